@@ -1,0 +1,1 @@
+"""femubench.bench: suites, runner, results store, reports and the command line."""

@@ -1,0 +1,1 @@
+"""femubench.solvers: one interface over local, global and sampling methods."""

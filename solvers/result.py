@@ -1,0 +1,89 @@
+"""The uniform result of one identification run (cf. scipy's OptimizeResult, pymoo's Result)."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+
+@dataclass
+class RunResult:
+    """Everything one solver run returns; serialises to JSON and back without loss.
+
+    Points are lists of floats in physical units (MPa, degrees, ...), in the order of
+    ``parameter_names``; ``x_normalised = x / reference``.
+
+    ``n_evals`` counts *every* forward-model evaluation the run triggered (Jacobian columns,
+    failed and infeasible points included); cache hits are counted apart in ``n_cache_hits``.
+    ``history`` has one row per iteration or generation: ``{"iteration", "n_evals",
+    "best_cost", "cost", "x"}``.
+    """
+
+    method: str
+    options: dict[str, Any]
+    seed: int | None
+    budget: int
+    parameter_names: list[str]
+    reference: list[float]
+    x0: list[float]
+    x: list[float]
+    x_normalised: list[float]
+    cost: float
+    status: str  # "converged" | "budget" | "max_iterations" | "failed" | "stalled"
+    success: bool
+    message: str
+    n_evals: int
+    n_failed: int = 0
+    n_infeasible: int = 0
+    n_cache_hits: int = 0
+    n_iterations: int = 0
+    wall_s: float = 0.0
+    history: list[dict[str, Any]] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON dict; non-finite floats become the strings "inf", "-inf", "nan"."""
+        return _encode(asdict(self))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "RunResult":
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"RunResult: unknown fields {sorted(unknown)}; allowed: {sorted(names)}")
+        return cls(**_decode(d))
+
+    def to_json(self, **kw) -> str:
+        return json.dumps(self.to_dict(), **kw)
+
+    @classmethod
+    def from_json(cls, text: str) -> "RunResult":
+        return cls.from_dict(json.loads(text))
+
+    def errors_percent(self) -> dict[str, float]:
+        """Signed error of each parameter with respect to its reference, in percent."""
+        return {n: 100.0 * (xn - 1.0) for n, xn in zip(self.parameter_names, self.x_normalised)}
+
+
+_SPECIAL = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}
+
+
+def _encode(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {k: _encode(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_encode(v) for v in obj]
+    return obj
+
+
+def _decode(obj):
+    if isinstance(obj, str) and obj in _SPECIAL:
+        return _SPECIAL[obj]
+    if isinstance(obj, dict):
+        return {k: _decode(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_decode(v) for v in obj]
+    return obj
