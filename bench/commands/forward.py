@@ -1,0 +1,71 @@
+"""``femubench forward``: one forward run of the cube test, printed and optionally saved."""
+from __future__ import annotations
+
+NAME = "forward"
+HELP = "Run the FE model of the cube compression test once (elastic, or a case's Drucker-Prager material)."
+
+
+def add_arguments(p) -> None:
+    p.add_argument("case", nargs="?", help="case name (see `femubench cases`); elastic material when absent")
+    p.add_argument("--mesh", default="coarse", help="coarse | paper | fine | NX,NY,NZ (default: coarse)")
+    p.add_argument("--plates", default="friction", choices=["friction", "frictionless"])
+    p.add_argument("--displacement", type=float, default=1.5, metavar="MM", help="top-plate displacement, mm (default 1.5)")
+    p.add_argument("--snapshots", type=int, default=10, metavar="N", help="number of snapshots (default 10)")
+    p.add_argument("--param", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
+                   help="material parameters (MPa, degrees); elastic: E, nu; a case: any of its parameters")
+    p.add_argument("--json", metavar="FILE", help="write the response as JSON")
+    p.add_argument("--vtu", metavar="DIR", help="write one VTU file per snapshot and a .pvd collection")
+
+
+def parse_params(items: list[str]) -> dict[str, float]:
+    """``["E=3e4", "nu=0.2"]`` -> ``{"E": 30000.0, "nu": 0.2}``; malformed items raise ValueError."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or not name:
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"--param {item!r} is malformed: expected NAME=VALUE with a number") from None
+    return out
+
+
+def main(args) -> int:
+    import json
+
+    from problems.fe import Loading, discretise, run
+    from problems.forward import material_from
+    from problems.measurement import measurement_grid
+    from problems.mesh import parse_mesh
+
+    material = material_from(args.case, parse_params(args.param))
+    loading = Loading(args.displacement, args.snapshots, args.plates)
+    mesh = parse_mesh(args.mesh)
+    print(f"mesh {args.mesh}: {mesh.n_elements} elements, {mesh.n_dofs} dofs; material {material!r}")
+    response = run(discretise(mesh), material, loading)
+    print(f"{'snapshot':>8} {'top mm':>8} {'reaction kN':>12}")
+    for k, (d, f) in enumerate(zip(response.snapshots_mm, response.reaction_kN), 1):
+        print(f"{k:8d} {d:8.4f} {f:12.3f}")
+    print(f"converged: {response.converged} ({response.message}); increments {response.increments}, "
+          f"Newton iterations {response.iterations}, cuts {response.cuts}, wall {response.wall_s:.2f} s")
+    if args.json:
+        points = measurement_grid()
+        u_h, u_v = response.front_face(points)
+        doc = {
+            "mesh": mesh.info(), "case": args.case, "plates": args.plates,
+            "snapshots_mm": response.snapshots_mm.tolist(), "reaction_kN": response.reaction_kN.tolist(),
+            "front_face": {"points": points.tolist(), "u_h": u_h.tolist(), "u_v": u_v.tolist()},
+            "converged": response.converged, "message": response.message, "increments": response.increments,
+            "iterations": response.iterations, "cuts": response.cuts, "wall_s": response.wall_s,
+            "timing": response.timing,
+        }
+        with open(args.json, "w") as fh:
+            json.dump(doc, fh, indent=1)
+        print(f"wrote {args.json}")
+    if args.vtu:
+        from problems.vtu import write_vtu
+
+        paths = write_vtu(response, args.vtu)
+        print(f"wrote {len(paths)} VTU files to {args.vtu}")
+    return 0 if response.converged else 1

@@ -1,0 +1,113 @@
+"""The FE model of the cube test as a forward model of the objective: parameters -> measurements.
+
+The measurement vector of one run is ``[u_h (N x m), u_v (N x m), reaction (N)]``: front-face
+horizontal and vertical displacements (mm) at the m grid points for each of the N snapshots
+(snapshot-major), then the plate force (kN).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from problems.cases import Case, get_case
+from problems.fe import Discretisation, Loading, NewtonSettings, discretise, run
+from problems.materials import LinearElastic
+from problems.measurement import measurement_grid
+from problems.mesh import parse_mesh
+
+#: tighter than the solver defaults so that finite-difference Jacobians are clean
+FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
+
+
+@lru_cache(maxsize=4)
+def discretisation(mesh: str) -> Discretisation:
+    """Discretisation of a mesh spec, built once per process (workers reuse it across runs)."""
+    return discretise(parse_mesh(mesh))
+
+
+def case_material(case: Case, x):
+    """The Drucker-Prager material of ``case`` at active parameters ``x`` (physical units)."""
+    from problems.materials.drucker_prager import make_material
+
+    return make_material(case.form, case.hardening, case.material_parameters(x))
+
+
+def material_from(case_name: str | None, overrides: dict[str, float]):
+    """Material for the CLI: elastic (E, nu) without a case, else the case's at reference + overrides."""
+    if case_name is None:
+        unknown = set(overrides) - {"E", "nu"}
+        if unknown:
+            raise ValueError(f"--param {sorted(unknown)} unknown for the elastic material; allowed: E, nu")
+        return LinearElastic(**overrides)
+    case = get_case(case_name)
+    allowed = set(case.names) | set(case.fixed)
+    unknown = set(overrides) - allowed
+    if unknown:
+        raise ValueError(f"--param {sorted(unknown)} unknown for case {case.name}; allowed: {', '.join(sorted(allowed))}")
+    from problems.materials.drucker_prager import make_material
+
+    params = {**case.material_parameters(case.reference), **overrides}
+    return make_material(case.form, case.hardening, params)
+
+
+def measurement_blocks(n_snapshots: int, n_points: int) -> dict[str, slice]:
+    """Named slices of the measurement vector."""
+    nm = n_snapshots * n_points
+    return {"u_h": slice(0, nm), "u_v": slice(nm, 2 * nm), "displacement": slice(0, 2 * nm),
+            "force": slice(2 * nm, 2 * nm + n_snapshots)}
+
+
+def measurement_vector(response, points: np.ndarray) -> np.ndarray:
+    """Stack a response into ``[u_h, u_v, reaction_kN]`` (mm, mm, kN)."""
+    u_h, u_v = response.front_face(points)
+    return np.concatenate([u_h.ravel(), u_v.ravel(), response.reaction_kN])
+
+
+@dataclass(frozen=True, eq=False)
+class FEForwardModel:
+    """Forward model of the objective backed by the FE cube test (picklable for Dask workers).
+
+    case     : the identification case (which parameters are active)
+    mesh     : mesh spec (``coarse``, ``paper``, ``fine`` or ``NX,NY,NZ``)
+    loading  : plate displacement, snapshots and plate condition
+    points   : (m, 2) front-face measurement points (y, z), mm
+    """
+
+    case: Case
+    mesh: str = "coarse"
+    loading: Loading = Loading()
+    points: np.ndarray = field(default_factory=measurement_grid)
+    settings: NewtonSettings = FORWARD_SETTINGS
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.case.names
+
+    def check(self, x) -> str | None:
+        """None when ``x`` defines a well-posed material, else the reason (no FE run)."""
+        from problems.materials.drucker_prager import validate_parameters
+
+        try:
+            validate_parameters(self.case.form, self.case.hardening, self.case.material_parameters(x))
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    def response(self, x):
+        """The full FE :class:`~problems.fe.Response` at ``x``."""
+        return run(discretisation(self.mesh), case_material(self.case, x), self.loading, self.settings)
+
+    def __call__(self, x):
+        from problems.objective import ForwardResult
+
+        t0 = time.perf_counter()
+        try:
+            resp = self.response(x)
+        except ValueError as exc:  # invalid material parameters slipped past check()
+            return ForwardResult(False, None, str(exc), time.perf_counter() - t0)
+        if not resp.converged:
+            return ForwardResult(False, None, resp.message, time.perf_counter() - t0)
+        return ForwardResult(True, measurement_vector(resp, self.points), "", time.perf_counter() - t0)
