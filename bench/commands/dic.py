@@ -1,0 +1,111 @@
+"""``femubench dic``: subset DIC (IC-GN, ZNSSD) of deformed images against a reference image."""
+from __future__ import annotations
+
+import argparse
+
+NAME = "dic"
+HELP = "Correlate deformed images against a reference image (subset DIC, IC-GN, ZNSSD)."
+
+COLUMNS = ("x", "y", "u", "v", "zncc", "converged")
+
+
+def _roi(text: str) -> tuple[int, int, int, int]:
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"ROI {text!r} must be four integers X0,Y0,X1,Y1") from None
+    if len(vals) != 4:
+        raise argparse.ArgumentTypeError(f"ROI {text!r} must be four integers X0,Y0,X1,Y1")
+    return vals  # type: ignore[return-value]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("ref", metavar="REF", help="reference image (TIFF, PNG or BMP; 8 or 16 bit)")
+    parser.add_argument("deformed", metavar="DEF", nargs="+", help="deformed image(s), same size as REF")
+    parser.add_argument("--subset", type=int, default=21, help="subset side in px, odd (default 21)")
+    parser.add_argument("--step", type=int, default=10, help="grid step in px (default 10)")
+    parser.add_argument(
+        "--roi", type=_roi, default=None, metavar="X0,Y0,X1,Y1",
+        help="region of interest in px, half-open (X0 <= x < X1); default: the whole image",
+    )
+    parser.add_argument(
+        "--csv", default=None, metavar="FILE",
+        help="write x, y, u, v, zncc, converged (px; x right, y down) to FILE; with several DEF "
+        "images one file per image, FILE's stem suffixed _1, _2, ...",
+    )
+    parser.add_argument("--order", type=int, choices=(3, 5), default=3, help="B-spline order: 3 bicubic, 5 biquintic")
+    parser.add_argument("--zncc-min", type=float, default=0.9, help="flag points whose final ZNCC is lower (default 0.9)")
+    parser.add_argument("--search", type=int, default=32, help="integer search radius of the FFT seed guess, px")
+    parser.add_argument("--figure", default=None, metavar="PNG", help="subset figure (reference / warped / deformed) of the last image")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _csv_paths(base: str, n: int) -> list:
+    from pathlib import Path
+
+    p = Path(base)
+    if n == 1:
+        return [p]
+    return [p.with_name(f"{p.stem}_{k}{p.suffix or '.csv'}") for k in range(1, n + 1)]
+
+
+def write_csv(path, result) -> None:
+    """One row per point: x, y, u, v (px), zncc, converged (0/1); NaN u, v where not converged."""
+    import numpy as np
+
+    data = np.column_stack([result.x, result.y, result.u, result.v, result.zncc, result.converged.astype(float)])
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(",".join(COLUMNS) + "\n")
+        for row in data:
+            fh.write(f"{row[0]:.0f},{row[1]:.0f},{row[2]:.6f},{row[3]:.6f},{row[4]:.6f},{int(row[5])}\n")
+
+
+def main(args: argparse.Namespace) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from problems.dic.correlate import Correlator, DICConfig, as_grey, check_not_blank, grid_points
+    from problems.dic.imageio import read_image
+
+    cfg = DICConfig(subset=args.subset, step=args.step, order=args.order, zncc_min=args.zncc_min,
+                    search_radius=args.search)
+    ref = read_image(args.ref)
+    check_not_blank(as_grey(ref, args.ref), f"reference image {args.ref}")
+    # read everything first: bad inputs fail before any work
+    images = []
+    for path in args.deformed:
+        img = read_image(path)
+        if img.shape != ref.shape:
+            raise ValueError(
+                f"image sizes differ: {args.ref} is {ref.shape[1]} x {ref.shape[0]} px, "
+                f"{path} is {img.shape[1]} x {img.shape[0]} px"
+            )
+        check_not_blank(as_grey(img, path), f"deformed image {path}")
+        images.append(img)
+    pts = grid_points(ref.shape, cfg.subset, cfg.step, args.roi)
+    corr = Correlator(ref, pts, cfg)
+    outs = _csv_paths(args.csv, len(images)) if args.csv else [None] * len(images)
+    prev = None
+    res = None
+    for path, img, out in tqdm(list(zip(args.deformed, images, outs)), desc="DIC", unit="img",
+                               disable=args.no_progress):
+        res = corr.correlate(img, initial=prev)
+        if np.any(res.converged):
+            prev = res
+        c = res.converged
+        msg = f"{path}: {int(c.sum())}/{len(c)} points converged"
+        if np.any(c):
+            msg += (f", mean u = {np.mean(res.u[c]):+.4f} px, mean v = {np.mean(res.v[c]):+.4f} px, "
+                    f"median ZNCC = {np.median(res.zncc[c]):.5f}, median std(u) = {np.median(res.std_u[c]):.4f} px")
+        tqdm.write(msg)
+        if out is not None:
+            write_csv(out, res)
+            tqdm.write(f"  -> {out}")
+    if args.figure and res is not None and np.any(res.converged):
+        from problems.dic.figures import plot_subsets
+
+        conv = np.flatnonzero(res.converged)
+        pick = conv[np.linspace(0, len(conv) - 1, min(4, len(conv))).round().astype(int)]
+        plot_subsets(ref, images[-1], res, pick, args.figure, cfg.subset, cfg.order)
+        tqdm.write(f"figure -> {args.figure}")
+    return 0

@@ -1,0 +1,54 @@
+"""The DIC route of the pseudo-experimental data: FE response -> speckle images -> IC-GN DIC.
+
+The FE front-face field of each snapshot is handed to :func:`problems.dic.measure_front_face`
+as a bilinear interpolant of the front-face nodal displacements; the measured displacements and
+their DIC standard deviations replace the FE values. Points whose correlation failed get zero
+value and infinite standard deviation: they carry no weight in the objective. The covariance is
+taken diagonal: on the 5 mm grid the 21 px subsets do not overlap, so points are independent, and
+the u_h-u_v covariance of one point is small for an isotropic speckle (it is kept in ``meta``).
+The images are not stored: camera, speckle and DIC settings and the seed regenerate them.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+
+def front_face_fields(response) -> list:
+    """One callable ``field(y_mm, z_mm) -> (u_y, u_z)`` per snapshot (quarter coordinates, mm)."""
+    mesh = response.mesh
+    g = mesh.grid_index()[-1]                          # (ny+1, nz+1) front-face nodes
+    ys, zs = mesh.nodes[g[:, 0], 1], mesh.nodes[g[0, :], 2]
+    fields = []
+    for u in response.displacements:
+        uy = RegularGridInterpolator((ys, zs), u[g, 1], bounds_error=False, fill_value=None)
+        uz = RegularGridInterpolator((ys, zs), u[g, 2], bounds_error=False, fill_value=None)
+
+        def field(y, z, uy=uy, uz=uz):
+            pts = np.column_stack([np.ravel(y), np.ravel(z)])
+            shape = np.shape(y)
+            return uy(pts).reshape(shape), uz(pts).reshape(shape)
+
+        fields.append(field)
+    return fields
+
+
+def dic_dataset(case, settings, x, response, *, progress: bool = True):
+    """A :class:`problems.data.Dataset` whose displacements were measured by DIC on rendered images."""
+    from problems.data import Dataset, _round, package_version
+    from problems.dic import measure_front_face
+
+    m = measure_front_face(front_face_fields(response), settings.points, seed=settings.seed, progress=progress,
+                           figure=False)
+    ok = m.converged
+    u_h = np.where(ok, m.u_h, 0.0)
+    u_v = np.where(ok, m.u_v, 0.0)
+    std = np.stack([np.where(ok, m.std_h, np.inf), np.where(ok, m.std_v, np.inf)])
+    meta = {"package_version": package_version(), "mesh": response.mesh.info(), "fe_wall_s": round(response.wall_s, 1),
+            "dic": {"camera": asdict(m.camera), "speckle": asdict(m.speckle), "dic": asdict(m.dic), "seed": m.seed,
+                    "converged_fraction": float(ok.mean()), "median_std_mm": float(np.nanmedian(m.std_h)),
+                    "max_abs_cov_hv_mm2": float(np.nanmax(np.abs(m.cov_hv))) if ok.any() else None}}
+    return Dataset(case.name, settings, dict(zip(case.names, map(float, x))), settings.points, response.snapshots_mm,
+                   u_h, u_v, _round(response.reaction_kN, settings.force_resolution_kN), std, meta)
