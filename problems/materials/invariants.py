@@ -55,7 +55,8 @@ def _hess_j3_operator() -> np.ndarray:
     return np.einsum("cij,abji->abc", B, T).reshape(36, 6)
 
 
-_HESS_J3_OP = _hess_j3_operator()
+#: (36, 6): ``hess_j3(s).reshape(-1, 36) = s @ HESS_J3_OPERATOR.T``.
+HESS_J3_OPERATOR = _hess_j3_operator()
 
 
 def pressure(stress: np.ndarray) -> np.ndarray:
@@ -114,7 +115,7 @@ def grad_j3(s: np.ndarray) -> np.ndarray:
 
 def hess_j3(s: np.ndarray) -> np.ndarray:
     """d2 J3 / d sigma_voigt^2, symmetric, linear in the deviator, (n, 6, 6)."""
-    return (s @ _HESS_J3_OP.T).reshape(-1, 6, 6)
+    return (s @ HESS_J3_OPERATOR.T).reshape(-1, 6, 6)
 
 
 def outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -22,16 +22,25 @@ import numpy as np
 
 from problems.materials.hardening import ReferenceTest
 from problems.materials.invariants import (
-    HESS_J2, M_VEC, deviator, grad_j2, grad_j3, hess_j3, j2, j3, outer, pressure,
+    HESS_J2, HESS_J3_OPERATOR, M_VEC, deviator, grad_j2, grad_j3, j2, j3, pressure,
 )
 
-# Below this q (MPa) the deviator is treated as zero: it only guards 0/0 in directions that are
-# multiplied by a vanishing deviator (the return mapping never iterates that close to an apex).
-_Q_TINY = 1e-200
+# [s_voigt, a] (n, 7) @ _HESS_OPERATOR = d2J3 weighted by s plus a * d2J2, flattened (n, 36)
+_HESS_OPERATOR = np.vstack([HESS_J3_OPERATOR.T, HESS_J2.reshape(1, 36)])
+
+# Below this q (MPa) the deviator is treated as zero: it only guards 0/0 in terms that vanish
+# with the deviator (the return mapping never iterates that close to an apex). Small enough to be
+# meaningless in MPa, large enough that 1/q^4 does not overflow.
+_Q_TINY = 1e-60
 
 
 def _safe(q: np.ndarray) -> np.ndarray:
     return np.maximum(q, _Q_TINY)
+
+
+def _inv(q: np.ndarray) -> np.ndarray:
+    """1/q, and 0 where q is (numerically) zero: every 1/q^k term multiplies a deviator power."""
+    return np.where(q > _Q_TINY, 1.0 / _safe(q), 0.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -59,32 +68,45 @@ class LodeMeasure:
     def value(self, stress: np.ndarray) -> np.ndarray:
         s = deviator(stress)
         q = np.sqrt(3.0 * j2(s))
-        return self.A * q + self.B * j3(s) / _safe(q) ** 2
+        return self.A * q + self.B * j3(s) * _inv(q) ** 2
 
-    def gradient(self, stress: np.ndarray, hessian: bool = False):
-        """t, dt/dsigma (n, 6) and, if asked, d2t/dsigma2 (n, 6, 6).
+    def gradient(self, stress: np.ndarray, hessian_weight: np.ndarray | None = None):
+        """t (n,), dt/dsigma (n, 6) and, if a weight w (n,) is given, w * d2t/dsigma2 (n, 6, 6).
 
         With t(q, J3): dt = t_q dq + t_J dJ3, t_q = A - 2 B J3/q^3, t_J = B/q^2, and
-        dq = 3/(2q) dJ2,  d2q = 3/(2q) d2J2 - (1/q) dq dq.
+        dq = 3/(2q) dJ2, d2q = 3/(2q) d2J2 - (1/q) dq dq. The Hessian is assembled as
+        ``a P + t_J d2J3 + dq (x) v1 + dJ3 (x) v2`` (P = d2J2) with the scalar weights folded in
+        before the (n, 6, 6) arrays are formed: it is the hot spot of the return mapping.
         """
         s = deviator(stress)
         q = np.sqrt(3.0 * j2(s))
-        qs = _safe(q)
+        qi = _inv(q)
+        gq = 1.5 * grad_j2(s) * qi[:, None]
+        if self.B == 0.0:  # K = 1: t = q, no third-invariant terms
+            t, grad = q, gq
+            if hessian_weight is None:
+                return t, grad
+            w = hessian_weight
+            hess = (1.5 * w * qi)[:, None, None] * HESS_J2
+            hess -= gq[:, :, None] * (w * qi)[:, None, None] * gq[:, None, :]
+            return t, grad, hess
         J3 = j3(s)
-        gq = 1.5 * grad_j2(s) / qs[:, None]
         gJ = grad_j3(s)
-        t = self.A * q + self.B * J3 / qs**2
-        t_q = self.A - 2.0 * self.B * J3 / qs**3
-        t_J = self.B / qs**2
+        t = self.A * q + self.B * J3 * qi**2
+        t_q = self.A - 2.0 * self.B * J3 * qi**3
+        t_J = self.B * qi**2
         grad = t_q[:, None] * gq + t_J[:, None] * gJ
-        if not hessian:
+        if hessian_weight is None:
             return t, grad
-        hq = (1.5 / qs)[:, None, None] * HESS_J2 - outer(gq, gq) / qs[:, None, None]
-        t_qq = 6.0 * self.B * J3 / qs**4
-        t_qJ = -2.0 * self.B / qs**3
-        cross = outer(gq, gJ)
-        hess = (t_q[:, None, None] * hq + t_J[:, None, None] * hess_j3(s)
-                + t_qq[:, None, None] * outer(gq, gq) + t_qJ[:, None, None] * (cross + cross.transpose(0, 2, 1)))
+        w = hessian_weight
+        t_qq = 6.0 * self.B * J3 * qi**4
+        t_qJ = -2.0 * self.B * qi**3
+        coeffs = np.concatenate([(w * t_J)[:, None] * s, (1.5 * w * t_q * qi)[:, None]], axis=1)
+        hess = (coeffs @ _HESS_OPERATOR).reshape(-1, 6, 6)
+        v1 = (w * (t_qq - t_q * qi))[:, None] * gq + (w * t_qJ)[:, None] * gJ
+        v2 = (w * t_qJ)[:, None] * gq
+        hess += gq[:, :, None] * v1[:, None, :]
+        hess += gJ[:, :, None] * v2[:, None, :]
         return t, grad, hess
 
 
@@ -132,9 +154,12 @@ class HyperbolicYield:
         root = np.sqrt(self.l0**2 + (qh * sbar) ** 2)
         return root - ph * sbar * self.tan_beta, qh**2 * sbar / root - ph * self.tan_beta
 
+    def value_pq(self, p, q, sbar):
+        """F from the invariants p, q (MPa)."""
+        return np.sqrt(self.l0**2 + q**2) - p * self.tan_beta - self.cohesion(sbar)[0]
+
     def value(self, stress, sbar):
-        q = np.sqrt(3.0 * j2(deviator(stress)))
-        return np.sqrt(self.l0**2 + q**2) - pressure(stress) * self.tan_beta - self.cohesion(sbar)[0]
+        return self.value_pq(pressure(stress), np.sqrt(3.0 * j2(deviator(stress))), sbar)
 
     def gradient(self, stress, sbar):
         s = deviator(stress)
@@ -159,18 +184,20 @@ class ExponentYield:
         pt = self.a * (qh * sbar) ** self.b - ph * sbar
         return pt, self.a * self.b * qh**self.b * sbar ** (self.b - 1.0) - ph
 
+    def value_pq(self, p, q, sbar):
+        """F from the invariants p, q (MPa)."""
+        return self.a * q**self.b - p - self.tension_strength(sbar)[0]
+
     def value(self, stress, sbar):
-        q = np.sqrt(3.0 * j2(deviator(stress)))
-        return self.a * q**self.b - pressure(stress) - self.tension_strength(sbar)[0]
+        return self.value_pq(pressure(stress), np.sqrt(3.0 * j2(deviator(stress))), sbar)
 
     def gradient(self, stress, sbar):
         s = deviator(stress)
         q = np.sqrt(3.0 * j2(s))
-        qs = _safe(q)
         pt, dpt = self.tension_strength(sbar)
         F = self.a * q**self.b - pressure(stress) - pt
         # a b q^(b-1) dq/dsigma with dq = 3/(2q) dJ2; vanishes with the deviator for b > 1
-        coef = np.where(q > _Q_TINY, 1.5 * self.a * self.b * qs ** (self.b - 2.0), 0.0)
+        coef = np.where(q > _Q_TINY, 1.5 * self.a * self.b * _safe(q) ** (self.b - 2.0), 0.0)
         grad = coef[:, None] * grad_j2(s) + M_VEC / 3.0
         return F, grad, -dpt
 
@@ -189,10 +216,15 @@ class LinearPotential:
     def gradient(self, stress):
         return self.lode.gradient(stress)[1] + (self.tan_psi / 3.0) * M_VEC
 
-    def hessian(self, stress):
-        """dG/dsigma (n, 6) and d2G/dsigma2 (n, 6, 6); singular at q = 0 (the apex)."""
-        _, g, h = self.lode.gradient(stress, hessian=True)
+    def hessian(self, stress, weight):
+        """dG/dsigma (n, 6) and weight * d2G/dsigma2 (n, 6, 6); singular at q = 0 (the apex)."""
+        _, g, h = self.lode.gradient(stress, hessian_weight=weight)
         return g + (self.tan_psi / 3.0) * M_VEC, h
+
+    def work(self, stress):
+        """sigma : dG/dsigma = G (degree-one homogeneous) and its gradient dG/dsigma."""
+        g = self.gradient(stress)
+        return np.einsum("ni,ni->n", stress, g), g
 
 
 @dataclass(frozen=True)
@@ -210,13 +242,28 @@ class HyperbolicPotential:
         root = np.sqrt(self.e**2 + 3.0 * j2(s))
         return (1.5 / _safe(root))[:, None] * grad_j2(s) + (self.tan_psi / 3.0) * M_VEC
 
-    def hessian(self, stress):
+    def hessian(self, stress, weight):
+        """dG/dsigma (n, 6) and weight * d2G/dsigma2 (n, 6, 6)."""
         s = deviator(stress)
         gJ2 = grad_j2(s)
         root = _safe(np.sqrt(self.e**2 + 3.0 * j2(s)))
         g = (1.5 / root)[:, None] * gJ2 + (self.tan_psi / 3.0) * M_VEC
-        h = (1.5 / root)[:, None, None] * HESS_J2 - (2.25 / root**3)[:, None, None] * outer(gJ2, gJ2)
+        h = (1.5 * weight / root)[:, None, None] * HESS_J2
+        h -= gJ2[:, :, None] * ((2.25 * weight / root**3)[:, None] * gJ2)[:, None, :]
         return g, h
+
+    def work(self, stress):
+        """Plastic work per unit multiplier w = sigma : dG/dsigma = q^2/R - p tan(psi)
+        (R = sqrt(e^2 + q^2)) and dw/dsigma = dG/dsigma + d2G/dsigma2 sigma, where
+        d2G sigma = dJ2 (3/(2R)) e^2/R^2 (from sigma . dJ2 = 2 J2 and d2J2 sigma = dJ2)."""
+        s = deviator(stress)
+        gJ2 = grad_j2(s)
+        J2 = j2(s)
+        root = _safe(np.sqrt(self.e**2 + 3.0 * J2))
+        g = (1.5 / root)[:, None] * gJ2 + (self.tan_psi / 3.0) * M_VEC
+        w = 3.0 * J2 / root - pressure(stress) * self.tan_psi
+        dw = g + (1.5 * self.e**2 / root**3)[:, None] * gJ2
+        return w, dw
 
 
 def lode_xi(stress: np.ndarray) -> np.ndarray:
