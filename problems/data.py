@@ -163,7 +163,7 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
     std = np.full((2,) + u_h.shape, displacement_std_mm(settings))
     return Dataset(case.name, settings, dict(zip(case.names, map(float, x))), settings.points, resp.snapshots_mm,
                    _round(u_h, res), _round(u_v, res), _round(resp.reaction_kN, settings.force_resolution_kN), std,
-                   {"package_version": package_version(), "mesh": resp.mesh.info(), "fe_wall_s": round(resp.wall_s, 1)})
+                   {"package_version": package_version(), "mesh": resp.mesh.info()})
 
 
 def _dic_dataset(case: Case, settings: DataSettings, x, resp) -> Dataset:

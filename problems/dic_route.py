@@ -46,7 +46,7 @@ def dic_dataset(case, settings, x, response, *, progress: bool = True):
     u_h = np.where(ok, m.u_h, 0.0)
     u_v = np.where(ok, m.u_v, 0.0)
     std = np.stack([np.where(ok, m.std_h, np.inf), np.where(ok, m.std_v, np.inf)])
-    meta = {"package_version": package_version(), "mesh": response.mesh.info(), "fe_wall_s": round(response.wall_s, 1),
+    meta = {"package_version": package_version(), "mesh": response.mesh.info(),
             "dic": {"camera": asdict(m.camera), "speckle": asdict(m.speckle), "dic": asdict(m.dic), "seed": m.seed,
                     "converged_fraction": float(ok.mean()), "median_std_mm": float(np.nanmedian(m.std_h)),
                     "max_abs_cov_hv_mm2": float(np.nanmax(np.abs(m.cov_hv))) if ok.any() else None}}

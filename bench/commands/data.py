@@ -42,5 +42,5 @@ def main(args) -> int:
             status |= 0 if same else 1
             continue
         save(ds, path)
-        print(f"{name}: wrote {path} (hash {ds.hash[:12]}, {len(ds.values)} values, FE {ds.meta.get('fe_wall_s')} s)")
+        print(f"{name}: wrote {path} (hash {ds.hash[:12]}, {len(ds.values)} values)")
     return status
