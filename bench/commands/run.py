@@ -1,0 +1,61 @@
+"""``femubench run SUITE``: run a suite of identifications, resumably, in parallel."""
+from __future__ import annotations
+
+NAME = "run"
+HELP = "run a suite (TOML) of identifications; resumes where a previous run stopped"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("suite", metavar="SUITE", help="suite file, e.g. suites/default.toml")
+    parser.add_argument("--out", metavar="DIR", default=None,
+                        help="results directory (default: results/<suite name>)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N", default=None,
+                       help="local Dask worker processes (default: one per core); 1 runs in-process")
+    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="submit to an existing Dask cluster, e.g. tcp://host:8786")
+    parser.add_argument("--force", action="store_true", help="rerun runs that already have a record")
+    parser.add_argument("--retry-failed", action="store_true",
+                        help="also rerun the runs whose record is a crash (an exception)")
+    parser.add_argument("--fan-out", action="store_true",
+                        help="let each run send its Jacobian columns / populations to the cluster too")
+    parser.add_argument("--dry-run", action="store_true",
+                        help="validate the suite and print what would run, without running anything")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def main(args) -> int:
+    import sys
+    from pathlib import Path
+
+    from bench.suite import load_suite
+
+    suite = load_suite(args.suite)  # ValueError -> message + exit 2 (bench.cli)
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    out = Path(args.out) if args.out else Path("results") / suite.name
+
+    if args.dry_run:
+        from bench.runner import pending_runs
+
+        runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
+        print(f"suite {suite.name!r}: {len(suite.cases)} cases x {len(suite.methods)} methods x "
+              f"{len(suite.budgets)} budgets x {len(suite.seeds)} seeds x starts {list(suite.starts)}"
+              + (f" ({suite.random_starts} random per seed)" if "random" in suite.starts else ""))
+        print(f"{len(runs)} runs, {len(runs) - len(pending)} with a record in {out}, {len(pending)} to run; "
+              f"at most {sum(r.budget for r in pending)} forward evaluations")
+        return 0
+
+    from bench.runner import run_suite
+
+    try:
+        summary = run_suite(suite, out, workers=args.workers, scheduler=args.scheduler, force=args.force,
+                            retry_failed=args.retry_failed, progress=not args.quiet, fan_out=args.fan_out)
+    except KeyboardInterrupt:
+        print("interrupted; finished runs are kept, rerun the same command to resume", file=sys.stderr)
+        return 130
+    print(summary)
+    if summary.crashed:
+        print(f"{summary.crashed} run(s) crashed (see {summary.log_file}): "
+              + ", ".join(summary.failures[:5]) + (" ..." if summary.crashed > 5 else ""), file=sys.stderr)
+    return 0

@@ -1,0 +1,259 @@
+"""Report tables computed from the tidy run DataFrame of :func:`bench.store.to_frames`.
+
+* :func:`table1` — the paper's Table 1 for one method: signed residual error of every
+  identified parameter with respect to its reference, in percent (median over seeds and
+  starts), rows = parameters, columns = cases, NaN (printed ``–``) where a parameter is not
+  active in a case.
+* :func:`comparison` — per case x method: runs, success rate (every |error| <= tol), median
+  and interquartile range of forward evaluations, median final cost, median wall time.
+* :func:`success_matrix` — success rate (%) per method (rows) and case (columns).
+
+Writers render a DataFrame as Markdown, CSV (full precision, ``–`` for inactive) or LaTeX
+(booktabs) without extra dependencies.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.store import PARAMETER_ORDER, parameter_order
+
+DASH = "–"  # en dash: inactive parameter
+
+#: Pretty parameter names for the tables (LaTeX, then Markdown/plain).
+PARAM_TEX = {"E": r"$E$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$", "sigma0": r"$\sigma_0$",
+             "H": r"$H$", "pt0": r"$p_{t0}$", "a": r"$a$", "b": r"$b$"}
+
+
+def case_order(cases) -> list[str]:
+    """The nine FE cases in the study's order, then the others alphabetically."""
+    try:
+        from problems.cases import CASES
+
+        canon = list(CASES)
+    except ImportError:  # pragma: no cover
+        canon = []
+    cases = list(dict.fromkeys(cases))
+    return [c for c in canon if c in cases] + sorted(c for c in cases if c not in canon)
+
+
+def method_order(methods) -> list[str]:
+    """Methods by family (local, global, sampling), then in the order of the study's list."""
+    from bench.suite import _CONTRACT_METHODS, _get_method
+
+    rank = {"local": 0, "global": 1, "sampling": 2}
+    canon = list(_CONTRACT_METHODS)
+
+    def key(m):
+        info = _get_method(m)
+        fam = rank.get(getattr(info, "family", None), 3)
+        return fam, canon.index(m) if m in canon else len(canon), m
+
+    return sorted(dict.fromkeys(methods), key=key)
+
+
+def identified(runs: pd.DataFrame) -> pd.DataFrame:
+    """Runs that returned an identification (crashed runs excluded)."""
+    if "crashed" not in runs:
+        return runs
+    return runs[~runs["crashed"].astype(bool)]
+
+
+def success(runs: pd.DataFrame, tol: float) -> pd.Series:
+    """True where every active parameter is within ``tol`` percent of its reference."""
+    params = runs.attrs.get("parameters") or parameter_order(
+        c[4:] for c in runs.columns if c.startswith("err."))
+    err = runs[[f"err.{p}" for p in params]].abs()
+    active = err.notna()
+    ok = ((err <= tol) | ~active).all(axis=1) & (active.sum(axis=1) > 0)
+    if "crashed" in runs:
+        ok &= ~runs["crashed"].astype(bool)
+    return ok
+
+
+def groups_key(runs: pd.DataFrame) -> list[str]:
+    """Grouping beyond case x method: the budget when the suite used several."""
+    return ["budget"] if "budget" in runs and runs["budget"].nunique() > 1 else []
+
+
+def table1(runs: pd.DataFrame, method: str, *, budget: int | None = None) -> pd.DataFrame:
+    """Rows = parameters, columns = cases; median signed error in percent (NaN = inactive)."""
+    sel = runs[runs["method"] == method]
+    if budget is not None:
+        sel = sel[sel["budget"] == budget]
+    cases = case_order(runs["case"].unique())
+    params = runs.attrs.get("parameters") or parameter_order(c[4:] for c in runs.columns if c.startswith("err."))
+    # canonical study parameters always appear (the paper's rows), others only when used
+    rows = [p for p in PARAMETER_ORDER if p in params] + [p for p in params if p not in PARAMETER_ORDER]
+    ok = identified(sel)
+    out = pd.DataFrame(index=pd.Index(rows, name="parameter"), columns=cases, dtype=float)
+    for case in cases:
+        part = ok[ok["case"] == case]
+        for p in rows:
+            col = part[f"err.{p}"] if f"err.{p}" in part else pd.Series(dtype=float)
+            out.loc[p, case] = float(col.median()) if col.notna().any() else math.nan
+    out.attrs["n_runs"] = {c: int((sel["case"] == c).sum()) for c in cases}
+    out.attrs["n_identified"] = {c: int((ok["case"] == c).sum()) for c in cases}
+    return out
+
+
+def comparison(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
+    """One row per case x method (x budget when there are several)."""
+    extra = groups_key(runs)
+    ok = success(runs, tol)
+    rows = []
+    for (case, method, *rest), g in runs.groupby(["case", "method", *extra], sort=False):
+        ev = g["n_evals"].astype(float)
+        gi = identified(g)
+        row = {"case": case, "method": method}
+        row.update(dict(zip(extra, rest)))
+        row.update({
+            "runs": len(g), "success_pct": 100.0 * float(ok.loc[g.index].mean()),
+            "evals_median": float(ev.median()), "evals_q25": float(ev.quantile(0.25)),
+            "evals_q75": float(ev.quantile(0.75)),
+            "cost_median": float(gi["cost"].median()) if len(gi) else math.nan,
+            "max_err_median_pct": float(gi["max_abs_err"].median()) if len(gi) else math.nan,
+            "wall_median_s": float(g["wall_s"].median()), "crashed": int(g["crashed"].sum()),
+        })
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    if len(df):
+        cases, methods = case_order(df["case"]), method_order(df["method"])
+        df["_c"] = df["case"].map(cases.index)
+        df["_m"] = df["method"].map(methods.index)
+        df = df.sort_values(["_c", "_m", *extra]).drop(columns=["_c", "_m"]).reset_index(drop=True)
+    df.attrs["tol"] = tol
+    return df
+
+
+def success_matrix(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
+    """Success rate in percent, rows = methods, columns = cases (all budgets pooled)."""
+    ok = success(runs, tol)
+    tab = (pd.DataFrame({"method": runs["method"], "case": runs["case"], "ok": ok.astype(float)})
+           .pivot_table(index="method", columns="case", values="ok", aggfunc="mean") * 100.0)
+    tab = tab.reindex(index=method_order(tab.index), columns=case_order(tab.columns))
+    tab.index.name, tab.columns.name = "method", None
+    return tab
+
+
+# --- formatting ------------------------------------------------------------------------------
+
+def fmt_pct(v: float) -> str:
+    """A percentage for Table 1: ``–`` if inactive, 3 significant digits, scientific if tiny."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return DASH
+    if v == 0:
+        return "0"
+    a = abs(v)
+    if a >= 1e-2 and a < 1e4:
+        return f"{v:.3g}" if a < 100 else f"{v:.0f}"
+    return f"{v:.2e}"
+
+
+def fmt_num(v: float, digits: int = 3) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return DASH
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if v == 0:
+        return "0"
+    a = abs(v)
+    if 1e-2 <= a < 1e5:
+        return f"{v:.{digits}g}"
+    return f"{v:.{max(digits - 1, 1)}e}"
+
+
+def table1_display(t: pd.DataFrame) -> pd.DataFrame:
+    return t.apply(lambda col: col.map(fmt_pct)).astype(str)
+
+
+def comparison_display(df: pd.DataFrame) -> pd.DataFrame:
+    tol = df.attrs.get("tol", 1.0)
+    out = pd.DataFrame({"case": df["case"], "method": df["method"]})
+    if "budget" in df:
+        out["budget"] = df["budget"].astype(int).astype(str)
+    out["runs"] = df["runs"].astype(int).astype(str)
+    out[f"success (|err| ≤ {tol:g} %)"] = df["success_pct"].map(lambda v: f"{v:.0f} %")
+    out["evals median"] = df["evals_median"].map(lambda v: f"{v:.0f}")
+    out["evals IQR"] = [f"{a:.0f}–{b:.0f}" for a, b in zip(df["evals_q25"], df["evals_q75"])]
+    out["final cost median"] = df["cost_median"].map(lambda v: fmt_num(v))
+    out["max |err| median (%)"] = df["max_err_median_pct"].map(fmt_pct)
+    out["wall median (s)"] = df["wall_median_s"].map(lambda v: fmt_num(v, 2))
+    out["crashed"] = df["crashed"].astype(int).astype(str)
+    return out
+
+
+def success_display(t: pd.DataFrame) -> pd.DataFrame:
+    return t.apply(lambda col: col.map(lambda v: DASH if pd.isna(v) else f"{v:.0f}")).astype(str)
+
+
+def to_markdown(df: pd.DataFrame, *, index: bool = True, index_label: str | None = None) -> str:
+    """A GitHub-flavoured Markdown table of the (string) cells of ``df``."""
+    cols = [str(c) for c in df.columns]
+    body = [[str(v) for v in row] for row in df.itertuples(index=False)]
+    if index:
+        cols = [index_label or str(df.index.name or "")] + cols
+        body = [[str(i)] + r for i, r in zip(df.index, body)]
+    esc = lambda s: s.replace("|", "\\|")  # noqa: E731
+    lines = ["| " + " | ".join(map(esc, cols)) + " |",
+             "|" + "|".join([":---"] + ["---:"] * (len(cols) - 1)) + "|"]
+    lines += ["| " + " | ".join(map(esc, r)) + " |" for r in body]
+    return "\n".join(lines) + "\n"
+
+
+_TEX_ESC = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}",
+            "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "\\": r"\textbackslash{}",
+            "–": "--", "≤": r"$\leq$", "|": r"$|$"}
+
+
+def tex_escape(s: str) -> str:
+    return "".join(_TEX_ESC.get(ch, ch) for ch in str(s))
+
+
+def to_latex(df: pd.DataFrame, *, caption: str, label: str, index: bool = True,
+             index_label: str | None = None, raw_index: bool = False) -> str:
+    """A booktabs ``table`` environment; cells are escaped, ``–`` becomes ``--``."""
+    cols = [tex_escape(c) for c in df.columns]
+    body = [[tex_escape(v) for v in row] for row in df.itertuples(index=False)]
+    if index:
+        cols = [tex_escape(index_label or df.index.name or "")] + cols
+        idx = [str(i) if raw_index else tex_escape(i) for i in df.index]
+        body = [[i] + r for i, r in zip(idx, body)]
+    spec = "l" + "r" * (len(cols) - 1)
+    lines = [r"\begin{table}[htbp]", r"\centering", rf"\caption{{{tex_escape(caption)}}}", rf"\label{{{label}}}",
+             r"\small", rf"\begin{{tabular}}{{{spec}}}", r"\toprule", " & ".join(cols) + r" \\", r"\midrule"]
+    lines += [" & ".join(r) + r" \\" for r in body]
+    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
+    return "\n".join(lines) + "\n"
+
+
+def write_table(stem: Path, formats, *, display: pd.DataFrame, raw: pd.DataFrame, caption: str,
+                label: str, index: bool = True, index_label: str | None = None,
+                tex_display: pd.DataFrame | None = None, raw_index_tex: bool = False) -> list[Path]:
+    """Write ``stem.{md,csv,tex}`` for the requested formats; return the paths written."""
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    paths = []
+    if "md" in formats:
+        p = stem.with_suffix(".md")
+        p.write_text(f"{caption}\n\n" + to_markdown(display, index=index, index_label=index_label), encoding="utf-8")
+        paths.append(p)
+    if "csv" in formats:
+        p = stem.with_suffix(".csv")
+        raw.to_csv(p, index=index, index_label=index_label, na_rep=DASH, float_format="%.10g")
+        paths.append(p)
+    if "tex" in formats:
+        p = stem.with_suffix(".tex")
+        p.write_text(to_latex(tex_display if tex_display is not None else display, caption=caption, label=label,
+                              index=index, index_label=index_label, raw_index=raw_index_tex), encoding="utf-8")
+        paths.append(p)
+    return paths
+
+
+def tex_param_index(t: pd.DataFrame) -> pd.DataFrame:
+    """Table 1 with LaTeX parameter symbols as index (unescaped)."""
+    t = t.copy()
+    t.index = [PARAM_TEX.get(p, tex_escape(p)) for p in t.index]
+    return t

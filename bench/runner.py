@@ -1,0 +1,489 @@
+"""Running suites: one identification per task, in-process or on a Dask cluster, resumable.
+
+* :func:`run_one` runs one :class:`~bench.suite.RunConfig` and returns its record; it never
+  raises — any exception becomes a record with ``status == "failed"`` and the traceback in the
+  message (and in ``record["error"]``), so one crash never takes a suite down.
+* :func:`run_suite` skips every run that already has a record in ``DIR/runs/`` and runs the
+  rest: ``workers=1`` in a plain loop in this process (debugging, profiling), otherwise on a
+  Dask ``LocalCluster`` of ``workers`` single-threaded worker processes (default: one per
+  core, BLAS/OpenMP pinned to one thread), or on an existing cluster given by ``scheduler``.
+  Records are written by this process (the client) as runs complete, atomically, so a
+  ``kill -9`` at any moment loses at most the runs in flight and never leaves half a record.
+
+Inside a run the objective evaluates Jacobian columns and population batches sequentially by
+default: with one run per core the cluster is already saturated. ``fan_out=True`` (CLI
+``--fan-out``) hands the objective a mapper that submits those batches to the same cluster
+through :func:`distributed.worker_client` — useful when there are fewer runs than cores.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import logging
+import os
+import platform
+import sys
+import time
+import traceback
+import warnings
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from bench import store
+from bench.suite import RunConfig, Suite, config_hash
+
+log = logging.getLogger("femubench.runner")
+
+#: Thread pinning for every worker process (and recommended for ``--workers 1``).
+SINGLE_THREAD_ENV = {
+    "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+    "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1",
+}
+#: Distinct warnings kept per record.
+MAX_WARNINGS = 20
+#: Packages whose versions go into every record.
+VERSIONED = ("femubench", "numpy", "scipy", "nlopt", "pymoo", "pyswarms", "emcee", "dask",
+             "distributed", "pandas", "meshio", "SALib")
+
+
+def now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+@functools.lru_cache(maxsize=1)
+def versions() -> dict[str, str]:
+    """Versions of Python, femubench (plus its git commit when run from a checkout) and the
+    numerical packages."""
+    from importlib import metadata
+
+    out = {"python": platform.python_version()}
+    for name in VERSIONED:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    commit = _git_commit()
+    if commit:
+        out["femubench_git"] = commit
+    return out
+
+
+def _git_commit() -> str | None:
+    """HEAD of the checkout femubench is imported from (read from .git, no subprocess)."""
+    root = Path(__file__).resolve().parent.parent / ".git"
+    try:
+        head = (root / "HEAD").read_text().strip()
+        if head.startswith("ref: "):
+            ref = head[5:]
+            p = root / ref
+            if p.is_file():
+                return p.read_text().strip()
+            packed = root / "packed-refs"
+            if packed.is_file():
+                for line in packed.read_text().splitlines():
+                    if line.endswith(" " + ref):
+                        return line.split()[0]
+            return None
+        return head
+    except OSError:
+        return None
+
+
+@functools.lru_cache(maxsize=1)
+def machine() -> dict[str, Any]:
+    """Where a run was executed."""
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        affinity = os.cpu_count()
+    return {
+        "hostname": platform.node(), "platform": platform.platform(), "machine": platform.machine(),
+        "processor": platform.processor(), "python": sys.version.split()[0],
+        "cpu_count": os.cpu_count(), "cpu_affinity": affinity,
+        "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+    }
+
+
+def initial_point(case, config: RunConfig):
+    """The physical start point x0 of a run: the case's default start, or the
+    ``start_index``-th seeded Latin-hypercube start of ``seed``."""
+    from problems.inverse import start_point
+
+    if config.start == "default":
+        return start_point(case, kind="default", seed=config.seed)
+    return start_point(case, kind="random", seed=config.seed, index=config.start_index)
+
+
+def is_analytic(case_name: str) -> bool:
+    return case_name.startswith("analytic-")
+
+
+def dataset_for(config: RunConfig, *, progress: bool = False):
+    """The measured data set of a run (FE cases): the shipped one, or the one made with the
+    suite's ``[data]`` settings (computed on first use and cached by problems.data)."""
+    if is_analytic(config.case):
+        return None
+    from problems.data import DataSettings, get_data
+
+    return get_data(config.case, DataSettings(**config.data) if config.data else None, progress=progress)
+
+
+def failed_result(config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0):
+    """A RunResult for a run that crashed before (or while) its solver returned."""
+    import math
+
+    from solvers.result import RunResult
+
+    names, ref = [], []
+    if case is None:
+        try:
+            from problems.cases import get_case
+
+            case = get_case(config.case)
+        except Exception:  # noqa: BLE001 - best effort only
+            case = None
+    if case is not None:
+        names, ref = list(case.names), [float(v) for v in case.reference]
+        if x0 is None:
+            x0 = case.start
+    x0 = [float(v) for v in x0] if x0 is not None else []
+    xn = [a / b if b else math.nan for a, b in zip(x0, ref)] if len(x0) == len(ref) else []
+    return RunResult(
+        method=config.method, options=dict(config.options), seed=config.seed, budget=config.budget,
+        parameter_names=names, reference=ref, x0=x0, x=list(x0), x_normalised=xn, cost=math.nan,
+        status="failed", success=False, message=message, n_evals=int(n_evals), wall_s=wall_s,
+    )
+
+
+def run_one(config: RunConfig | dict, *, mapper: Callable | None = None, suite: str | None = None,
+            dataset=None) -> dict[str, Any]:
+    """Run one identification and return its record (see :mod:`bench.store`); never raises
+    (except KeyboardInterrupt/SystemExit).
+
+    ``dataset``: the run's measured data (a problems.data.Dataset) when the caller prepared it;
+    by default it is loaded (or made) here with :func:`dataset_for`.
+    """
+    if isinstance(config, dict):
+        config = RunConfig.from_dict(config)
+    started, t0 = now(), time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:  # kept in the record, not on the console
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", DeprecationWarning)
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        result, data_hash, error = _run_guarded(config, mapper, dataset, t0)
+    record = make_record(config, result, suite=suite, data_hash=data_hash, error=error,
+                         started=started, finished=now())
+    seen = []
+    for w in caught:
+        text = f"{w.category.__name__}: {w.message}"
+        if text not in seen:
+            seen.append(text)
+    record["warnings"] = seen[:MAX_WARNINGS]
+    return record
+
+
+def _run_guarded(config: RunConfig, mapper, dataset, t0):
+    case = x0 = objective = None
+    error = data_hash = None
+    try:
+        from problems.cases import get_case
+        from problems.inverse import build_objective
+        from solvers import solve
+
+        case = get_case(config.case)
+        if dataset is None and not is_analytic(config.case):
+            dataset = dataset_for(config)
+        objective = build_objective(case, mesh=config.mesh, data=dataset, mapper=mapper)
+        data_hash = getattr(objective, "data_hash", None)
+        x0 = initial_point(case, config)
+        result = solve(objective, config.method, budget=config.budget, seed=config.seed, x0=x0,
+                       **dict(config.options))
+    except Exception as exc:  # a crash must never take a suite down
+        error = "".join(traceback.format_exception(exc))
+        n_evals = int(getattr(objective, "n_evals", 0) or 0) if objective is not None else 0
+        result = failed_result(config, f"{type(exc).__name__}: {exc}\n{error}", case=case, x0=x0,
+                               n_evals=n_evals, wall_s=time.perf_counter() - t0)
+    return result, data_hash, error
+
+
+def make_record(config: RunConfig, result, *, suite=None, data_hash=None, error=None,
+                started=None, finished=None) -> dict[str, Any]:
+    res = result.to_dict() if hasattr(result, "to_dict") else dict(result)
+    return {
+        "schema": store.RECORD_SCHEMA, "config_hash": config_hash(config), "config": config.to_dict(),
+        "suite": suite, "result": res, "data_hash": data_hash, "error": error,
+        "versions": versions(), "machine": machine(), "started": started, "finished": finished,
+        "warnings": [],
+    }
+
+
+# --- inside a Dask task --------------------------------------------------------------------
+
+class WorkerClientMapper:
+    """``mapper(fn, items)`` that fans ``items`` out to the cluster the calling task runs on.
+
+    Only valid inside a Dask task; the task secedes from the worker's thread pool while it
+    waits, so it never deadlocks a saturated cluster. Falls back to a loop for one item.
+    """
+
+    def __call__(self, fn, items):
+        items = list(items)
+        if len(items) <= 1:
+            return [fn(item) for item in items]
+        from distributed import worker_client
+
+        with worker_client() as client:
+            futures = client.map(fn, items, pure=False)
+            return client.gather(futures)
+
+
+def _dask_task(config: dict, suite: str | None, fan_out: bool, dataset=None) -> dict:
+    """The Dask task: one identification (module-level so that it pickles by reference)."""
+    return run_one(config, mapper=WorkerClientMapper() if fan_out else None, suite=suite, dataset=dataset)
+
+
+# --- suites -----------------------------------------------------------------------------------
+
+@dataclass
+class SuiteSummary:
+    """What :func:`run_suite` did."""
+
+    name: str
+    out_dir: Path
+    total: int
+    skipped: int
+    ran: int = 0
+    failed: int = 0
+    crashed: int = 0
+    wall_s: float = 0.0
+    removed_tmp: int = 0
+    log_file: Path | None = None
+    failures: list[str] = field(default_factory=list)
+
+    def __str__(self) -> str:
+        return (f"suite {self.name!r}: {self.total} runs, {self.skipped} already done, {self.ran} run now "
+                f"({self.failed} not successful, {self.crashed} crashed) in {self.wall_s:.1f} s; "
+                f"records in {store.runs_dir(self.out_dir)}")
+
+
+def default_workers() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover
+        return max(1, os.cpu_count() or 1)
+
+
+@contextmanager
+def _dir_lock(out_dir: Path):
+    """Exclusive lock on the results directory (released by the OS even on kill -9)."""
+    import fcntl
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fh = open(out_dir / ".lock", "a+")
+    try:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(f"another 'femubench run' is writing to {out_dir}; wait for it or use another --out") from None
+        yield
+    finally:
+        fh.close()
+
+
+@contextmanager
+def _suite_log(path: Path):
+    logger = logging.getLogger("femubench")
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    old_level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(old_level)
+        handler.close()
+
+
+def pending_runs(suite: Suite, out_dir: str | Path, *, force: bool = False, retry_failed: bool = False):
+    """``(all_runs, pending)``: the suite's runs and those to run now (no record yet, or all of
+    them with ``force``, or also the crashed ones with ``retry_failed``)."""
+    runs = suite.runs()
+    if force:
+        return runs, list(runs)
+    done = store.done_hashes(out_dir)
+    pending = [r for r in runs if config_hash(r) not in done]
+    if retry_failed:
+        for r in runs:
+            h = config_hash(r)
+            if h in done:
+                try:
+                    rec = store.read_record(store.record_path(out_dir, h))
+                except (OSError, ValueError):
+                    pending.append(r)
+                    continue
+                if rec.get("error"):
+                    pending.append(r)
+    return runs, pending
+
+
+def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, scheduler: str | None = None,
+              force: bool = False, retry_failed: bool = False, progress: bool = True,
+              fan_out: bool = False) -> SuiteSummary:
+    """Run every run of ``suite`` that has no record in ``out_dir`` (all of them with ``force``)."""
+    out_dir = Path(out_dir)
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    if workers is not None and scheduler is not None:
+        raise ValueError("give either --workers or --scheduler, not both")
+    t0 = time.perf_counter()
+    with _dir_lock(out_dir):
+        store.runs_dir(out_dir).mkdir(parents=True, exist_ok=True)
+        removed = store.clean_tmp(out_dir)
+        if suite.source:
+            store.atomic_write_text(out_dir / f"{suite.name}.suite.toml", suite.source)
+        log_file = out_dir / f"{suite.name}.log"
+        with _suite_log(log_file):
+            runs, pending = pending_runs(suite, out_dir, force=force, retry_failed=retry_failed)
+            summary = SuiteSummary(suite.name, out_dir, len(runs), len(runs) - len(pending),
+                                   removed_tmp=removed, log_file=log_file)
+            if removed:
+                log.warning("removed %d stray temporary file(s) left by an interrupted run", removed)
+            n_workers = workers if workers is not None else min(default_workers(), max(1, len(pending)))
+            where = scheduler or ("in-process" if n_workers == 1 else f"local cluster of {n_workers} workers")
+            log.info("suite %s: %d runs, %d with a record, %d to run (%s)%s", suite.name, len(runs),
+                     summary.skipped, len(pending), where, ", --force" if force else "")
+            datasets = prepare_datasets(pending, progress=progress)
+            bar = _progress(suite.name, len(runs), summary.skipped, progress)
+            try:
+                todo = []
+                for cfg in pending:  # runs whose data could not be made fail right away
+                    ds = datasets.get(data_key(cfg))
+                    if isinstance(ds, BaseException):
+                        msg = "".join(traceback.format_exception(ds))
+                        rec = make_record(cfg, failed_result(cfg, f"data set: {type(ds).__name__}: {ds}\n{msg}"),
+                                          suite=suite.name, error=msg, started=now(), finished=now())
+                        _finish(summary, out_dir, cfg, rec, bar)
+                    else:
+                        todo.append(cfg)
+                if not todo:
+                    pass
+                elif scheduler is None and n_workers == 1:
+                    for cfg in todo:
+                        rec = run_one(cfg, suite=suite.name, dataset=datasets.get(data_key(cfg)))
+                        _finish(summary, out_dir, cfg, rec, bar)
+                else:
+                    _run_dask(summary, out_dir, todo, suite.name, bar, n_workers=n_workers,
+                              scheduler=scheduler, fan_out=fan_out, datasets=datasets)
+            except KeyboardInterrupt:
+                log.warning("interrupted: %d runs finished now, %d left for the next 'femubench run'",
+                            summary.ran, len(pending) - summary.ran)
+                raise
+            finally:
+                bar.close()
+                summary.wall_s = time.perf_counter() - t0
+            log.info("done: %s", summary)
+    return summary
+
+
+def data_key(config: RunConfig) -> tuple[str, str] | None:
+    """Runs with the same key share one data set (None: analytic, no data set)."""
+    if is_analytic(config.case):
+        return None
+    from bench.suite import canonical_json
+
+    return config.case, canonical_json(config.data)
+
+
+def prepare_datasets(pending: list[RunConfig], *, progress: bool = False) -> dict:
+    """Load (or make, once) the data set of every FE case x data settings among ``pending``, here
+    in the client, so that workers receive the data with the task (no shared file system needed)
+    and a non-default data set is computed once, not by every run. Failures are returned as the
+    exception, which turns the affected runs into failed records."""
+    out: dict = {}
+    for cfg in pending:
+        key = data_key(cfg)
+        if key is None or key in out:
+            continue
+        t0 = time.perf_counter()
+        try:
+            out[key] = dataset_for(cfg, progress=progress)
+            log.info("data set of %s %s: hash %s (%.1f s)", cfg.case, key[1], getattr(out[key], "hash", "?")[:12],
+                     time.perf_counter() - t0)
+        except Exception as exc:  # noqa: BLE001 - reported per run
+            out[key] = exc
+            log.error("data set of %s with %s could not be made: %s", cfg.case, key[1], exc)
+    return out
+
+
+def _progress(name: str, total: int, initial: int, enabled: bool):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, initial=initial, desc=name, unit="run", disable=not enabled,
+                dynamic_ncols=True, smoothing=0.05, file=sys.stderr)
+
+
+def _finish(summary: SuiteSummary, out_dir: Path, cfg: RunConfig, record: dict, bar) -> None:
+    store.write_record(out_dir, record)
+    res = record["result"]
+    summary.ran += 1
+    if not res.get("success"):
+        summary.failed += 1
+    if record.get("error"):
+        summary.crashed += 1
+        summary.failures.append(cfg.label)
+        log.error("run %s crashed:\n%s", cfg.label, record["error"])
+    log.info("%s: %s cost=%s n_evals=%s wall=%.2fs [%s]", cfg.label, res.get("status"), res.get("cost"),
+             res.get("n_evals"), float(res.get("wall_s") or 0.0), record["config_hash"][:12])
+    for w in record.get("warnings") or []:
+        log.warning("%s: %s", cfg.label, w)
+    bar.update(1)
+    bar.set_postfix(unsuccessful=summary.failed, crashed=summary.crashed, refresh=False)
+
+
+def _run_dask(summary, out_dir, pending, suite_name, bar, *, n_workers, scheduler, fan_out, datasets=None):
+    import uuid
+
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", env=dict(SINGLE_THREAD_ENV),
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise ValueError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from None
+    try:
+        log.info("dask: %s, dashboard %s", client, getattr(client, "dashboard_link", "?"))
+        tag = uuid.uuid4().hex[:8]
+        scattered = {k: client.scatter(ds, hash=False) for k, ds in (datasets or {}).items()
+                     if not isinstance(ds, BaseException)}
+        by_key = {}
+        futures = []
+        for cfg in pending:
+            key = f"femubench-{config_hash(cfg)[:16]}-{tag}"
+            fut = client.submit(_dask_task, cfg.to_dict(), suite_name, fan_out, scattered.get(data_key(cfg)),
+                                key=key, pure=False)
+            by_key[fut.key] = cfg
+            futures.append(fut)
+        for fut in as_completed(futures):
+            cfg = by_key[fut.key]
+            try:
+                record = fut.result()
+            except Exception as exc:  # worker died (KilledWorker), unpicklable result, ...
+                msg = "".join(traceback.format_exception(exc))
+                record = make_record(cfg, failed_result(cfg, f"{type(exc).__name__}: {exc}\n{msg}"),
+                                     suite=suite_name, error=msg, started=None, finished=now())
+            _finish(summary, out_dir, cfg, record, bar)
+            fut.release()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

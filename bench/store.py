@@ -1,0 +1,277 @@
+"""The results store: one JSON record per run under ``DIR/runs/``, written atomically.
+
+A record is keyed by :func:`bench.suite.config_hash` of its :class:`~bench.suite.RunConfig`
+and lives in ``DIR/runs/<hash>.json``. It is written to a temporary file in the same directory
+(``.<hash>.<random>.tmp``), flushed, fsync'ed and renamed over the final name with
+:func:`os.replace`, so a reader (or a rerun after ``kill -9``) sees either the whole record or
+none. Stray ``*.tmp`` files left by a killed writer are ignored by the loaders and removed by
+:func:`clean_tmp` (which the runner calls while holding the directory lock).
+
+Record (JSON object)::
+
+    schema       int, RECORD_SCHEMA
+    config_hash  str, sha256 of the run configuration
+    config       RunConfig.to_dict()
+    suite        name of the suite that produced it
+    result       RunResult.to_dict()
+    data_hash    str | None, hash of the measured-data file used by the objective
+    error        str | None, traceback when the run crashed (result.status == "failed")
+    warnings     [str], the distinct warnings the run issued (at most 20)
+    versions     {package: version}
+    machine      {hostname, platform, python, cpu_count, ...}
+    started      ISO-8601 UTC time
+    finished     ISO-8601 UTC time
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator
+
+RECORD_SCHEMA = 1
+RUNS = "runs"
+
+log = logging.getLogger("femubench.store")
+
+#: Canonical order of the study's parameters (Table 1 rows); others follow alphabetically.
+PARAMETER_ORDER = ("E", "beta", "K", "psi", "sigma0", "H", "pt0", "a", "b")
+
+
+def runs_dir(out_dir: str | Path) -> Path:
+    return Path(out_dir) / RUNS
+
+
+def record_path(out_dir: str | Path, config_hash: str) -> Path:
+    return runs_dir(out_dir) / f"{config_hash}.json"
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: temporary file, fsync, rename, fsync directory."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    try:  # make the rename durable
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:  # pragma: no cover - platforms without directory fsync
+        pass
+
+
+def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:
+    """Write one record atomically to ``DIR/runs/<config_hash>.json``; return its path."""
+    h = record["config_hash"]
+    path = record_path(out_dir, h)
+    atomic_write_text(path, json.dumps(_json_safe(record), sort_keys=True, separators=(",", ":")) + "\n")
+    return path
+
+
+def read_record(path: str | Path) -> dict[str, Any]:
+    with open(path, encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+def has_record(out_dir: str | Path, config_hash: str) -> bool:
+    return record_path(out_dir, config_hash).is_file()
+
+
+def stray_tmp(out_dir: str | Path) -> list[Path]:
+    """Temporary files left behind by killed writers."""
+    d = runs_dir(out_dir)
+    return sorted(d.glob("*.tmp")) if d.is_dir() else []
+
+
+def clean_tmp(out_dir: str | Path) -> int:
+    """Remove stray temporary files; only call while no writer is active (the runner's lock)."""
+    n = 0
+    for p in stray_tmp(out_dir):
+        try:
+            p.unlink()
+            n += 1
+        except FileNotFoundError:
+            pass
+    return n
+
+
+def iter_records(out_dir: str | Path) -> Iterator[dict[str, Any]]:
+    """Yield every complete record of ``DIR/runs`` (sorted by hash); unreadable files are skipped
+    with a warning, stray ``*.tmp`` files are ignored and reported."""
+    d = runs_dir(out_dir)
+    if not d.is_dir():
+        return
+    tmp = stray_tmp(out_dir)
+    if tmp:
+        log.warning("ignoring %d stray temporary file(s) in %s (left by an interrupted run)", len(tmp), d)
+    for p in sorted(d.glob("*.json")):
+        try:
+            rec = read_record(p)
+        except (OSError, json.JSONDecodeError) as exc:  # should not happen with atomic writes
+            log.warning("skipping unreadable record %s: %s", p, exc)
+            continue
+        if not isinstance(rec, dict) or "config_hash" not in rec or "result" not in rec:
+            log.warning("skipping %s: not a femubench record", p)
+            continue
+        yield rec
+
+
+def load_records(out_dir: str | Path) -> list[dict[str, Any]]:
+    """All complete records of a results directory."""
+    return list(iter_records(out_dir))
+
+
+def done_hashes(out_dir: str | Path) -> set[str]:
+    """Hashes of the runs that have a record (by file name; no parsing)."""
+    d = runs_dir(out_dir)
+    return {p.stem for p in d.glob("*.json")} if d.is_dir() else set()
+
+
+def parameter_order(names) -> list[str]:
+    names = list(dict.fromkeys(names))
+    known = [n for n in PARAMETER_ORDER if n in names]
+    return known + sorted(n for n in names if n not in PARAMETER_ORDER)
+
+
+def _num(v) -> float:
+    if v is None:
+        return math.nan
+    if isinstance(v, str):
+        return {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}.get(v, math.nan)
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def to_frames(out_dir: str | Path, records: list[dict] | None = None):
+    """Load a results directory into two tidy DataFrames ``(runs, history)``.
+
+    ``runs``: one row per run — configuration columns (case, method, seed, start, start_index,
+    budget, mesh, ``data.<key>``, options as JSON), outcome (status, success, cost, n_evals, ...,
+    wall_s), per parameter ``x.<p>`` (physical), ``xn.<p>`` (x / reference), ``err.<p>`` (signed
+    error in percent; NaN where the parameter is inactive) and ``x0.<p>``, plus provenance
+    (data_hash, hostname, started, finished, crashed).
+
+    ``history``: one row per history row of each run — config_hash, case, method, seed, start,
+    start_index, budget, iteration, n_evals, cost, best_cost and ``xn.<p>``/``err.<p>``.
+    """
+    import numpy as np
+    import pandas as pd
+
+    records = load_records(out_dir) if records is None else records
+    all_params: list[str] = []
+    for rec in records:
+        all_params.extend(rec["result"].get("parameter_names", []))
+    params = parameter_order(all_params)
+
+    rows, hrows = [], []
+    for rec in records:
+        cfg, res = rec["config"], rec["result"]
+        names = list(res.get("parameter_names", []))
+        ref = np.array([_num(v) for v in res.get("reference", [])], float)
+        x = np.array([_num(v) for v in res.get("x", [])], float)
+        xn = np.array([_num(v) for v in res.get("x_normalised", [])], float)
+        x0 = np.array([_num(v) for v in res.get("x0", [])], float)
+        key = {
+            "config_hash": rec["config_hash"], "suite": rec.get("suite"), "case": cfg["case"],
+            "method": cfg["method"], "seed": int(cfg["seed"]), "start": cfg["start"],
+            "start_index": int(cfg["start_index"]), "budget": int(cfg["budget"]),
+        }
+        row = dict(key)
+        row["mesh"] = cfg.get("mesh")
+        for k, v in sorted((cfg.get("data") or {}).items()):
+            row[f"data.{k}"] = v
+        row["options"] = json.dumps(cfg.get("options") or {}, sort_keys=True)
+        row.update({
+            "status": res.get("status"), "success_solver": bool(res.get("success")),
+            "cost": _num(res.get("cost")), "n_evals": int(res.get("n_evals") or 0),
+            "n_failed": int(res.get("n_failed") or 0), "n_infeasible": int(res.get("n_infeasible") or 0),
+            "n_cache_hits": int(res.get("n_cache_hits") or 0),
+            "n_iterations": int(res.get("n_iterations") or 0), "wall_s": _num(res.get("wall_s")),
+            "message": res.get("message", ""), "crashed": bool(rec.get("error")),
+            "data_hash": rec.get("data_hash"), "hostname": (rec.get("machine") or {}).get("hostname"),
+            "started": rec.get("started"), "finished": rec.get("finished"),
+            "n_params": len(names), "max_abs_err": float(np.max(np.abs(100.0 * (xn - 1.0)))) if len(xn) else math.nan,
+        })
+        idx = {n: i for i, n in enumerate(names)}
+        for p in params:
+            i = idx.get(p)
+            row[f"x.{p}"] = x[i] if i is not None and i < len(x) else math.nan
+            row[f"xn.{p}"] = xn[i] if i is not None and i < len(xn) else math.nan
+            row[f"err.{p}"] = 100.0 * (xn[i] - 1.0) if i is not None and i < len(xn) else math.nan
+            row[f"x0.{p}"] = x0[i] if i is not None and i < len(x0) else math.nan
+        rows.append(row)
+
+        for h in res.get("history") or []:
+            hr = dict(key)
+            hr["iteration"] = int(h.get("iteration", len(hrows)))
+            hr["n_evals"] = int(h.get("n_evals") or 0)
+            hr["cost"] = _num(h.get("cost"))
+            hr["best_cost"] = _num(h.get("best_cost", h.get("cost")))
+            hx = h.get("x")
+            hxn = (np.array([_num(v) for v in hx], float) / ref) if hx is not None and len(hx) == len(ref) \
+                else np.full(len(names), math.nan)
+            for p in params:
+                i = idx.get(p)
+                hr[f"xn.{p}"] = hxn[i] if i is not None else math.nan
+                hr[f"err.{p}"] = 100.0 * (hxn[i] - 1.0) if i is not None else math.nan
+            hr["max_abs_err"] = float(np.max(np.abs(100.0 * (hxn - 1.0)))) if len(hxn) else math.nan
+            hrows.append(hr)
+
+    runs = pd.DataFrame(rows)
+    history = pd.DataFrame(hrows)
+    sort = ["case", "method", "budget", "seed", "start", "start_index"]
+    if len(runs):
+        runs = runs.sort_values(sort, kind="stable").reset_index(drop=True)
+    if len(history):
+        history = history.sort_values(sort + ["iteration"], kind="stable").reset_index(drop=True)
+    runs.attrs["parameters"] = params
+    history.attrs["parameters"] = params
+    return runs, history
+
+
+def write_parquet(out_dir: str | Path, dest: str | Path | None = None) -> tuple[Path, Path]:
+    """Write ``runs.parquet`` and ``history.parquet`` (default: into ``DIR``); return their paths."""
+    runs, history = to_frames(out_dir)
+    dest = Path(dest) if dest is not None else Path(out_dir)
+    dest.mkdir(parents=True, exist_ok=True)
+    paths = dest / "runs.parquet", dest / "history.parquet"
+    for df, p in zip((runs, history), paths):
+        df = df.copy()
+        df.attrs = {}
+        tmp = p.with_suffix(".parquet.tmp")
+        df.to_parquet(tmp, index=False)
+        os.replace(tmp, p)
+    return paths
+
+
+def _json_safe(obj):
+    """Non-finite floats -> "inf"/"-inf"/"nan" (as RunResult.to_dict does); numpy -> Python."""
+    if isinstance(obj, float):
+        if not math.isfinite(obj):
+            return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+        return obj
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if hasattr(obj, "tolist"):  # numpy scalars and arrays
+        return _json_safe(obj.tolist())
+    return obj

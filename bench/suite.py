@@ -1,0 +1,508 @@
+"""Suites: a TOML file describing cases x methods x seeds x starts x budgets, and its runs.
+
+A suite is loaded with :func:`load_suite` (or :func:`parse_suite` from a dict), validated
+strictly *before anything runs* — every unknown key, unknown case or method and impossible
+value is reported with the allowed values — and expanded by :meth:`Suite.runs` into a list of
+:class:`RunConfig`, one per identification. :func:`config_hash` keys a run in the results store.
+
+The schema is documented in ``docs/suites.md``; in short::
+
+    [suite]
+    name = "default"                 # optional, defaults to the file name
+    description = "..."              # optional
+    cases = "all"                    # or a list of case names (analytic-* included)
+    methods = ["lm", "gauss-newton"]
+    seeds = [0]                      # optional, default [0]
+    starts = ["default"]             # "default" and/or "random"; optional
+    random_starts = 1                # random starts per seed when "random" is listed
+    budgets = [200]                  # forward evaluations per run
+    mesh = "coarse"                  # optional
+
+    [data]                           # optional, passed to build_objective(data=...)
+    noise_um = 0.0
+
+    [options.lm]                     # optional, per-method solver options
+    xtol = 1e-10
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+#: Version of the run-configuration schema; part of every config hash.
+CONFIG_SCHEMA = 1
+
+START_KINDS = ("default", "random")
+
+#: Meshes accepted when the FE package does not publish its own list.
+FALLBACK_MESHES = ("coarse", "paper", "fine")
+
+#: Data settings accepted when problems.inverse does not publish its own (name -> type).
+FALLBACK_DATA_SETTINGS: dict[str, tuple] = {
+    "mesh": (str,), "resolution_um": (float,), "noise_um": (float,), "force_resolution_kN": (float,),
+    "seed": (int,), "displacement_mm": (float,), "snapshots": (int,), "plates": (str,),
+    "spacing_mm": (float,), "margin_mm": (float,), "route": (str,),
+}
+
+SUITE_KEYS = {
+    "name": "suite name (string; default: the file name without .toml)",
+    "description": "free text",
+    "cases": '"all" or a list of case names',
+    "methods": "list of method names",
+    "seeds": "list of non-negative integers (default [0])",
+    "starts": 'list of "default" and/or "random" (default ["default"])',
+    "random_starts": "random starts per seed when 'random' is listed (integer >= 1, default 1)",
+    "budgets": "list of positive integers: forward evaluations per run",
+    "mesh": "FE mesh name (default 'coarse')",
+}
+TOP_KEYS = ("suite", "data", "options")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """The complete configuration of one identification run (what its record is keyed by).
+
+    ``start`` is ``"default"`` (the case's default start, ``start_index`` 0) or ``"random"``
+    (the ``start_index``-th random start drawn for ``seed``). ``data`` and ``options`` hold
+    only the settings written in the suite (defaults are the library's).
+    """
+
+    case: str
+    method: str
+    seed: int
+    start: str
+    start_index: int
+    budget: int
+    mesh: str
+    data: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "case": self.case, "method": self.method, "seed": self.seed, "start": self.start,
+            "start_index": self.start_index, "budget": self.budget, "mesh": self.mesh,
+            "data": dict(sorted(self.data.items())), "options": dict(sorted(self.options.items())),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "RunConfig":
+        return cls(case=d["case"], method=d["method"], seed=int(d["seed"]), start=d["start"],
+                   start_index=int(d["start_index"]), budget=int(d["budget"]), mesh=d["mesh"],
+                   data=dict(d.get("data") or {}), options=dict(d.get("options") or {}))
+
+    @property
+    def hash(self) -> str:
+        return config_hash(self)
+
+    @property
+    def label(self) -> str:
+        """Short human-readable label, e.g. ``linear-shear/lm/s0/default0/b200``."""
+        return f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}"
+
+
+def canonical_json(obj: Any) -> str:
+    """Canonical JSON (sorted keys, no whitespace) used for hashing."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=True)
+
+
+def config_hash(config: RunConfig) -> str:
+    """sha256 hex digest of the canonical JSON of the run's full configuration."""
+    payload = {"schema": CONFIG_SCHEMA, **config.to_dict()}
+    return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A validated suite: the lists it spans and the per-method options."""
+
+    name: str
+    cases: tuple[str, ...]
+    methods: tuple[str, ...]
+    seeds: tuple[int, ...] = (0,)
+    starts: tuple[str, ...] = ("default",)
+    random_starts: int = 1
+    budgets: tuple[int, ...] = (200,)
+    mesh: str = "coarse"
+    data: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)  # method -> {option: value}
+    description: str = ""
+    source: str | None = None  # the TOML text it was read from, if any
+
+    def runs(self) -> list[RunConfig]:
+        """All runs, ordered case, method, budget, seed, start, start index."""
+        out = []
+        for case in self.cases:
+            for method in self.methods:
+                for budget in self.budgets:
+                    for seed in self.seeds:
+                        for start in self.starts:
+                            n = 1 if start == "default" else self.random_starts
+                            for i in range(n):
+                                out.append(RunConfig(case, method, seed, start, i, budget, self.mesh,
+                                                     dict(self.data), dict(self.options.get(method, {}))))
+        return out
+
+    def __len__(self) -> int:
+        per_seed = sum(1 if s == "default" else self.random_starts for s in self.starts)
+        return len(self.cases) * len(self.methods) * len(self.budgets) * len(self.seeds) * per_seed
+
+    @property
+    def total_budget(self) -> int:
+        """Upper bound on the forward evaluations of the whole suite."""
+        return sum(r.budget for r in self.runs())
+
+
+# --- what is allowed ------------------------------------------------------------------------
+
+def _known_cases() -> dict:
+    from problems.cases import CASES
+
+    try:
+        from problems.cases import all_cases
+
+        return all_cases()
+    except ImportError:  # analytic problems not available
+        return dict(CASES)
+
+
+def _fe_cases() -> list[str]:
+    from problems.cases import CASES
+
+    return list(CASES)
+
+
+def _methods() -> dict | None:
+    """solvers.METHODS, or None when the solver package is not importable."""
+    try:
+        from solvers import METHODS
+    except ImportError:
+        return None
+    return METHODS
+
+
+def _get_method(method: str):
+    """solvers' MethodInfo for ``method`` (registered or resolved, e.g. nlopt:<ALGO>), or None."""
+    try:
+        from solvers.base import get_method
+    except ImportError:
+        get_method = None
+    if get_method is not None:
+        try:
+            return get_method(method)
+        except (ValueError, KeyError):
+            return None
+    methods = _methods()
+    return None if methods is None else methods.get(method)
+
+
+def method_options(method: str, methods: dict | None = None) -> dict | None:
+    """The option table ``{name: (default, description)}`` of a method, None if unknown."""
+    info = _get_method(method)
+    return None if info is None else dict(getattr(info, "options", {}) or {})
+
+
+def _method_known(method: str, methods: dict | None) -> bool:
+    if methods is None:  # solvers not importable: only the names of the contract
+        return method in _CONTRACT_METHODS
+    return _get_method(method) is not None
+
+
+_CONTRACT_METHODS = ("lm", "gauss-newton", "ga", "de", "pso", "sa", "mcmc", "nlopt:BOBYQA",
+                     "nlopt:SBPLX", "nlopt:NELDERMEAD", "nlopt:CRS2_LM", "nlopt:DIRECT_L",
+                     "nlopt:ESCH", "nlopt:ISRES", "nlopt:MLSL", "multistart-lm", "pso+lm")
+
+
+def _meshes() -> tuple[str, ...]:
+    """Named mesh presets of the FE model (a mesh may also be given as "NX,NY,NZ")."""
+    try:
+        from problems.mesh import MESH_PRESETS
+    except ImportError:
+        return FALLBACK_MESHES
+    return tuple(MESH_PRESETS)
+
+
+def _mesh_ok(mesh) -> bool:
+    if not isinstance(mesh, str):
+        return False
+    if mesh in _meshes():
+        return True
+    parts = mesh.split(",")
+    return len(parts) == 3 and all(p.strip().isdigit() and int(p) >= 1 for p in parts)
+
+
+def _data_settings() -> dict[str, tuple]:
+    """Allowed [data] keys (the fields of problems.data.DataSettings) -> accepted Python types."""
+    try:
+        from problems.data import DataSettings
+    except ImportError:
+        return dict(FALLBACK_DATA_SETTINGS)
+    return {f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings)}
+
+
+def _check_data_settings(data: dict) -> str | None:
+    """The reason ``data`` does not make valid DataSettings, or None."""
+    try:
+        from problems.data import DataSettings
+    except ImportError:
+        return None
+    try:
+        DataSettings(**data)
+    except (ValueError, TypeError) as exc:
+        return str(exc)
+    return None
+
+
+def _types_like(default) -> tuple:
+    if isinstance(default, bool):
+        return (bool,)
+    if isinstance(default, int):
+        return (int,)
+    if isinstance(default, float):
+        return (float,)
+    if isinstance(default, str):
+        return (str,)
+    if default is None:
+        return (bool, int, float, str)
+    if isinstance(default, (list, tuple)):
+        return (list,)
+    return (object,)
+
+
+# --- loading and validation -----------------------------------------------------------------
+
+def load_suite(path: str | Path) -> Suite:
+    """Read and validate a suite TOML file; raise ValueError naming every problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"suite file {str(path)!r} does not exist")
+    text = path.read_text()
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    return parse_suite(raw, name=path.stem, source=text, where=str(path))
+
+
+def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, where: str = "suite") -> Suite:
+    """Validate a suite given as a dict (the parsed TOML); raise ValueError listing all errors."""
+    errors: list[str] = []
+
+    def err(msg):
+        errors.append(msg)
+
+    if not isinstance(raw, dict):
+        raise ValueError(f"{where}: a suite is a TOML table")
+    for key in raw:
+        if key not in TOP_KEYS:
+            err(f"unknown top-level table [{key}]; allowed: {', '.join('[' + k + ']' for k in TOP_KEYS)}")
+    s = raw.get("suite")
+    if s is None:
+        err("missing table [suite] (with at least 'cases', 'methods' and 'budgets')")
+        s = {}
+    elif not isinstance(s, dict):
+        err("'suite' must be a table: [suite]")
+        s = {}
+    for key in s:
+        if key not in SUITE_KEYS:
+            hint = _did_you_mean(key, SUITE_KEYS)
+            err(f"[suite] unknown key {key!r}{hint}; allowed: {', '.join(SUITE_KEYS)}")
+
+    # name / description
+    sname = s.get("name", name)
+    if not isinstance(sname, str) or not sname.strip():
+        err(f"[suite] name must be a non-empty string, got {sname!r}")
+        sname = name
+    elif not all(c.isalnum() or c in "-_." for c in sname):
+        err(f"[suite] name {sname!r} may contain only letters, digits, '-', '_' and '.'")
+    description = s.get("description", "")
+    if not isinstance(description, str):
+        err(f"[suite] description must be a string, got {description!r}")
+        description = ""
+
+    # cases
+    known_cases = _known_cases()
+    cases = s.get("cases")
+    if cases is None:
+        err('[suite] missing key \'cases\' ("all" or a list of case names)')
+        cases = []
+    elif cases == "all":
+        cases = _fe_cases()
+    elif not isinstance(cases, list) or not cases:
+        err(f'[suite] cases must be "all" or a non-empty list of case names, got {cases!r}')
+        cases = []
+    else:
+        for c in cases:
+            if not isinstance(c, str) or c not in known_cases:
+                err(f"[suite] cases: case {c!r} is unknown; allowed: \"all\" or {', '.join(known_cases)}")
+        _no_duplicates("cases", cases, err)
+
+    # methods
+    methods_table = _methods()
+    methods = s.get("methods")
+    if methods is None:
+        err("[suite] missing key 'methods' (a list of method names)")
+        methods = []
+    elif not isinstance(methods, list) or not methods:
+        err(f"[suite] methods must be a non-empty list of method names, got {methods!r}")
+        methods = []
+    else:
+        allowed = list(methods_table) if methods_table is not None else list(_CONTRACT_METHODS)
+        allowed = [a for a in allowed if a in _CONTRACT_METHODS] + [a for a in allowed if a not in _CONTRACT_METHODS]
+        for m in methods:
+            if not isinstance(m, str) or not _method_known(m, methods_table):
+                hint = _did_you_mean(m, allowed) if isinstance(m, str) else ""
+                err(f"[suite] methods: method {m!r} is unknown{hint}; allowed: {', '.join(allowed)}"
+                    " (or nlopt:<ALGORITHM>)")
+        _no_duplicates("methods", methods, err)
+
+    seeds = _int_list(s, "seeds", [0], minimum=0, err=err)
+    budgets = _int_list(s, "budgets", None, minimum=1, err=err)
+
+    starts = s.get("starts", ["default"])
+    if not isinstance(starts, list) or not starts:
+        err(f'[suite] starts must be a non-empty list of "default" and/or "random", got {starts!r}')
+        starts = ["default"]
+    else:
+        for st in starts:
+            if st not in START_KINDS:
+                err(f"[suite] starts: {st!r} is not a start kind; allowed: {', '.join(START_KINDS)}")
+        _no_duplicates("starts", starts, err)
+        starts = [st for st in START_KINDS if st in starts]  # canonical order
+
+    random_starts = s.get("random_starts", 1)
+    if isinstance(random_starts, bool) or not isinstance(random_starts, int) or random_starts < 1:
+        err(f"[suite] random_starts must be an integer >= 1, got {random_starts!r}")
+        random_starts = 1
+    elif "random_starts" in s and "random" not in starts:
+        err('[suite] random_starts is set but starts does not list "random"')
+
+    mesh = s.get("mesh", "coarse")
+    if not _mesh_ok(mesh):
+        err(f"[suite] mesh {mesh!r} is unknown; allowed: {', '.join(_meshes())} or \"NX,NY,NZ\" (integers >= 1)")
+
+    # [data]
+    raw_data = raw.get("data", {})
+    if not isinstance(raw_data, dict):
+        err("'data' must be a table: [data]")
+        raw_data = {}
+    data: dict[str, Any] = {}
+    allowed_data = _data_settings()
+    for key, value in raw_data.items():
+        if key not in allowed_data:
+            err(f"[data] unknown key {key!r}{_did_you_mean(key, allowed_data)}; allowed: {', '.join(allowed_data)}")
+            continue
+        types = allowed_data[key]
+        ok, value = _coerce(value, types)
+        if not ok:
+            err(f"[data] {key} must be of type {'/'.join(t.__name__ for t in types)}, got {raw_data[key]!r}")
+        elif isinstance(value, float) and not math.isfinite(value):
+            err(f"[data] {key} must be finite, got {value!r}")
+        data[key] = value
+    if data and not any(e.startswith("[data]") for e in errors):
+        reason = _check_data_settings(data)
+        if reason:
+            err(f"[data] {reason}")
+
+    # [options.<method>]
+    options = raw.get("options", {})
+    if not isinstance(options, dict):
+        err("'options' must be a table of per-method tables: [options.<method>]")
+        options = {}
+    clean_options: dict[str, dict] = {}
+    for m, opts in options.items():
+        if m not in methods:
+            err(f"[options.{_q(m)}] is for method {m!r}, which the suite does not run; "
+                f"the suite's methods: {', '.join(map(str, methods)) or '(none)'}")
+            continue
+        if not isinstance(opts, dict):
+            err(f"[options.{_q(m)}] must be a table of option = value")
+            continue
+        table = method_options(m, methods_table)
+        clean = {}
+        for key, value in opts.items():
+            if table is not None and key not in table:
+                allowed = ", ".join(table) or "(this method takes no options)"
+                err(f"[options.{_q(m)}] unknown option {key!r}{_did_you_mean(key, table)}; allowed: {allowed}")
+                continue
+            if table is not None:
+                default = table[key][0] if isinstance(table[key], tuple) else table[key]
+                ok, value2 = _coerce(value, _types_like(default))
+                if not ok:
+                    err(f"[options.{_q(m)}] {key} must be like its default {default!r} "
+                        f"({type(default).__name__}), got {value!r}")
+                    continue
+                value = value2
+            if isinstance(value, float) and not math.isfinite(value):
+                err(f"[options.{_q(m)}] {key} must be finite (leave it out to use its default), got {value!r}")
+                continue
+            clean[key] = value
+        if clean:
+            clean_options[m] = clean
+
+    if errors:
+        raise ValueError(f"{where}: invalid suite:\n  - " + "\n  - ".join(errors))
+
+    return Suite(name=sname, cases=tuple(cases), methods=tuple(methods), seeds=tuple(seeds),
+                 starts=tuple(starts), random_starts=random_starts, budgets=tuple(budgets),
+                 mesh=mesh, data=dict(data), options=clean_options, description=description,
+                 source=source)
+
+
+def _q(m: str) -> str:
+    return m if m.replace("-", "").replace("_", "").isalnum() else f'"{m}"'
+
+
+def _int_list(s: dict, key: str, default, *, minimum: int, err) -> list[int]:
+    if key not in s:
+        if default is None:
+            err(f"[suite] missing key {key!r} ({SUITE_KEYS[key]})")
+            return []
+        return list(default)
+    value = s[key]
+    if not isinstance(value, list) or not value:
+        err(f"[suite] {key} must be a non-empty list of integers, got {value!r}")
+        return list(default or [])
+    bad = [v for v in value if isinstance(v, bool) or not isinstance(v, int) or v < minimum]
+    if bad:
+        what = "positive integers" if minimum == 1 else f"integers >= {minimum}"
+        err(f"[suite] {key} must be {what}; invalid: {', '.join(map(repr, bad))}")
+        return []
+    _no_duplicates(key, value, err)
+    return list(value)
+
+
+def _no_duplicates(key: str, values: list, err) -> None:
+    seen, dup = set(), []
+    for v in values:
+        hv = repr(v)
+        if hv in seen and hv not in dup:
+            dup.append(hv)
+        seen.add(hv)
+    if dup:
+        err(f"[suite] {key} lists {', '.join(dup)} more than once")
+
+
+def _coerce(value, types: tuple) -> tuple[bool, Any]:
+    """Accept ``value`` for ``types`` (ints where floats are expected become floats)."""
+    if object in types:
+        return True, value
+    if isinstance(value, bool):
+        return (bool in types), value
+    if isinstance(value, int) and int not in types and float in types:
+        return True, float(value)
+    if isinstance(value, list) and list in types:
+        return True, value
+    return isinstance(value, tuple(t for t in types if t is not list)), value
+
+
+def _did_you_mean(key: str, allowed) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(str(key), list(allowed), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""

@@ -1,0 +1,170 @@
+"""Suites: strict validation (the promised errors), expansion and the config hash."""
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench.suite import RunConfig, config_hash, load_suite, parse_suite
+
+ROOT = Path(__file__).resolve().parent.parent
+
+GOOD = {
+    "suite": {"name": "t", "cases": ["analytic-smooth", "analytic-linear"], "methods": ["lm", "gauss-newton"],
+              "seeds": [0, 1], "starts": ["default", "random"], "random_starts": 2, "budgets": [50, 100]},
+}
+
+
+def with_(path: str, value, base=GOOD):
+    raw = copy.deepcopy(base)
+    *head, last = path.split(".")
+    d = raw
+    for k in head:
+        d = d.setdefault(k, {})
+    if value is _DELETE:
+        d.pop(last)
+    else:
+        d[last] = value
+    return raw
+
+
+_DELETE = object()
+
+
+def test_expansion_counts_and_order():
+    s = parse_suite(GOOD)
+    runs = s.runs()
+    # 2 cases x 2 methods x 2 budgets x 2 seeds x (1 default + 2 random)
+    assert len(runs) == len(s) == 2 * 2 * 2 * 2 * 3
+    assert len({config_hash(r) for r in runs}) == len(runs)
+    assert runs[0] == RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", {}, {})
+    assert [(r.start, r.start_index) for r in runs[:3]] == [("default", 0), ("random", 0), ("random", 1)]
+    assert s.total_budget == sum(r.budget for r in runs)
+
+
+def test_all_cases_means_the_nine_fe_cases():
+    from problems.cases import CASES
+
+    s = parse_suite(with_("suite.cases", "all"))
+    assert s.cases == tuple(CASES) and len(s.cases) == 9
+
+
+def test_options_are_attached_to_their_method_only():
+    from solvers import METHODS
+
+    name, (default, _) = next(iter(METHODS["lm"].options.items()))
+    value = default if not isinstance(default, (int, float)) or isinstance(default, bool) else default * 2
+    s = parse_suite(with_(f"options.lm.{name}", value))
+    lm = [r for r in s.runs() if r.method == "lm"]
+    gn = [r for r in s.runs() if r.method == "gauss-newton"]
+    assert all(r.options == {name: value} for r in lm) and all(r.options == {} for r in gn)
+    assert config_hash(lm[0]) != config_hash(parse_suite(GOOD).runs()[0])
+
+
+def test_config_hash_is_canonical_and_stable():
+    a = RunConfig("analytic-smooth", "lm", 0, "default", 0, 100, "coarse", {"b": 1, "a": 2.0}, {"y": 1, "x": "s"})
+    b = RunConfig("analytic-smooth", "lm", 0, "default", 0, 100, "coarse", {"a": 2.0, "b": 1}, {"x": "s", "y": 1})
+    assert config_hash(a) == config_hash(b)
+    assert config_hash(a) != config_hash(RunConfig.from_dict({**a.to_dict(), "seed": 1}))
+    assert RunConfig.from_dict(a.to_dict()) == a
+    # changing this value orphans every stored record: bump CONFIG_SCHEMA deliberately if needed
+    assert config_hash(RunConfig("linear-compression", "lm", 0, "default", 0, 200, "coarse")) == \
+        "59064abca4ad72a36e177bb07e19b2d4d22b46d46c40bc9479eb1b7e46446770"
+
+
+@pytest.mark.parametrize("raw, needles", [
+    (with_("suite.seed", [0]), ["[suite] unknown key 'seed'", "did you mean 'seeds'", "allowed: name"]),
+    (with_("suite.cases", ["linear-compresion"]), ["case 'linear-compresion' is unknown", "linear-compression"]),
+    (with_("suite.cases", []), ["cases must be"]),
+    (with_("suite.methods", ["lm", "levenberg"]), ["method 'levenberg' is unknown", "allowed:", "gauss-newton"]),
+    (with_("suite.methods", ["nlopt:NOSUCH"]), ["method 'nlopt:NOSUCH' is unknown"]),
+    (with_("suite.budgets", [0]), ["budgets must be positive integers", "0"]),
+    (with_("suite.budgets", [-5, 10]), ["budgets must be positive integers", "-5"]),
+    (with_("suite.budgets", []), ["budgets must be a non-empty list"]),
+    (with_("suite.budgets", _DELETE), ["missing key 'budgets'"]),
+    (with_("suite.seeds", [0.5]), ["seeds must be integers >= 0", "0.5"]),
+    (with_("suite.seeds", ["1"]), ["seeds must be integers >= 0"]),
+    (with_("suite.seeds", [True]), ["seeds must be integers >= 0"]),
+    (with_("suite.seeds", [1, 1]), ["seeds lists 1 more than once"]),
+    (with_("suite.starts", ["default", "randon"]), ["'randon' is not a start kind", "default, random"]),
+    (with_("suite.random_starts", 0), ["random_starts must be an integer >= 1"]),
+    (with_("suite.mesh", "huge"), ["mesh 'huge' is unknown", "coarse"]),
+    (with_("results.x", 1), ["unknown top-level table [results]", "[suite], [data], [options]"]),
+    (with_("data.noize_um", 1.0), ["[data] unknown key 'noize_um'", "allowed:"]),
+    (with_("data.noise_um", -1.0), ["[data] noise_um = -1.0 is out of range"]),
+    (with_("data.route", "laser"), ["[data] route = 'laser' is unknown", "fe, dic"]),
+    (with_("data.seed", 1.5), ["[data] seed must be of type int"]),
+    (with_("options.pso.w", 0.5), ["[options.pso] is for method 'pso', which the suite does not run"]),
+    (with_("options.lm.no_such_option", 1), ["[options.lm] unknown option 'no_such_option'", "allowed:"]),
+    ({"suite": {"cases": "all"}}, ["missing key 'methods'", "missing key 'budgets'"]),
+])
+def test_invalid_suites_are_rejected_with_the_key_and_what_is_allowed(raw, needles):
+    with pytest.raises(ValueError) as info:
+        parse_suite(raw)
+    msg = str(info.value)
+    for needle in needles:
+        assert needle in msg, f"{needle!r} not in:\n{msg}"
+
+
+def test_data_settings_are_attached_to_every_run():
+    s = parse_suite(with_("data.noise_um", 2, with_("data.seed", 3)))
+    assert all(r.data == {"noise_um": 2.0, "seed": 3} for r in s.runs())
+    assert isinstance(s.runs()[0].data["noise_um"], float)  # an int where a float is expected
+
+
+def test_all_errors_are_reported_at_once():
+    raw = with_("suite.budgets", [0], with_("suite.seeds", [-1], with_("suite.colour", "red")))
+    msg = str(pytest.raises(ValueError, parse_suite, raw).value)
+    assert "budgets" in msg and "seeds" in msg and "colour" in msg
+
+
+def test_option_values_are_type_checked():
+    from solvers import METHODS
+
+    name, (default, _) = next((k, v) for k, v in METHODS["lm"].options.items()
+                              if isinstance(v[0], (int, float)) and not isinstance(v[0], bool))
+    with pytest.raises(ValueError, match=rf"\[options.lm\] {name} must be like its default"):
+        parse_suite(with_(f"options.lm.{name}", "fast"))
+
+
+def test_cli_rejects_an_invalid_suite_before_running_anything(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[suite]\ncases = ["analytic-smooth"]\nmethods = ["lm"]\nbudgets = [0]\nstart = ["default"]\n')
+    out = tmp_path / "out"
+    p = subprocess.run([sys.executable, "-m", "bench", "run", str(bad), "--out", str(out), "--workers", "1"],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert p.returncode == 2
+    assert "femubench run: error:" in p.stderr and "budgets must be positive integers" in p.stderr
+    assert "unknown key 'start'" in p.stderr and "did you mean 'starts'" in p.stderr
+    assert not out.exists()  # nothing ran, nothing written
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    p = tmp_path / "x.toml"
+    p.write_text("[suite\n")
+    with pytest.raises(ValueError, match="not valid TOML"):
+        load_suite(p)
+    with pytest.raises(FileNotFoundError):
+        load_suite(tmp_path / "missing.toml")
+
+
+@pytest.mark.parametrize("name", ["default", "paper", "smoke"])
+def test_shipped_suites_are_valid(name):
+    s = load_suite(ROOT / "suites" / f"{name}.toml")
+    assert s.name == name and len(s.runs()) == len(s) > 0
+
+
+def test_default_and_paper_suites_match_the_issue():
+    from problems.cases import CASES
+
+    d = load_suite(ROOT / "suites" / "default.toml")
+    assert set(d.cases) == set(CASES) and set(d.methods) == {"lm", "gauss-newton"}
+    assert d.starts == ("default",) and d.mesh == "coarse" and len(d) == 18
+    p = load_suite(ROOT / "suites" / "paper.toml")
+    assert set(p.cases) == set(CASES) and len(p.budgets) == 1 and "random" in p.starts and len(p.seeds) > 1
+    for m in ("lm", "gauss-newton", "ga", "pso", "sa", "mcmc"):
+        assert m in p.methods
+    assert sum(m.startswith("nlopt:") for m in p.methods) >= 5
