@@ -1,1 +1,13 @@
-"""femubench.solvers: one interface over local, global and sampling methods."""
+"""femubench.solvers: one interface over local, global and sampling methods.
+
+>>> from solvers import solve, METHODS
+>>> result = solve(objective, "lm", budget=200, seed=0, x0=case.start)
+
+Importing the package registers every adapter in :data:`METHODS`.
+"""
+from solvers.base import METHODS, MethodInfo, Outcome, Run, get_method, register, solve
+from solvers.result import RunResult
+
+from solvers import scipy_, gauss_newton, pymoo_, pyswarms_, nlopt_, emcee_, hybrid  # noqa: E402,F401  (registration)
+
+__all__ = ["solve", "METHODS", "RunResult", "MethodInfo", "Outcome", "Run", "get_method", "register"]

@@ -1,0 +1,295 @@
+"""One interface over every method: :func:`solve`, the registry :data:`METHODS`, the budget guard.
+
+A method is a function ``run(r: Run) -> Outcome`` registered with :func:`register`. It works in
+the objective's scaled space ``z = x / reference`` (``r.z0``, ``r.lower``, ``r.upper``), calls the
+objective (its only source of evaluations), records one history row per iteration or generation
+with :meth:`Run.record`, and returns an :class:`Outcome` (status, message, iterations, extra).
+
+:func:`solve` does everything else, identically for all methods:
+
+* resets the objective (counters, log, cache, best point) and sets its budget: the objective
+  raises :class:`~problems.objective.BudgetExhausted` rather than exceed it; :func:`solve`
+  catches it (status ``"budget"``) and returns the best point so far;
+* the final point is the best (lowest-cost, successful, feasible) point the objective evaluated
+  during the run; if there is none, the status is ``"failed"`` and ``x = x0``, ``cost = inf``;
+* the counts come from the objective's own counters (never from the library), the wall time
+  from a clock around the run;
+* the seed: ``seed=None`` draws one from OS entropy and records it, so every run can be
+  replayed; libraries that use NumPy's global generator are run inside :func:`isolated_global_rng`.
+
+``x0`` is physical; ``None`` means the centre of the box (not the reference, which is the answer
+on the analytic problems). A start outside the box raises ``ValueError``.
+
+``success`` is true when the status is ``"converged"``, and also for global and sampling methods
+when they stopped at their budget or generation limit (their normal end).
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from problems.objective import BudgetExhausted, Objective
+from solvers.result import RunResult
+
+FAMILIES = ("local", "global", "sampling")
+STATUSES = ("converged", "budget", "max_iterations", "failed", "stalled")
+
+
+@dataclass(frozen=True)
+class MethodInfo:
+    """A registered method: its library, family, options ``name -> (default, description)``."""
+
+    name: str
+    library: str
+    family: str
+    options: dict[str, tuple[Any, str]]
+    run: Callable[["Run"], "Outcome"]
+    stochastic: bool = False
+    description: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "library": self.library, "family": self.family,
+                "stochastic": self.stochastic, "description": self.description,
+                "options": {k: {"default": _plain(d), "description": s} for k, (d, s) in self.options.items()}}
+
+
+@dataclass
+class Outcome:
+    """What a method reports back to :func:`solve` (counts and final point come from the objective)."""
+
+    status: str = "converged"
+    message: str = ""
+    n_iterations: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+METHODS: dict[str, MethodInfo] = {}
+_RESOLVERS: list[Callable[[str], MethodInfo | None]] = []  # dynamic names, e.g. nlopt:<ANY>
+
+
+def register(name: str, *, library: str, family: str, options: dict[str, tuple[Any, str]] | None = None,
+             stochastic: bool = False, description: str = ""):
+    """Decorator adding ``run`` to :data:`METHODS` under ``name``."""
+    if family not in FAMILIES:
+        raise ValueError(f"family {family!r} is unknown; allowed: {', '.join(FAMILIES)}")
+
+    def deco(run):
+        METHODS[name] = MethodInfo(name, library, family, dict(options or {}), run, stochastic, description)
+        return run
+
+    return deco
+
+
+def get_method(name: str) -> MethodInfo:
+    """The registered method ``name`` (or one resolved dynamically, e.g. any ``nlopt:<ALGORITHM>``)."""
+    if name in METHODS:
+        return METHODS[name]
+    for resolve in _RESOLVERS:
+        info = resolve(name)
+        if info is not None:
+            return info
+    raise ValueError(f"solver {name!r} is unknown; allowed: {', '.join(sorted(METHODS))} "
+                     "(and any nlopt:<ALGORITHM>)")
+
+
+@dataclass
+class Run:
+    """The context a method runs in: objective, start, seed, budget, options and the history."""
+
+    objective: Objective
+    method: str
+    z0: np.ndarray
+    seed: int
+    budget: int
+    options: dict[str, Any]
+    history: list[dict[str, Any]] = field(default_factory=list)
+    phase: str | None = None
+    _iteration: list[int] = field(default_factory=lambda: [0])  # shared with sub-runs
+
+    @property
+    def lower(self) -> np.ndarray:
+        return self.objective.lower_z
+
+    @property
+    def upper(self) -> np.ndarray:
+        return self.objective.upper_z
+
+    @property
+    def n_iterations(self) -> int:
+        return self._iteration[0]
+
+    def rng(self, stream: int = 0) -> np.random.Generator:
+        """A generator derived from the run's seed (``stream`` separates independent uses)."""
+        return np.random.default_rng([self.seed, stream])
+
+    def record(self, z=None, cost: float | None = None, **more) -> None:
+        """Append one history row (one per iteration/generation); ``z`` is the current point."""
+        obj = self.objective
+        self._iteration[0] += 1
+        best = obj.best
+        row = {"iteration": self._iteration[0], "n_evals": obj.n_evals,
+               "best_cost": best.cost if best is not None else math.inf,
+               "cost": math.inf if cost is None else float(cost),
+               "x": [] if z is None else [float(v) for v in obj.to_physical(z)]}
+        if self.phase:
+            row["phase"] = self.phase
+        row.update({k: _plain(v) for k, v in more.items()})
+        self.history.append(row)
+
+    def record_log(self, start: int = 0) -> None:
+        """One history row per new (uncached) evaluation in ``objective.log[start:]``."""
+        obj = self.objective
+        best = math.inf
+        for row in self.history:
+            best = min(best, row["best_cost"])
+        for entry in obj.log[start:]:
+            if entry["cached"]:
+                continue
+            if entry["ok"] and entry["feasible"]:
+                best = min(best, entry["cost"])
+            self._iteration[0] += 1
+            row = {"iteration": self._iteration[0], "n_evals": entry["n_evals"], "best_cost": best,
+                   "cost": entry["cost"], "x": [float(v) for v in entry["x"]]}
+            if self.phase:
+                row["phase"] = self.phase
+            self.history.append(row)
+
+    def sub(self, method: str, z0, budget: int, options: dict[str, Any] | None = None,
+            phase: str | None = None) -> Outcome:
+        """Run another registered method as a phase, capped at ``budget`` more evaluations.
+
+        The phase shares the objective, the history and the iteration counter. If the phase uses
+        up its share, it ends with status ``"budget"``; if the *whole* budget is spent,
+        :class:`BudgetExhausted` propagates to :func:`solve`.
+        """
+        info = get_method(method)
+        opts = resolve_options(info, options or {}, strict=False)
+        obj = self.objective
+        outer = obj.budget
+        cap = obj.n_evals + max(0, int(budget))
+        obj.set_budget(cap if outer is None else min(outer, cap))
+        child = Run(obj, method, np.asarray(z0, float), self.seed, int(budget), opts, self.history,
+                    phase or method, self._iteration)
+        try:
+            out = info.run(child)
+        except BudgetExhausted as exc:
+            if outer is not None and obj.n_evals >= outer:
+                raise
+            out = Outcome("budget", str(exc))
+        finally:
+            obj.set_budget(outer)
+        return out
+
+
+def resolve_options(info: MethodInfo, options: dict[str, Any], strict: bool = True) -> dict[str, Any]:
+    """Defaults overridden by ``options``; unknown names raise ``ValueError`` (or are dropped)."""
+    unknown = set(options) - set(info.options)
+    if unknown and strict:
+        raise ValueError(f"{info.name}: unknown option(s) {sorted(unknown)}; allowed: {sorted(info.options)}")
+    out = {k: d for k, (d, _) in info.options.items()}
+    out.update({k: v for k, v in options.items() if k in info.options})
+    return out
+
+
+@contextlib.contextmanager
+def isolated_global_rng(seed: int):
+    """Seed NumPy's *global* generator for a library that uses it, and restore it afterwards."""
+    state = np.random.get_state()
+    np.random.seed(seed % 2**32)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
+
+
+def solve(objective: Objective, method: str, *, budget: int, seed: int | None = 0, x0=None,
+          **options) -> RunResult:
+    """Minimise ``objective`` with ``method`` within ``budget`` forward evaluations.
+
+    ``x0`` is physical (``None``: centre of the box). Options are the method's (see
+    ``METHODS[method].options``); unknown options raise ``ValueError``. See the module docstring.
+    """
+    info = get_method(method)
+    opts = resolve_options(info, options)
+    budget = int(budget)
+    if budget < 1:
+        raise ValueError(f"budget must be at least 1 forward evaluation, got {budget}")
+    if seed is None:
+        seed = int(np.random.SeedSequence().entropy % 2**32)
+    seed = int(seed)
+    obj = objective
+    if x0 is None:
+        x0 = 0.5 * (obj.lower + obj.upper)
+    x0 = np.asarray(x0, dtype=float).ravel()
+    if x0.size != obj.n_params:
+        raise ValueError(f"x0 has {x0.size} values, expected {obj.n_params} ({', '.join(obj.names)})")
+    span = obj.upper - obj.lower
+    if np.any(x0 < obj.lower - 1e-9 * span) or np.any(x0 > obj.upper + 1e-9 * span):
+        raise ValueError(f"x0 = {x0.tolist()} lies outside the bounds [{obj.lower.tolist()}, {obj.upper.tolist()}]")
+    x0 = np.clip(x0, obj.lower, obj.upper)
+
+    obj.reset()
+    obj.set_budget(budget)
+    run = Run(obj, info.name if method == info.name else method, obj.to_scaled(x0), seed, budget, opts)
+    t0 = time.perf_counter()
+    try:
+        out = info.run(run)
+    except BudgetExhausted as exc:
+        out = Outcome("budget", str(exc))
+    finally:
+        obj.set_budget(None)
+    wall = time.perf_counter() - t0
+
+    status, message = out.status, out.message
+    if status not in STATUSES:
+        raise RuntimeError(f"{method}: invalid status {status!r}")
+    best = obj.best
+    if best is None:
+        x, cost = x0.copy(), math.inf
+        last = next((e for e in reversed(obj.log) if not e["ok"] or not e["feasible"]), None)
+        status = "failed"
+        message = ("no successful evaluation" + (f"; {message}" if message else "")
+                   + (f" (last failure at x = {np.asarray(last['x']).tolist()})" if last else ""))
+    else:
+        x, cost = best.x.copy(), best.cost
+    success = status == "converged" or (info.family != "local" and status in ("budget", "max_iterations"))
+    extra = {k: _plain(v) for k, v in out.extra.items()}
+    if obj.n_jacobian_failures:
+        extra["n_jacobian_failures"] = obj.n_jacobian_failures
+    return RunResult(
+        method=run.method, options={k: _plain(v) for k, v in opts.items()}, seed=seed, budget=budget,
+        parameter_names=list(obj.names), reference=[float(v) for v in obj.reference],
+        x0=[float(v) for v in x0], x=[float(v) for v in x],
+        x_normalised=[float(v) for v in obj.to_scaled(x)], cost=float(cost), status=status,
+        success=bool(success), message=message, n_evals=obj.n_evals, n_failed=obj.n_failed,
+        n_infeasible=obj.n_infeasible, n_cache_hits=obj.n_cache_hits,
+        n_iterations=int(out.n_iterations if out.n_iterations is not None else run.n_iterations),
+        wall_s=wall, history=run.history, extra=extra,
+    )
+
+
+def lhs(n: int, lower, upper, rng: np.random.Generator) -> np.ndarray:
+    """``n`` Latin-hypercube points in the box, shape (n, d)."""
+    from scipy.stats import qmc
+
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    unit = qmc.LatinHypercube(d=lower.size, seed=rng).random(n)
+    return lower + unit * (upper - lower)
+
+
+def _plain(v):
+    """JSON-friendly: numpy scalars/arrays become Python floats/lists, recursively."""
+    if isinstance(v, np.ndarray):
+        return _plain(v.tolist())
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, dict):
+        return {str(k): _plain(w) for k, w in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(w) for w in v]
+    return v

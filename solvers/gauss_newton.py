@@ -1,0 +1,79 @@
+"""``gauss-newton``: bounded Gauss-Newton with a projected Armijo line search (H = J^T J).
+
+Each iteration, at the current point z with whitened residual r and Jacobian J (one parallel
+batch of finite differences):
+
+1. gradient ``g = 2 J^T r``; variables at a bound whose gradient pushes outward are *active*
+   and held fixed (projected Gauss-Newton);
+2. Gauss-Newton step on the free variables, ``J_f p_f = -r`` in the least-squares sense (``lstsq``:
+   the minimum-norm step when ``J^T J`` is singular);
+3. projected Armijo backtracking: ``z(a) = P(z + a p)``, accept the first ``a = 1, 1/2, 1/4, ...``
+   with ``cost(z(a)) <= cost(z) + c1 g.(z(a) - z)``. A failed point has cost FAILURE_COST and is
+   rejected like any other bad step.
+
+Stops: relative cost decrease < ftol or relative step < xtol ("converged"), projected gradient
+< gtol ("converged"), no acceptable step after ``max_backtracks`` halvings ("stalled"),
+``max_iterations`` ("max_iterations").
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solvers.base import Outcome, Run, register
+from solvers.scipy_ import JAC_OPTIONS
+
+GN_OPTIONS = {
+    **JAC_OPTIONS,
+    "max_iterations": (100, "maximum number of Gauss-Newton iterations"),
+    "ftol": (1e-10, "stop when the relative cost decrease of an accepted step is below ftol"),
+    "xtol": (1e-10, "stop when |dz| <= xtol (xtol + |z|)"),
+    "gtol": (1e-12, "stop when the projected gradient's infinity norm is below gtol"),
+    "c1": (1e-4, "Armijo sufficient-decrease constant"),
+    "max_backtracks": (30, "maximum number of step halvings in the line search"),
+}
+
+
+@register("gauss-newton", library="femubench", family="local", options=GN_OPTIONS,
+          description="own bounded Gauss-Newton: H = J^T J, projected step, Armijo backtracking")
+def run_gauss_newton(r: Run) -> Outcome:
+    obj, o = r.objective, r.options
+    lo, hi = r.lower, r.upper
+    z = np.clip(r.z0, lo, hi)
+    ev = obj.evaluate(z)
+    if not ev.usable:
+        return Outcome("failed", f"start point failed: {ev.message}")
+    f, res = ev.cost, ev.residual
+    r.record(z, f)
+    for it in range(1, int(o["max_iterations"]) + 1):
+        J = obj.jacobian(z, scheme=o["scheme"], rel_step=o["rel_step"], r0=res)
+        g = 2.0 * J.T @ res
+        pg = z - np.clip(z - g, lo, hi)
+        if np.max(np.abs(pg)) <= o["gtol"]:
+            return Outcome("converged", "projected gradient below gtol", it - 1)
+        active = ((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0))
+        free = ~active
+        p = np.zeros_like(z)
+        if free.any():
+            p[free] = np.linalg.lstsq(J[:, free], -res, rcond=None)[0]
+        alpha, accepted = 1.0, None
+        for _ in range(int(o["max_backtracks"]) + 1):
+            zt = np.clip(z + alpha * p, lo, hi)
+            dz = zt - z
+            if not np.any(dz):
+                break
+            evt = obj.evaluate(zt)
+            if evt.usable and evt.cost <= f + o["c1"] * float(g @ dz):
+                accepted = (zt, evt)
+                break
+            alpha *= 0.5
+        if accepted is None:
+            return Outcome("stalled", "line search found no sufficient decrease", it)
+        zt, evt = accepted
+        decrease, step = f - evt.cost, np.linalg.norm(zt - z)
+        z, f, res = zt, evt.cost, evt.residual
+        r.record(z, f, step_length=alpha)
+        if decrease <= o["ftol"] * f:
+            return Outcome("converged", "relative cost decrease below ftol", it)
+        if step <= o["xtol"] * (o["xtol"] + np.linalg.norm(z)):
+            return Outcome("converged", "relative step below xtol", it)
+    return Outcome("max_iterations", f"{o['max_iterations']} iterations", int(o["max_iterations"]))

@@ -1,0 +1,238 @@
+"""The weighted least-squares objective: whitening, counting, cache, budget, failures, Jacobian, mapper."""
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+from problems.objective import FAILURE_COST, BudgetExhausted, ForwardResult, Objective
+
+
+class Quadratic:
+    """U_N(x) = [x0, x1, x0 * x1, x0^2]; fails for x0 > 1.8, infeasible for x1 > 1.8."""
+
+    names = ("x0", "x1")
+
+    def __init__(self):
+        self.calls = 0
+
+    def check(self, x):
+        return "x1 too large" if x[1] > 1.8 else None
+
+    def values(self, x):
+        return np.array([x[0], x[1], x[0] * x[1], x[0] ** 2])
+
+    def jacobian(self, x):
+        return np.array([[1.0, 0.0], [0.0, 1.0], [x[1], x[0]], [2 * x[0], 0.0]])
+
+    def __call__(self, x):
+        self.calls += 1
+        if x[0] > 1.8:
+            return ForwardResult(False, None, "did not converge")
+        return ForwardResult(True, self.values(x))
+
+
+def make(sigma=None, covariance=None, **kw):
+    model = Quadratic()
+    data = model.values(np.array([1.0, 1.0])) + np.array([0.01, -0.02, 0.03, 0.0])
+    obj = Objective(model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0],
+                    sigma=sigma, covariance=covariance, **kw)
+    return obj, model
+
+
+class CountingMapper:
+    def __init__(self):
+        self.calls = 0
+        self.items = 0
+
+    def __call__(self, fn, items):
+        self.calls += 1
+        self.items += len(items)
+        return [fn(x) for x in items]
+
+
+def test_cost_is_whitened_sum_of_squares():
+    obj, model = make(sigma=[0.1, 0.2, 0.1, 0.5])
+    x = np.array([1.2, 0.9])
+    d = obj.data - model.values(x)
+    expected = float(np.sum((d / np.array([0.1, 0.2, 0.1, 0.5])) ** 2))
+    assert obj.cost(x) == pytest.approx(expected, rel=1e-14)
+    assert obj.residual(x) @ obj.residual(x) == pytest.approx(expected, rel=1e-14)
+
+
+def test_full_covariance_matches_diagonal_when_diagonal():
+    s = np.array([0.1, 0.2, 0.1, 0.5])
+    diag, _ = make(sigma=s)
+    full, _ = make(covariance=np.diag(s**2))
+    z = np.array([1.3, 0.7])
+    np.testing.assert_allclose(full.residual(z), diag.residual(z), rtol=1e-13)
+    assert full.cost(z) == pytest.approx(diag.cost(z), rel=1e-13)
+
+
+def test_full_covariance_cost_is_mahalanobis_distance():
+    rng = np.random.default_rng(0)
+    B = rng.standard_normal((4, 4))
+    C = B @ B.T + 4 * np.eye(4)
+    obj, model = make(covariance=C)
+    z = np.array([1.1, 1.4])
+    d = obj.data - model.values(z)
+    assert obj.cost(z) == pytest.approx(float(d @ np.linalg.solve(C, d)), rel=1e-12)
+
+
+def test_cost_split_sums_to_total():
+    obj, _ = make(sigma=0.1, blocks={"first": slice(0, 2), "second": slice(2, 4)})
+    split = obj.cost_split(np.array([1.2, 0.9]))
+    assert split["first"] + split["second"] == pytest.approx(split["total"], rel=1e-14)
+    assert split["first"] > 0 and split["second"] > 0
+
+
+def test_scaling_and_bounds():
+    model = Quadratic()
+    obj = Objective(model, model.values(np.array([2.0, 3.0])), lower=[1.0, 1.5], upper=[4.0, 6.0],
+                    reference=[2.0, 3.0])
+    np.testing.assert_allclose(obj.lower_z, [0.5, 0.5])
+    np.testing.assert_allclose(obj.upper_z, [2.0, 2.0])
+    np.testing.assert_allclose(obj.to_physical([1.5, 0.5]), [3.0, 1.5])
+    np.testing.assert_allclose(obj.to_scaled([3.0, 1.5]), [1.5, 0.5])
+    assert obj.n_params == 2 and obj.n_residuals == 4 and obj.names == ("x0", "x1")
+
+
+def test_counting_cache_hits_apart():
+    obj, model = make()
+    z = np.array([1.1, 0.9])
+    c1 = obj.cost(z)
+    c2 = obj.cost(z.copy())
+    assert c1 == c2
+    assert (obj.n_evals, obj.n_cache_hits, model.calls) == (1, 1, 1)
+    assert [e["cached"] for e in obj.log] == [False, True]
+    costs = obj.costs([z, z, [1.2, 0.9], [1.2, 0.9]])  # two hits from before, one new + its repeat
+    assert (obj.n_evals, obj.n_cache_hits, model.calls) == (2, 4, 2)
+    assert costs[0] == costs[1] == c1 and costs[2] == costs[3] != c1
+
+
+def test_cache_off_counts_every_call():
+    obj, model = make(cache=False)
+    for _ in range(3):
+        obj.cost([1.1, 0.9])
+    assert (obj.n_evals, obj.n_cache_hits, model.calls) == (3, 0, 3)
+
+
+def test_infeasible_counted_not_run_and_failed_counted():
+    obj, model = make()
+    ev = obj.evaluate([1.0, 1.9])  # x1 > 1.8: check() rejects it
+    assert not ev.feasible and ev.cost == FAILURE_COST and "x1 too large" in ev.message
+    assert model.calls == 0 and obj.n_evals == 1 and obj.n_infeasible == 1
+    ev = obj.evaluate([1.9, 1.0])  # x0 > 1.8: the model fails
+    assert ev.feasible and not ev.ok and ev.cost == FAILURE_COST
+    assert model.calls == 1 and obj.n_evals == 2 and obj.n_failed == 1
+    # the failure residual has squared norm FAILURE_COST (a trust region then rejects the step)
+    assert ev.residual @ ev.residual == pytest.approx(FAILURE_COST, rel=1e-12)
+    assert obj.best is None
+    ev = obj.evaluate([2.5, 1.0])  # outside the box: infeasible, counted, not run
+    assert not ev.feasible and "outside the bounds" in ev.message and model.calls == 1 and obj.n_infeasible == 2
+
+
+def test_model_exception_becomes_failure():
+    class Raising(Quadratic):
+        def __call__(self, x):
+            raise ZeroDivisionError("boom")
+
+    obj = Objective(Raising(), np.zeros(4), lower=[0.5, 0.5], upper=[2, 2], reference=[1, 1])
+    with pytest.warns(RuntimeWarning, match="boom"):
+        ev = obj.evaluate([1.0, 1.0])
+    assert not ev.ok and ev.cost == FAILURE_COST and obj.n_failed == 1
+
+
+def test_best_tracks_lowest_successful_point():
+    obj, _ = make()
+    obj.costs([[1.5, 1.5], [1.0, 1.0], [1.9, 1.0], [1.2, 1.2]])
+    assert obj.best.cost == pytest.approx(obj.cost([1.0, 1.0]))
+    np.testing.assert_allclose(obj.best.x, [1.0, 1.0])
+
+
+def test_budget_single_and_batch():
+    obj, model = make()
+    obj.set_budget(3)
+    obj.cost([1.0, 1.0])
+    obj.cost([1.0, 1.0])  # cache hit: free
+    with pytest.raises(BudgetExhausted):
+        obj.costs([[1.1, 1.0], [1.2, 1.0], [1.3, 1.0], [1.4, 1.0]])
+    # the two points that fitted were evaluated and recorded, in order
+    assert obj.n_evals == 3 and model.calls == 3
+    np.testing.assert_allclose([e["x"][0] for e in obj.log if not e["cached"]], [1.0, 1.1, 1.2])
+    assert obj.cost([1.2, 1.0]) > 0  # still served from the cache
+    with pytest.raises(BudgetExhausted):
+        obj.cost([1.5, 1.0])
+    assert obj.n_evals == 3
+
+
+def test_infeasible_points_are_charged_to_the_budget():
+    obj, model = make()
+    obj.set_budget(2)
+    obj.costs([[1.0, 1.9], [1.0, 1.95]])
+    with pytest.raises(BudgetExhausted):
+        obj.cost([1.0, 1.0])
+    assert model.calls == 0 and obj.n_evals == 2
+
+
+def test_fd_jacobian_matches_analytic_and_columns_are_counted():
+    obj, model = make(sigma=[0.1, 0.2, 0.1, 0.5])
+    z = np.array([1.3, 0.7])
+    J_exact = -(model.jacobian(z) / np.array([0.1, 0.2, 0.1, 0.5])[:, None])
+    obj.evaluate(z)
+    n0 = obj.n_evals
+    J = obj.jacobian(z)
+    assert obj.n_evals - n0 == 2  # one forward-difference column per parameter, r0 from the cache
+    np.testing.assert_allclose(J, J_exact, rtol=1e-5, atol=1e-6 * np.abs(J_exact).max())
+    Jc = obj.jacobian(z, scheme="central", rel_step=1e-5)
+    assert obj.n_evals - n0 == 6
+    np.testing.assert_allclose(Jc, J_exact, rtol=1e-8, atol=1e-8 * np.abs(J_exact).max())
+
+
+def test_fd_steps_flipped_inward_at_the_bound():
+    obj, model = make()
+    z = np.array([2.0, 0.5])  # upper bound in x0, lower bound in x1
+    J = obj.jacobian(z)
+    inside = [e["x"] for e in obj.log if not e["cached"]]
+    assert all(np.all(x >= obj.lower) and np.all(x <= obj.upper) for x in inside)
+    assert obj.n_infeasible == 0
+    # x0 = 2 > 1.8 lies in the failing region: r0 failed -> zero Jacobian, no columns evaluated
+    assert np.all(J == 0) and obj.n_evals == 1
+    J = obj.jacobian(np.array([1.8, 0.5]), scheme="central")
+    np.testing.assert_allclose(J[0, 0], -1.0, rtol=1e-5)  # one-sided inward at x0 = 1.8 (+h fails)
+
+
+def test_mapper_called_once_per_batch():
+    mapper = CountingMapper()
+    obj, _ = make(mapper=mapper)
+    obj.costs([[1.0, 1.0], [1.1, 1.0], [1.0, 1.9], [1.0, 1.0]])  # 2 new feasible, 1 infeasible, 1 repeat
+    assert (mapper.calls, mapper.items) == (1, 2)
+    obj.jacobian(np.array([1.0, 1.0]))
+    assert (mapper.calls, mapper.items) == (2, 4)
+    obj.costs([[1.0, 1.0]])  # all cached: no mapper call
+    assert mapper.calls == 2
+
+
+def test_model_and_worker_function_pickle():
+    obj, _ = make()
+    fn = pickle.loads(pickle.dumps(obj._runner))
+    res = fn(np.array([1.0, 1.0]))
+    assert res.ok and res.wall_s >= 0
+    np.testing.assert_allclose(res.values, [1.0, 1.0, 1.0, 1.0])
+
+
+def test_invalid_inputs_raise_value_error():
+    model = Quadratic()
+    with pytest.raises(ValueError, match="not both"):
+        Objective(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], sigma=1.0,
+                  covariance=np.eye(4))
+    with pytest.raises(ValueError, match="positive definite"):
+        Objective(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], covariance=-np.eye(4))
+    with pytest.raises(ValueError, match="non-zero"):
+        Objective(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[0, 1])
+    obj, _ = make()
+    with pytest.raises(ValueError, match="expected 2"):
+        obj.cost([1.0, 1.0, 1.0])
+    assert math.isinf(obj.remaining)
