@@ -1,0 +1,1 @@
+"""Cross-checks of femubench's FE model and materials against other codes (scripts, not tests)."""
