@@ -15,11 +15,14 @@ Return mapping (backward Euler, closest-point projection), unknowns per plastic 
     R3 = E (eqps - eqps_n - c dlambda)                       (linear)     = 0
     R3 = (q_hat sigma_bar (eqps - eqps_n) - dlambda sigma:dG/dsigma) E/sigma0  (work) = 0
 
-solved by Newton with a backtracking line search on ||R||, iterating only the unconverged
-subset. The consistent tangent follows from the converged Jacobian J: since dR/d(strain
-increment) = [-D; 0; 0], ``d sigma / d eps = (J^-1)[:6, :6] D`` (non-symmetric unless psi = beta
-for the linear form). The linear form's cone apex is handled by a closed-form return to the
-apex, chosen when the trial deviator lies inside the apex's cone of admissible flow directions.
+solved per point by Newton with a backtracking line search on ||R||. The consistent tangent
+follows from the converged Jacobian J: since dR/d(strain increment) = [-D; 0; 0],
+``d sigma / d eps = (J^-1)[:6, :6] D`` (non-symmetric unless psi = beta for the linear form).
+The linear form's cone apex is handled by a closed-form return to the apex, chosen when the
+trial deviator lies inside the apex's cone of admissible flow directions.
+
+The elastic trial, the elastic/plastic split and the bookkeeping are vectorised numpy here; the
+plastic points go to the compiled per-point kernel :func:`_kernels.plastic_return` (numba).
 """
 from __future__ import annotations
 
@@ -29,15 +32,14 @@ from typing import Mapping
 
 import numpy as np
 
+from problems.materials import _kernels as _K
 from problems.materials.base import MaterialUpdate, isotropic_stiffness
 from problems.materials.hardening import (
     HARDENINGS, LinearHardening, ProportionalEqps, WorkEqps, linear_eqps_constant, reference_test,
 )
-from problems.materials.invariants import M_VEC, deviator, j2, pressure
-from problems.materials.meridional_return import meridional_return
 from problems.materials.yield_surfaces import (
     ExponentYield, HyperbolicPotential, HyperbolicYield, LinearPotential, LinearYield, LodeMeasure,
-    lode_xi, tan_deg,
+    tan_deg,
 )
 
 FORMS = ("linear", "hyperbolic", "exponent")
@@ -248,16 +250,6 @@ class DruckerPrager:
     def shear_modulus(self) -> float:
         return self.E / (2.0 * (1.0 + self.nu))
 
-    def _apply_D(self, x: np.ndarray) -> np.ndarray:
-        """D @ x for engineering-strain-like x of shape (m, 6) or (m, 6, k), without a matmul."""
-        lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
-        mu = self.shear_modulus
-        out = np.empty_like(x)
-        tr = x[:, 0] + x[:, 1] + x[:, 2]
-        out[:, :3] = 2.0 * mu * x[:, :3] + lam * tr[:, None]
-        out[:, 3:] = mu * x[:, 3:]
-        return out
-
     # ---- convenience for drivers and tests ---------------------------------------------------
     @property
     def params(self) -> dict[str, float]:
@@ -288,308 +280,51 @@ class DruckerPrager:
         return does not converge get ``ok = False`` and keep the trial stress, elastic tangent
         and old state (the FE solver cuts the increment).
         """
-        de = np.asarray(strain_increment, float)
-        sig_n = np.asarray(stress_old, float)
-        st_n = np.asarray(state_old, float)
+        de = np.ascontiguousarray(strain_increment, dtype=float)
+        sig_n = np.ascontiguousarray(stress_old, dtype=float)
+        st_n = np.ascontiguousarray(state_old, dtype=float)
+        lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+        eqps_n = np.ascontiguousarray(st_n[:, 0])
+        sig_tr, scale, plastic = _K.elastic_trial(lam, self.shear_modulus, self.law.sigma0, self.law.H,
+                                                  self.yield_tol, self.yield_function.kernel_params,
+                                                  de, sig_n, eqps_n)
+        idx = np.flatnonzero(plastic)
+        if idx.size:
+            res = self._plastic_return(sig_tr[idx], eqps_n[idx], scale[idx])
+            r_stress, r_eqps, r_tangent, r_ok = res.stress, res.eqps, res.tangent, res.ok
+        else:
+            r_stress, r_eqps, r_tangent, r_ok = np.zeros((0, 6)), np.zeros(0), np.zeros((0, 6, 6)), np.zeros(0, bool)
         n = de.shape[0]
-        D = self.stiffness
-        sig_tr = sig_n + self._apply_D(de)
-        eqps_n = st_n[:, 0]
-        scale = np.maximum(self.law.sigma0, np.abs(sig_tr).max(axis=1)) if n else np.zeros(0)
-        F_tr = self.yield_function.value(sig_tr, self.law.yield_stress(eqps_n))
-        plastic = F_tr > self.yield_tol * scale
-
-        stress = sig_tr.copy()
-        tangent = np.empty((n, 6, 6))
-        tangent[:] = D
-        state = st_n.copy()
-        ok = np.ones(n, bool)
-        if plastic.any():
-            idx = np.flatnonzero(plastic)
-            # extreme trial states may overflow on the way; they end up flagged through ok
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                res = self._plastic_return(sig_tr[idx], eqps_n[idx], scale[idx])
-            good = idx[res.ok]
-            stress[good] = res.stress[res.ok]
-            tangent[good] = res.tangent[res.ok]
-            state[good, 0] = res.eqps[res.ok]
-            # plastic strain = total increment minus its elastic part C (sigma - sigma_n)
-            dsig = stress[good] - sig_n[good]
-            state[good, 1:] = st_n[good, 1:] + de[good] - dsig @ self._scaled_compliance / self.E
-            ok[idx[~res.ok]] = False
-        return MaterialUpdate(stress, tangent, state, ok)
+        out = MaterialUpdate(np.empty((n, 6)), np.empty((n, 6, 6)), np.empty_like(st_n), np.empty(n, bool))
+        # returned points: plastic strain = total increment minus its elastic part C (sigma - sigma_n)
+        _K.merge_update(self.stiffness, self.E, self.nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps,
+                        r_tangent, r_ok, out.stress, out.tangent, out.state, out.ok)
+        return out
 
     # ---- plastic correction -------------------------------------------------------------------
-    def _plastic_return(self, sig_tr, eqps_n, scale) -> _Return:
-        m = sig_tr.shape[0]
-        stress = np.empty((m, 6))
-        eqps = np.empty(m)
-        tangent = np.empty((m, 6, 6))
-        ok = np.zeros(m, bool)
-        apex = np.zeros(m, bool)
-        smooth = np.ones(m, bool)
-        if self.form == "linear":
-            apex, a_sig, a_eqps, a_tan = self._apex_return(sig_tr, eqps_n)
-            stress[apex], eqps[apex], tangent[apex], ok[apex] = a_sig, a_eqps, a_tan, True
-            smooth = ~apex
-        if smooth.any():
-            idx = np.flatnonzero(smooth)
-            x0 = self._start(sig_tr[idx], eqps_n[idx], scale[idx])
-            s_sig, s_eqps, s_dlam, s_tan, s_ok = self._newton_return(
-                sig_tr[idx], eqps_n[idx], scale[idx], x0)
-            # a valid smooth return has a non-negative multiplier; on the cone it must also keep
-            # the deviator on the trial's side of the apex (else the apex branch applies)
-            s_ok &= s_dlam >= -self.tol * 1e-3
-            if self.form == "linear":
-                s_dev, t_dev = deviator(s_sig), deviator(sig_tr[idx])
-                s_ok &= np.einsum("ni,ni->n", s_dev[:, :3], t_dev[:, :3]) + 2.0 * np.einsum(
-                    "ni,ni->n", s_dev[:, 3:], t_dev[:, 3:]) > 0.0
-            stress[idx], eqps[idx], tangent[idx], ok[idx] = s_sig, s_eqps, s_tan, s_ok
-        return _Return(stress, eqps, tangent, ok, apex)
-
-    def _apex_return(self, sig_tr, eqps_n):
-        """Closed-form return of the linear cone to its apex where that is the solution.
-
-        At the apex sigma = -p I, s = 0, so the whole trial deviator becomes plastic:
-        d e_pl = s_trial / (2 G) must lie in dlambda * (subdifferential of t at 0), and the
-        volumetric part is dlambda tan(psi). The pressure and the hardening then give
-        ``p = p_trial + K_b tan(psi) dlambda`` and
-        ``-p tan(beta) - d_hat sigma_bar(eqps_n + c dlambda) = 0`` (linear in dlambda).
-        The apex applies iff dlambda > 0 and the gauge of s_trial/(2 G dlambda) with respect to
-        the subdifferential, ``q_trial * m(xi_trial) / (3 G dlambda)``, is <= 1 (see
-        :func:`_polar_factor`); else the smooth return is the solution.
-        """
-        yf, pot, law = self.yield_function, self.potential, self.law
-        Kb, G = self.bulk_modulus, self.shear_modulus
-        tb, tp, dh, c = yf.tan_beta, pot.tan_psi, yf.d_hat, self.eqps_rule.c
-        p_tr = pressure(sig_tr)
-        q_tr = np.sqrt(3.0 * j2(deviator(sig_tr)))
-        den = Kb * tp * tb + dh * c * law.H
-        num = -p_tr * tb - dh * law.yield_stress(eqps_n)
-        m = sig_tr.shape[0]
-        empty = (np.zeros(m, bool), np.zeros((0, 6)), np.zeros(0), np.zeros((0, 6, 6)))
-        if den <= 0.0:  # psi = 0 and H = 0: the apex cannot be reached by any flow
-            return empty
-        dlam = num / den
-        # K <= m(xi) <= 1 (t/q lies in [1, 1/K]): only the undecided band needs m itself
-        apex = (dlam > 0.0) & (q_tr * yf.lode.K <= 3.0 * G * dlam)
-        band = apex & (q_tr > 3.0 * G * dlam)
-        if band.any():
-            factor = _polar_factor(lode_xi(sig_tr[band]), yf.lode.K)
-            apex[band] = q_tr[band] * factor <= 3.0 * G * dlam[band]
-        if not apex.any():
-            return empty
-        p = p_tr[apex] + Kb * tp * dlam[apex]
-        stress = -p[:, None] * M_VEC
-        eqps = eqps_n[apex] + c * dlam[apex]
-        # dp/dp_trial = d_hat c H / den and dp_trial/d eps = -K_b m  =>  D_apex = K_b (dhcH/den) m m
-        k_alg = Kb * dh * c * law.H / den
-        tangent = np.broadcast_to(k_alg * np.outer(M_VEC, M_VEC), (int(apex.sum()), 6, 6)).copy()
-        return apex, stress, eqps, tangent
-
-    def _start(self, sig_tr, eqps_n, scale):
-        """Newton's starting point x0 (m, 8). Linear form: the closed-form cone return with
-        t/q frozen at the trial Lode angle. Von Mises-section forms: the exact meridional-plane
-        return (see :mod:`meridional_return`), or the trial state where that failed."""
-        E = self.E
-        x = np.zeros((sig_tr.shape[0], 8))
-        x[:, :6] = sig_tr
-        x[:, 7] = E * eqps_n
-        s_tr = deviator(sig_tr)
-        q_tr = np.sqrt(3.0 * j2(s_tr))
-        inv_q_tr = np.where(q_tr > 0.0, 1.0 / np.where(q_tr > 0.0, q_tr, 1.0), 0.0)  # radial scaling of s_tr
-        if self.form == "linear":
-            # The return with t/q frozen at the trial Lode angle is a Drucker-Prager cone return
-            # in closed form; the Lode angle moves little, so it is close to the solution.
-            yf, law = self.yield_function, self.law
-            h = yf.lode.per_unit_q(lode_xi(sig_tr))
-            p_tr = pressure(sig_tr)
-            f_tr = h * q_tr - p_tr * yf.tan_beta - yf.d_hat * law.yield_stress(eqps_n)
-            den = (3.0 * self.shear_modulus * h * h + self.bulk_modulus * self.potential.tan_psi * yf.tan_beta
-                   + yf.d_hat * self.eqps_rule.c * law.H)
-            dl = np.maximum(f_tr, 0.0) / den
-            # stay off the apex, where the cone's flow direction is undefined
-            q = np.maximum(q_tr - 3.0 * self.shear_modulus * h * dl, 0.05 * q_tr)
-            p = p_tr + self.bulk_modulus * self.potential.tan_psi * dl
-            x[:, :6] = s_tr * (q * inv_q_tr)[:, None] - p[:, None] * M_VEC
-            x[:, 6] = E * dl
-            x[:, 7] = E * (eqps_n + self.eqps_rule.c * dl)
-            return x
-        pot = self.potential
-        p, q, eqps, dl, ok = meridional_return(
-            pressure(sig_tr), q_tr, eqps_n, bulk=self.bulk_modulus, shear=self.shear_modulus,
-            tan_psi=pot.tan_psi, e=pot.e, q_hat=self.eqps_rule.q_hat, law=self.law,
-            yield_pq=self.yield_function.value_pq, f_tol=1e-3 * self.tol * scale)
-        x[ok, :6] = s_tr[ok] * (q * inv_q_tr)[ok, None] - p[ok, None] * M_VEC
-        x[ok, 6] = E * dl[ok]
-        x[ok, 7] = E * eqps[ok]
-        return x
-
-    def _newton_return(self, sig_tr, eqps_n, scale, x0):
-        """Closest-point projection by Newton with line search from x0; returns stress, eqps,
-        dlambda, consistent tangent and convergence flags for the m given trial states."""
-        m = sig_tr.shape[0]
-        E = self.E
-        x = x0.copy()
-        tangent = np.zeros((m, 6, 6))
-        conv = np.zeros(m, bool)
-        act = np.arange(m)
-        # consistent tangent: dR/d eps = [-E C D; 0; 0] = [-E I; 0; 0], so
-        # d sigma / d eps = (J^-1 [E I; 0; 0])[:6], solved together with the last Newton step
-        rhs_tangent = np.zeros((8, 6))
-        rhs_tangent[:6] = E * np.eye(6)
-        for it in range(self.max_iter + 1):
-            R, J = self._residual(x[act], sig_tr[act], eqps_n[act], jacobian=True)
-            err = np.abs(R).max(axis=1) / scale[act]
-            done = err <= self.tol
-            if done.any():
-                # One last full Newton step: quadratic convergence takes the solution from the
-                # tolerance to round-off, so that finite differences of the map are clean. The
-                # tangent uses the same Jacobian (it differs from the final one by ~tol).
-                n_done = int(done.sum())
-                rhs = np.concatenate([-R[done][:, :, None], np.broadcast_to(rhs_tangent, (n_done, 8, 6))], axis=2)
-                sol, solved = _solve(J[done], rhs)
-                idx = act[done]
-                x[idx] += np.where(solved[:, None], sol[:, :, 0], 0.0)
-                tangent[idx] = sol[:, :6, 1:]
-                conv[idx] = solved
-            keep = ~done & np.isfinite(err)
-            act, R, J = act[keep], R[keep], J[keep]
-            if act.size == 0 or it == self.max_iter:
-                break
-            step, solved = _solve(J, -R)
-            act, R, step = act[solved], R[solved], step[solved]
-            x[act] = self._line_search(x[act], step, R, sig_tr[act], eqps_n[act], scale[act])
-        return x[:, :6].copy(), x[:, 7] / E, x[:, 6] / E, tangent, conv
-
-    def _residual(self, x, sig_tr, eqps_n, jacobian=False):
-        """Residuals (m, 8) in MPa and, if asked, their Jacobian (m, 8, 8) w.r.t. x.
-
-        The stress residual is written in strain space and scaled by E,
-        ``R1 = E C (sigma - sigma_trial) + (E dlambda) dG/dsigma``, so that its Jacobian
-        ``E C + (E dlambda) d2G/dsigma2`` is symmetric and needs no product with D.
-        """
-        E, law, rule = self.E, self.law, self.eqps_rule
-        sig, lam, kap = x[:, :6], x[:, 6], x[:, 7]
-        dkap = kap - E * eqps_n
-        sbar = law.yield_stress(kap / E)
-        EC = self._scaled_compliance
-        R = np.empty((x.shape[0], 8))
-        if jacobian:
-            g, lam_Hg = self.potential.hessian(sig, lam)
-            F, dF, dF_dsbar = self.yield_function.gradient(sig, sbar)
-        else:
-            g = self.potential.gradient(sig)
-            F = self.yield_function.value(sig, sbar)
-        R[:, :6] = (sig - sig_tr) @ EC + lam[:, None] * g
-        R[:, 6] = F
-        if isinstance(rule, ProportionalEqps):
-            R[:, 7] = dkap - rule.c * lam
-        else:
-            w, dw = self.potential.work(sig)  # plastic work per unit multiplier, sigma : dG/dsigma
-            s0 = law.sigma0
-            R[:, 7] = (rule.q_hat * sbar * dkap - lam * w) / s0
-        if not jacobian:
-            return R
-        J = np.zeros((x.shape[0], 8, 8))
-        J[:, :6, :6] = lam_Hg
-        J[:, :6, :6] += EC
-        J[:, :6, 6] = g
-        J[:, 6, :6] = dF
-        J[:, 6, 7] = dF_dsbar * law.H / E
-        if isinstance(rule, ProportionalEqps):
-            J[:, 7, 6] = -rule.c
-            J[:, 7, 7] = 1.0
-        else:
-            J[:, 7, :6] = -(lam / s0)[:, None] * dw
-            J[:, 7, 6] = -w / s0
-            J[:, 7, 7] = rule.q_hat * (sbar + law.H * dkap / E) / s0
-        return R, J
-
     @property
-    def _scaled_compliance(self) -> np.ndarray:
-        """E C (6, 6), dimensionless (C = D^-1, engineering shear); symmetric."""
-        EC = np.zeros((6, 6))
-        EC[:3, :3] = -self.nu
-        EC[np.arange(3), np.arange(3)] = 1.0
-        EC[np.arange(3, 6), np.arange(3, 6)] = 2.0 * (1.0 + self.nu)
-        return EC
+    def _kernel_params(self) -> np.ndarray:
+        """The material vector of :mod:`_kernels` (elasticity, hardening, eqps rule, Newton controls)."""
+        mp = np.empty(_K.M_SIZE)
+        mp[_K.M_E], mp[_K.M_NU] = self.E, self.nu
+        mp[_K.M_S0], mp[_K.M_H] = self.law.sigma0, self.law.H
+        if isinstance(self.eqps_rule, ProportionalEqps):
+            mp[_K.M_RULE], mp[_K.M_RULE_C] = _K.PROPORTIONAL, self.eqps_rule.c
+        else:
+            mp[_K.M_RULE], mp[_K.M_RULE_C] = _K.WORK, self.eqps_rule.q_hat
+        mp[_K.M_TOL], mp[_K.M_MAXIT] = self.tol, self.max_iter
+        return mp
 
-    def _line_search(self, x, step, R0, sig_tr, eqps_n, scale):
-        """Backtracking (Armijo on ||R/scale||^2) from x along the Newton step, per point.
-
-        On the linear cone a step may also not shrink q by more than 20x nor flip the deviator:
-        the cone's flow direction is discontinuous at its apex, where Newton must not land.
-        """
-        phi0 = np.einsum("ni,ni->n", R0, R0) / scale**2
-        alpha = np.ones(x.shape[0])
-        x_new = x + step
-        todo = np.arange(x.shape[0])
-        for _ in range(12):
-            R = self._residual(x_new[todo], sig_tr[todo], eqps_n[todo])
-            phi = np.einsum("ni,ni->n", R, R) / scale[todo] ** 2
-            good = np.isfinite(phi) & (phi <= (1.0 - 1e-4 * alpha[todo]) * phi0[todo])
-            if self.form == "linear":
-                s_old, s_new = deviator(x[todo, :6]), deviator(x_new[todo, :6])
-                q_old, q_new = np.sqrt(3.0 * j2(s_old)), np.sqrt(3.0 * j2(s_new))
-                same_side = np.einsum("ni,ni->n", s_old[:, :3], s_new[:, :3]) + 2.0 * np.einsum(
-                    "ni,ni->n", s_old[:, 3:], s_new[:, 3:]) > 0.0
-                good &= same_side & (q_new >= 0.05 * q_old)
-            todo = todo[~good]
-            if todo.size == 0:
-                break
-            alpha[todo] *= 0.5
-            x_new[todo] = x[todo] + alpha[todo, None] * step[todo]
-        return x_new
-
-
-def _solve(A: np.ndarray, b: np.ndarray):
-    """Batched solve A x = b (b (m, k) or (m, k, r)); returns x and a flag of solvable systems.
-
-    A singular system in the batch must not sink the others, so on failure retry one by one.
-    """
-    vec = b.ndim == 2
-    bb = b[..., None] if vec else b
-    try:
-        x = np.linalg.solve(A, bb)
-        solved = np.isfinite(x).all(axis=(1, 2))
-    except np.linalg.LinAlgError:
-        x = np.zeros_like(bb)
-        solved = np.zeros(A.shape[0], bool)
-        for i in range(A.shape[0]):
-            try:
-                x[i] = np.linalg.solve(A[i], bb[i])
-                solved[i] = np.isfinite(x[i]).all()
-            except np.linalg.LinAlgError:
-                pass
-    return (x[..., 0] if vec else x), solved
+    def _plastic_return(self, sig_tr, eqps_n, scale) -> _Return:
+        """Return of m plastic trial states (see :func:`_kernels.plastic_return`)."""
+        stress, eqps, _, tangent, ok, apex, _ = _K.plastic_return(
+            self._kernel_params, self.yield_function.kernel_params, self.potential.kernel_params,
+            np.ascontiguousarray(sig_tr, dtype=float), np.ascontiguousarray(eqps_n, dtype=float),
+            np.ascontiguousarray(scale, dtype=float))
+        return _Return(stress, eqps, tangent, ok, apex)
 
 
 def _polar_factor(xi: np.ndarray, K: float) -> np.ndarray:
-    """m(xi) = max over Lode angles phi of cos(phi - phi_y) / h(phi), with cos 3 phi_y = xi the
-    Lode measure (r/q)^3 of a deviator y and h(phi) = t/q at Lode angle phi.
-
-    The gauge of y with respect to the subdifferential of t at s = 0 (the deviatoric flow
-    directions the apex admits) is ``sup_s (y:s)/t(s) = 2/3 q_y m(xi)``; for K = 1 that set is a
-    ball and m = 1, in general K <= m <= 1. The maximiser is bracketed on a grid around phi_y
-    and polished by Newton steps on f'(phi) = 0 with analytic derivatives of f = cos(u)/h,
-    u = phi - phi_y, h' = 3/2 (1 - 1/K) sin 3 phi, h'' = 9/2 (1 - 1/K) cos 3 phi.
-    """
-    if K == 1.0 or xi.size == 0:
-        return np.ones_like(xi)
-    k1 = 1.0 - 1.0 / K
-    phi_y = np.arccos(np.clip(xi, -1.0, 1.0)) / 3.0
-    offsets = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 361)
-    h_grid = 0.5 * ((1.0 + 1.0 / K) - k1 * np.cos(3.0 * (phi_y[:, None] + offsets[None, :])))
-    u = offsets[(np.cos(offsets)[None, :] / h_grid).argmax(axis=1)]
-    for _ in range(4):
-        phi = phi_y + u
-        c, s = np.cos(u), np.sin(u)
-        h = 0.5 * ((1.0 + 1.0 / K) - k1 * np.cos(3.0 * phi))
-        h1 = 1.5 * k1 * np.sin(3.0 * phi)
-        h2 = 4.5 * k1 * np.cos(3.0 * phi)
-        f1 = (-s * h - c * h1) / h**2
-        f2 = ((-c * h - c * h2) * h + 2.0 * h1 * (s * h + c * h1)) / h**3
-        u = u - np.where(f2 < 0.0, f1 / f2, 0.0)  # only where f is locally concave (a maximum)
-    h = 0.5 * ((1.0 + 1.0 / K) - k1 * np.cos(3.0 * (phi_y + u)))
-    return np.cos(u) / h
+    """m(xi) = max over Lode angles phi of cos(phi - phi_y) / h(phi), with cos 3 phi_y = xi and
+    h(phi) = t/q at Lode angle phi: the apex test's gauge factor (see :func:`_kernels._polar_factor`)."""
+    return _K.polar_factors(np.ascontiguousarray(xi, dtype=float), float(K))

@@ -13,11 +13,15 @@ Invariants (compression-positive pressure, as in the extended Drucker-Prager lit
     J2 = s:s/2,  q = sqrt(3 J2)          (von Mises stress, MPa)
     J3 = det(s) = tr(s^3)/3,  r = cbrt(27/2 J3) = cbrt(9/2 tr(s^3))  (keeps the sign)
 
-All functions are vectorised over the leading axis (``n`` points).
+All functions are vectorised over the leading axis (``n`` points). The third invariant and its
+derivatives are those of the compiled per-point code of :mod:`_kernels` (the return mapping's),
+looped over the points.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from problems.materials import _kernels as _K
 
 #: ``m = [1,1,1,0,0,0]``: Voigt identity, d tr(sigma) / d sigma.
 M_VEC = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
@@ -27,36 +31,6 @@ M_VEC = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
 HESS_J2 = np.zeros((6, 6))
 HESS_J2[:3, :3] = np.eye(3) - 1.0 / 3.0
 HESS_J2[3:, 3:] = 2.0 * np.eye(3)
-
-_PAIRS = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))  # Voigt index -> tensor (i, j)
-
-
-def _basis() -> np.ndarray:
-    """``B[a]``: d sigma_tensor / d sigma_voigt[a] (3x3 each; shear ones carry both (i,j) and (j,i))."""
-    B = np.zeros((6, 3, 3))
-    for a, (i, j) in enumerate(_PAIRS):
-        B[a, i, j] = 1.0
-        B[a, j, i] = 1.0
-    return B
-
-
-def _hess_j3_operator() -> np.ndarray:
-    """Linear map (36, 6) from the deviator in Voigt form to the Hessian of J3, flattened.
-
-    With ``E_a = dev(B_a)`` (d s / d sigma_a) and cof(s) = s.s - J2 I the gradient of J3 is
-    ``cof(s) : E_a``; since tr(E_a) = 0 the J2 I part drops from the second derivative and
-    ``d2 J3 / d sigma_a d sigma_b = tr(s (E_a E_b + E_b E_a))``, linear in s.
-    """
-    B = _basis()
-    E = B - np.einsum("a,ij->aij", np.trace(B, axis1=1, axis2=2) / 3.0, np.eye(3))
-    T = np.einsum("aij,bjk->abik", E, E)
-    T = T + T.transpose(1, 0, 2, 3)
-    # s_tensor = sum_c s_voigt[c] B_c  =>  H[a, b] = sum_c s_voigt[c] tr(B_c T[a, b])
-    return np.einsum("cij,abji->abc", B, T).reshape(36, 6)
-
-
-#: (36, 6): ``hess_j3(s).reshape(-1, 36) = s @ HESS_J3_OPERATOR.T``.
-HESS_J3_OPERATOR = _hess_j3_operator()
 
 
 def pressure(stress: np.ndarray) -> np.ndarray:
@@ -78,8 +52,7 @@ def j2(s: np.ndarray) -> np.ndarray:
 
 def j3(s: np.ndarray) -> np.ndarray:
     """Third deviatoric invariant ``J3 = det(s)`` of a Voigt deviator, (n,)."""
-    xx, yy, zz, yz, xz, xy = s.T
-    return xx * yy * zz + 2.0 * yz * xz * xy - xx * yz**2 - yy * xz**2 - zz * xy**2
+    return _K.third_invariants(_rows(s), 0)[:, 0]
 
 
 def mises(stress: np.ndarray) -> np.ndarray:
@@ -101,21 +74,16 @@ def grad_j2(s: np.ndarray) -> np.ndarray:
 
 def grad_j3(s: np.ndarray) -> np.ndarray:
     """d J3 / d sigma_voigt = dev(s.s) with doubled shear entries, (n, 6)."""
-    xx, yy, zz, yz, xz, xy = s.T
-    s2 = np.empty_like(s)
-    s2[:, 0] = xx * xx + xy * xy + xz * xz
-    s2[:, 1] = xy * xy + yy * yy + yz * yz
-    s2[:, 2] = xz * xz + yz * yz + zz * zz
-    s2[:, 3] = 2.0 * (xy * xz + yy * yz + yz * zz)
-    s2[:, 4] = 2.0 * (xx * xz + xy * yz + xz * zz)
-    s2[:, 5] = 2.0 * (xx * xy + xy * yy + xz * yz)
-    s2[:, :3] -= (2.0 / 3.0) * j2(s)[:, None]
-    return s2
+    return _K.third_invariants(_rows(s), 1)
 
 
 def hess_j3(s: np.ndarray) -> np.ndarray:
     """d2 J3 / d sigma_voigt^2, symmetric, linear in the deviator, (n, 6, 6)."""
-    return (s @ HESS_J3_OPERATOR.T).reshape(-1, 6, 6)
+    return _K.third_invariants(_rows(s), 2).reshape(-1, 6, 6)
+
+
+def _rows(s) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(s, float))
 
 
 def outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
