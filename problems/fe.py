@@ -22,7 +22,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from problems.assembly import Pattern, build_pattern, element_forces, element_matrices
-from problems.element import GAUSS_WEIGHTS, b_bar, gradients
+from problems.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
 from problems.materials.base import Material
 from problems.mesh import Mesh, nested_dissection_order
 
@@ -89,10 +89,15 @@ class Discretisation:
         return self.dV.size
 
 
-def discretise(mesh: Mesh) -> Discretisation:
-    """Precompute the B-bar operators, integration weights and sparsity pattern of ``mesh``."""
+def discretise(mesh: Mesh, *, use_b_bar: bool = True) -> Discretisation:
+    """Precompute the strain operators, integration weights and sparsity pattern of ``mesh``.
+
+    ``use_b_bar=False`` gives the standard fully integrated element, which locks under
+    (nearly) isochoric deformation; it exists to demonstrate that, not for production runs.
+    """
     dNdx, detJ = gradients(mesh.nodes[mesh.elements])
-    return Discretisation(mesh, b_bar(dNdx, detJ), detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes))
+    B = b_bar(dNdx, detJ) if use_b_bar else strain_operator(dNdx)
+    return Discretisation(mesh, B, detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes))
 
 
 @dataclass(frozen=True, eq=False)
