@@ -136,7 +136,8 @@ def displacement_std_mm(settings: DataSettings) -> float:
     return math.hypot(res_mm / math.sqrt(12.0), settings.noise_um * 1e-3)
 
 
-def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None, **overrides) -> Dataset:
+def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None, progress: bool = False,
+              **overrides) -> Dataset:
     """Compute a data set: the FE response at ``x`` (default: the case's reference) on ``settings.mesh``.
 
     Keyword overrides go into :class:`DataSettings` (``make_data(case, mesh="coarse", resolution_um=0)``).
@@ -148,7 +149,7 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
     settings = DataSettings(**{**asdict(settings or DataSettings()), **overrides})
     x = case.reference if x is None else np.asarray(x, float)
     model = FEForwardModel(case, settings.mesh, settings.loading, settings.points)
-    resp = model.response(x)
+    resp = model.response(x, progress=progress)
     if not resp.converged:
         raise RuntimeError(f"data model of {case.name} on mesh {settings.mesh} failed: {resp.message}")
     u_h, u_v = resp.front_face(settings.points)
@@ -218,6 +219,6 @@ def get_data(case: str, settings: DataSettings | None = None, *, progress: bool 
         return load(path)
     if progress:
         print(f"computing data for {case} on mesh {settings.mesh} (cached in {path}) ...", flush=True)
-    ds = make_data(case, settings)
+    ds = make_data(case, settings, progress=progress)
     save(ds, path)
     return ds

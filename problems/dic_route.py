@@ -6,7 +6,9 @@ their DIC standard deviations replace the FE values. Points whose correlation fa
 value and infinite standard deviation: they carry no weight in the objective. The covariance is
 taken diagonal: on the 5 mm grid the 21 px subsets do not overlap, so points are independent, and
 the u_h-u_v covariance of one point is small for an isotropic speckle (it is kept in ``meta``).
-The images are not stored: camera, speckle and DIC settings and the seed regenerate them.
+The images (PackBits TIFF) and a Fig.-2-like figure of a few subsets (reference, warped,
+deformed) are written to ``results/data/cache/<case>__dic_images/``; they are not part of the
+data file: camera, speckle and DIC settings and the seed regenerate them.
 """
 from __future__ import annotations
 
@@ -40,8 +42,11 @@ def dic_dataset(case, settings, x, response, *, progress: bool = True):
     from problems.data import Dataset, _round, package_version
     from problems.dic import measure_front_face
 
+    from problems.data import DATA_DIR
+
+    image_dir = DATA_DIR / "cache" / f"{case.name}__dic_images"   # images + Fig.-2-like subset figure
     m = measure_front_face(front_face_fields(response), settings.points, seed=settings.seed, progress=progress,
-                           figure=False)
+                           image_dir=image_dir, figure=True)
     ok = m.converged
     u_h = np.where(ok, m.u_h, 0.0)
     u_v = np.where(ok, m.u_v, 0.0)

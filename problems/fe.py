@@ -194,9 +194,17 @@ class Response:
 
 
 def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
-        settings: NewtonSettings = NewtonSettings()) -> Response:
-    """Run the plate-compression test on ``disc`` with ``material``; never raises on non-convergence."""
+        settings: NewtonSettings = NewtonSettings(), *, progress: bool = False) -> Response:
+    """Run the plate-compression test on ``disc`` with ``material``; never raises on non-convergence.
+
+    ``progress`` shows a progress bar over the snapshots (for long runs on fine meshes).
+    """
     t0 = time.perf_counter()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=loading.snapshots, desc="snapshots", unit="snap")
     bc = BoundaryConditions(disc, loading.plates)
     solver = _Newton(disc, material, bc, settings)
     ne, nn = disc.mesh.n_elements, disc.mesh.n_nodes
@@ -234,6 +242,10 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         out_h.append(state.reshape(ne, 8, -1).mean(axis=1))
         out_f.append(-4.0 * f_int[bc.top_z].sum() / 1000.0)
         out_d.append(lam * loading.displacement_mm)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     n_state = len(material.state_names)
     return Response(
         mesh=disc.mesh,

@@ -96,9 +96,10 @@ class FEForwardModel:
             return str(exc)
         return None
 
-    def response(self, x):
+    def response(self, x, *, progress: bool = False):
         """The full FE :class:`~problems.fe.Response` at ``x``."""
-        return run(discretisation(self.mesh), case_material(self.case, x), self.loading, self.settings)
+        return run(discretisation(self.mesh), case_material(self.case, x), self.loading, self.settings,
+                   progress=progress)
 
     def __call__(self, x):
         from problems.objective import ForwardResult

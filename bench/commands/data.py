@@ -34,7 +34,7 @@ def main(args) -> int:
     status = 0
     for name in tqdm(names, desc="data sets", disable=len(names) == 1):
         path = Path(args.out) if args.out else (default_path(name) if settings == DataSettings() else cached_path(name, settings))
-        ds = make_data(name, replace(settings))
+        ds = make_data(name, replace(settings), progress=True)
         text = ds.to_json()
         if args.check:
             same = path.exists() and path.read_text() == text

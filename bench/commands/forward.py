@@ -43,7 +43,7 @@ def main(args) -> int:
     loading = Loading(args.displacement, args.snapshots, args.plates)
     mesh = parse_mesh(args.mesh)
     print(f"mesh {args.mesh}: {mesh.n_elements} elements, {mesh.n_dofs} dofs; material {material!r}")
-    response = run(discretise(mesh), material, loading)
+    response = run(discretise(mesh), material, loading, progress=mesh.n_elements > 1000)
     print(f"{'snapshot':>8} {'top mm':>8} {'reaction kN':>12}")
     for k, (d, f) in enumerate(zip(response.snapshots_mm, response.reaction_kN), 1):
         print(f"{k:8d} {d:8.4f} {f:12.3f}")
