@@ -6,6 +6,7 @@ items))``; the objective uses it to evaluate Jacobian columns and populations as
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 from collections.abc import Callable, Iterator
 
@@ -62,7 +63,7 @@ def cluster(workers: int | None = None, scheduler: str | None = None) -> Iterato
     os.environ.update(SINGLE_THREAD_ENV)  # inherited by the worker processes
     n = workers or os.cpu_count() or 1
     with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs="error") as lc, Client(lc) as client:
+                      silence_logs=logging.ERROR) as lc, Client(lc) as client:
         yield client
 
 

@@ -1,0 +1,88 @@
+"""``femubench gsa CASE``: global sensitivity (Sobol indices or Morris screening) over the parameter box."""
+from __future__ import annotations
+
+NAME = "gsa"
+HELP = ("global sensitivity of the cost, peak force and lateral bulge over the parameter box: Sobol first-order and "
+        "total indices (Saltelli sampling) or Morris screening (SALib); prints the FE evaluations and wall time")
+
+
+def add_arguments(p) -> None:
+    from bench.studies import DATA_HELP
+
+    p.add_argument("case", metavar="CASE", help="case name (FE or analytic-*)")
+    p.add_argument("--method", default="sobol", choices=["sobol", "morris"])
+    p.add_argument("--samples", type=int, default=None, metavar="N",
+                   help="Sobol: base samples N, N (d + 2) evaluations, a power of 2 (default 32); "
+                        "Morris: trajectories r, r (d + 1) evaluations (default 10)")
+    p.add_argument("--mesh", default="coarse", help="coarse | paper | fine | NX,NY,NZ (default: coarse)")
+    p.add_argument("--data", default="auto", help=DATA_HELP)
+    p.add_argument("--box-scale", default="auto", metavar="S",
+                   help="shrink the case's box about the reference by S in (0, 1]; auto (default): 1, or the largest "
+                        "S whose sample points are all feasible")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", metavar="DIR", help="output directory (default results/studies/gsa/<case>)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="local Dask worker processes (default: one per core); 1 runs in-process")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
+    p.add_argument("--dry-run", action="store_true", help="print the planned evaluations and the box, run nothing")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-figures", action="store_true")
+
+
+def main(args) -> int:
+    import os
+
+    from bench.parallel import mapper
+    from bench.studies.global_sensitivity import run_gsa
+    from problems.cases import get_case
+
+    case = get_case(args.case)
+    samples = args.samples or (32 if args.method == "sobol" else 10)
+    if samples < 2:
+        raise ValueError(f"--samples {samples} is out of range: need at least 2")
+    if args.box_scale != "auto":
+        try:
+            scale = float(args.box_scale)
+        except ValueError:
+            raise ValueError(f"--box-scale {args.box_scale!r} is malformed: a number in (0, 1] or auto") from None
+        if not 0 < scale <= 1:
+            raise ValueError(f"--box-scale {scale} is out of range: 0 < S <= 1")
+    else:
+        scale = "auto"
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    workers = 1 if case.name.startswith("analytic-") else (args.workers or os.cpu_count() or 1)
+
+    def confirm(planned, box, s, n_bad):
+        extra = f"; box scaled by {s:g} ({n_bad} sample points infeasible in the full box)" if s < 1 else ""
+        print(f"{args.method} on {case.name} (mesh {args.mesh}): {planned} evaluations planned{extra}", flush=True)
+        if args.dry_run:
+            for n, lo, hi in zip(case.names, *box):
+                print(f"  {n:>8} [{lo:.6g}, {hi:.6g}]")
+        return not args.dry_run
+
+    with mapper(1 if case.name.startswith("analytic-") else args.workers, args.scheduler) as m:
+        res = run_gsa(case.name, method=args.method, samples=samples, mesh=args.mesh, data=args.data, box_scale=scale,
+                      seed=args.seed, mapper=m, workers=workers, out=args.out, progress=not args.quiet,
+                      figures=not args.no_figures, confirm=confirm)
+    if res.get("aborted"):
+        return 0
+    r, c = res["result"], res["cost"]
+    print(f"data: {res['data']}")
+    for w in r.warnings:
+        print(f"warning: {w}")
+    if args.method == "sobol":
+        print(f"{'output':>14} {'param':>8} {'S1':>7} {'+-':>6} {'ST':>7} {'+-':>6}")
+        for row in r.rows():
+            print(f"{row['output']:>14} {row['parameter']:>8} {row['S1']:7.3f} {row['S1_conf']:6.3f} "
+                  f"{row['ST']:7.3f} {row['ST_conf']:6.3f}")
+    else:
+        print(f"{'output':>14} {'param':>8} {'mu*':>10} {'+-':>9} {'sigma':>10}")
+        for row in r.rows():
+            print(f"{row['output']:>14} {row['parameter']:>8} {row['mu_star']:10.4g} {row['mu_star_conf']:9.3g} "
+                  f"{row['sigma']:10.4g}")
+    print(f"cost: {c['fe_evaluations']} forward evaluations ({c['failed']} failed, {c['infeasible']} infeasible), "
+          f"{c['evaluation_wall_s']:.1f} s evaluating with {c['workers']} worker(s), {c['total_wall_s']:.1f} s total")
+    print(f"wrote {res['paths'][0].parent}")
+    return 0
