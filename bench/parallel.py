@@ -11,7 +11,8 @@ import os
 from collections.abc import Callable, Iterator
 
 #: environment that pins BLAS/OpenMP to one thread in each worker process
-SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                       "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
 
 
 def sequential_map(fn, items) -> list:

@@ -32,15 +32,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from bench import store
+from bench.parallel import SINGLE_THREAD_ENV  # thread pinning for every worker process
 from bench.suite import RunConfig, Suite, config_hash
 
 log = logging.getLogger("femubench.runner")
 
-#: Thread pinning for every worker process (and recommended for ``--workers 1``).
-SINGLE_THREAD_ENV = {
-    "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-    "VECLIB_MAXIMUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1",
-}
 #: Distinct warnings kept per record.
 MAX_WARNINGS = 20
 #: Packages whose versions go into every record.

@@ -64,7 +64,8 @@ class NewtonSettings:
     max_iterations    : Newton iterations per increment before the increment is cut
     substeps          : increments between two snapshots
     max_cuts          : total bisections allowed in a run
-    permc_spec        : SuperLU column ordering (MMD_AT_PLUS_A measured fastest here)
+    linear_rtol       : an increment whose residual is below linear_rtol * rtol_force is accepted
+                        without the displacement test (Abaqus' "linear increment" rule)
     """
 
     rtol_force: float = 1e-8
