@@ -105,7 +105,7 @@ def machine() -> dict[str, Any]:
 def initial_point(case, config: RunConfig):
     """The physical start point x0 of a run: the case's default start, or the
     ``start_index``-th seeded Latin-hypercube start of ``seed``."""
-    from problems.inverse import start_point
+    from problems.inverse.build import start_point
 
     if config.start == "default":
         return start_point(case, kind="default", seed=config.seed)
@@ -118,10 +118,10 @@ def is_analytic(case_name: str) -> bool:
 
 def dataset_for(config: RunConfig, *, progress: bool = False):
     """The measured data set of a run (FE cases): the shipped one, or the one made with the
-    suite's ``[data]`` settings (computed on first use and cached by problems.data)."""
+    suite's ``[data]`` settings (computed on first use and cached by problems.inverse.data)."""
     if is_analytic(config.case):
         return None
-    from problems.data import DataSettings, get_data
+    from problems.inverse.data import DataSettings, get_data
 
     return get_data(config.case, DataSettings(**config.data) if config.data else None, progress=progress)
 
@@ -135,7 +135,7 @@ def failed_result(config: RunConfig, message: str, *, case=None, x0=None, n_eval
     names, ref = [], []
     if case is None:
         try:
-            from problems.cases import get_case
+            from problems.inverse.cases import get_case
 
             case = get_case(config.case)
         except Exception:  # noqa: BLE001 - best effort only
@@ -158,7 +158,7 @@ def run_one(config: RunConfig | dict, *, mapper: Callable | None = None, suite: 
     """Run one identification and return its record (see :mod:`bench.store`); never raises
     (except KeyboardInterrupt/SystemExit).
 
-    ``dataset``: the run's measured data (a problems.data.Dataset) when the caller prepared it;
+    ``dataset``: the run's measured data (a problems.inverse.data.Dataset) when the caller prepared it;
     by default it is loaded (or made) here with :func:`dataset_for`.
     """
     if isinstance(config, dict):
@@ -184,8 +184,8 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
     case = x0 = objective = None
     error = data_hash = None
     try:
-        from problems.cases import get_case
-        from problems.inverse import build_objective
+        from problems.inverse.cases import get_case
+        from problems.inverse.build import build_objective
         from solvers import solve
 
         case = get_case(config.case)

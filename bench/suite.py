@@ -43,7 +43,7 @@ START_KINDS = ("default", "random")
 #: Meshes accepted when the FE package does not publish its own list.
 FALLBACK_MESHES = ("coarse", "paper", "fine")
 
-#: Data settings accepted when problems.inverse does not publish its own (name -> type).
+#: Data settings accepted when problems.inverse.build does not publish its own (name -> type).
 FALLBACK_DATA_SETTINGS: dict[str, tuple] = {
     "mesh": (str,), "resolution_um": (float,), "noise_um": (float,), "force_resolution_kN": (float,),
     "seed": (int,), "displacement_mm": (float,), "snapshots": (int,), "plates": (str,),
@@ -161,10 +161,10 @@ class Suite:
 # --- what is allowed ------------------------------------------------------------------------
 
 def _known_cases() -> dict:
-    from problems.cases import CASES
+    from problems.inverse.cases import CASES
 
     try:
-        from problems.cases import all_cases
+        from problems.inverse.cases import all_cases
 
         return all_cases()
     except ImportError:  # analytic problems not available
@@ -172,7 +172,7 @@ def _known_cases() -> dict:
 
 
 def _fe_cases() -> list[str]:
-    from problems.cases import CASES
+    from problems.inverse.cases import CASES
 
     return list(CASES)
 
@@ -221,7 +221,7 @@ _CONTRACT_METHODS = ("lm", "gauss-newton", "ga", "de", "pso", "sa", "mcmc", "nlo
 def _meshes() -> tuple[str, ...]:
     """Named mesh presets of the FE model (a mesh may also be given as "NX,NY,NZ")."""
     try:
-        from problems.mesh import MESH_PRESETS
+        from problems.fe.mesh import MESH_PRESETS
     except ImportError:
         return FALLBACK_MESHES
     return tuple(MESH_PRESETS)
@@ -237,9 +237,9 @@ def _mesh_ok(mesh) -> bool:
 
 
 def _data_settings() -> dict[str, tuple]:
-    """Allowed [data] keys (the fields of problems.data.DataSettings) -> accepted Python types."""
+    """Allowed [data] keys (the fields of problems.inverse.data.DataSettings) -> accepted Python types."""
     try:
-        from problems.data import DataSettings
+        from problems.inverse.data import DataSettings
     except ImportError:
         return dict(FALLBACK_DATA_SETTINGS)
     return {f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings)}
@@ -248,7 +248,7 @@ def _data_settings() -> dict[str, tuple]:
 def _check_data_settings(data: dict) -> str | None:
     """The reason ``data`` does not make valid DataSettings, or None."""
     try:
-        from problems.data import DataSettings
+        from problems.inverse.data import DataSettings
     except ImportError:
         return None
     try:

@@ -8,7 +8,7 @@ with :meth:`Run.record`, and returns an :class:`Outcome` (status, message, itera
 :func:`solve` does everything else, identically for all methods:
 
 * resets the objective (counters, log, cache, best point) and sets its budget: the objective
-  raises :class:`~problems.objective.BudgetExhausted` rather than exceed it; :func:`solve`
+  raises :class:`~problems.inverse.objective.BudgetExhausted` rather than exceed it; :func:`solve`
   catches it (status ``"budget"``) and returns the best point so far;
 * the final point is the best (lowest-cost, successful, feasible) point the objective evaluated
   during the run; if there is none, the status is ``"failed"`` and ``x = x0``, ``cost = inf``;
@@ -33,7 +33,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from problems.objective import BudgetExhausted, Objective
+from problems.inverse.objective import BudgetExhausted, Objective
 from solvers.result import RunResult
 
 FAMILIES = ("local", "global", "sampling")

@@ -6,10 +6,10 @@ import pickle
 import numpy as np
 import pytest
 
-from problems.analytic import (ANALYTIC_CASES, LinearModel, RastriginModel, SinusoidModel,
+from problems.inverse.analytic import (ANALYTIC_CASES, LinearModel, RastriginModel, SinusoidModel,
                                StressStrainModel, analytic_model, analytic_objective)
-from problems.cases import get_case
-from problems.objective import FAILURE_COST
+from problems.inverse.cases import get_case
+from problems.inverse.objective import FAILURE_COST
 
 NAMES = sorted(ANALYTIC_CASES)
 

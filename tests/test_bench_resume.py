@@ -29,7 +29,7 @@ budgets = [80]
 # `python -m bench` with every analytic forward evaluation slowed down by 3 ms, so that the
 # suite takes a few seconds and the kill lands part-way (the results are unchanged).
 SLOW_CLI = (
-    "import sys, time, problems.analytic as a\n"
+    "import sys, time, problems.inverse.analytic as a\n"
     "for cls in (a.StressStrainModel, a.LinearModel):\n"
     "    def slow(self, x, _f=cls.__call__):\n"
     "        time.sleep(0.003)\n"

@@ -46,7 +46,7 @@ def test_expansion_counts_and_order():
 
 
 def test_all_cases_means_the_nine_fe_cases():
-    from problems.cases import CASES
+    from problems.inverse.cases import CASES
 
     s = parse_suite(with_("suite.cases", "all"))
     assert s.cases == tuple(CASES) and len(s.cases) == 9
@@ -158,7 +158,7 @@ def test_shipped_suites_are_valid(name):
 
 
 def test_default_and_paper_suites_match_the_issue():
-    from problems.cases import CASES
+    from problems.inverse.cases import CASES
 
     d = load_suite(ROOT / "suites" / "default.toml")
     assert set(d.cases) == set(CASES) and set(d.methods) == {"lm", "gauss-newton"}

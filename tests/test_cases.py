@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from problems.cases import A_REF, CASES, get_case, hyperbolic_l0
+from problems.inverse.cases import A_REF, CASES, get_case, hyperbolic_l0
 
 
 def test_nine_cases_with_the_paper_active_parameters():

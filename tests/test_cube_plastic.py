@@ -3,11 +3,11 @@ and the B-bar element does not lock under isochoric plastic flow."""
 import numpy as np
 import pytest
 
-from problems.cases import CASES
-from problems.fe import Loading, discretise, run
-from problems.forward import FORWARD_SETTINGS, case_material, discretisation
+from problems.inverse.cases import CASES
+from problems.fe.newton import Loading, discretise, run
+from problems.inverse.forward import FORWARD_SETTINGS, case_material, discretisation
 from problems.materials.drucker_prager import make_material
-from problems.mesh import box_mesh
+from problems.fe.mesh import box_mesh
 
 
 @pytest.mark.parametrize("name", sorted(CASES))

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from problems.data import make_data
+from problems.inverse.data import make_data
 
 
 @pytest.mark.slow

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from problems.material_point import run_material_point
+from problems.materials.point_driver import run_material_point
 from problems.materials import drucker_prager as dp
 from problems.materials.invariants import M_VEC, deviator, mises, pressure
 from problems.materials.verification import typical_parameters

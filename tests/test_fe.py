@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
 
-from problems.assembly import element_forces, element_matrices
-from problems.element import gradients, shape_functions
-from problems.fe import Loading, NewtonSettings, discretise, run
+from problems.fe.assembly import element_forces, element_matrices
+from problems.fe.element import gradients, shape_functions
+from problems.fe.newton import Loading, NewtonSettings, discretise, run
 from problems.materials import LinearElastic, MaterialUpdate
-from problems.measurement import front_face_operator, measurement_grid
-from problems.mesh import MESH_PRESETS, box_mesh, distort, parse_mesh
+from problems.fe.front_face import front_face_operator, measurement_grid
+from problems.fe.mesh import MESH_PRESETS, box_mesh, distort, parse_mesh
 
 E, NU = 30_000.0, 0.2
 
@@ -187,7 +187,7 @@ def test_invalid_inputs_name_the_field():
 def test_vtu_export_round_trip(tmp_path):
     import meshio
 
-    from problems.vtu import write_vtu
+    from problems.fe.vtu import write_vtu
 
     r = run(discretise(box_mesh(2, 2, 3)), LinearElastic(E, NU), Loading(1.0, 2))
     paths = write_vtu(r, tmp_path)

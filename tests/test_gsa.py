@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from SALib.test_functions import Ishigami
 
-from problems.global_sensitivity import (
+from problems.analysis.global_sensitivity import (
     feasible_scale, morris_screening, scaled_box, sobol_analyze, sobol_indices, sobol_sample, summary_outputs,
 )
 

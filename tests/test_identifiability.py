@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from problems.identifiability import (
+from problems.analysis.identifiability import (
     analyse_jacobian, correlation_matrix, fisher_information, identifiability, laplace_covariance, refine_mode,
 )
-from problems.objective import ForwardResult, Objective
+from problems.inverse.objective import ForwardResult, Objective
 
 REF = np.array([2.0, 50.0, 0.3])
 SIGMA = np.array([0.1] * 8 + [0.5] * 4)
@@ -143,7 +143,7 @@ def test_identifiability_cli_on_analytic_cases(tmp_path, capsys):
     assert "analytic-smooth: cond(J^T J) =" in text and "analytic-linear" in text
     doc = json.loads((out / "analytic-linear" / "identifiability.json").read_text())
     # analytic-linear: closed-form posterior covariance of the LinearModel
-    from problems.analytic import analytic_model
+    from problems.inverse.analytic import analytic_model
 
     model = analytic_model("analytic-linear")
     _, cov = model.posterior(model.values(model.reference))

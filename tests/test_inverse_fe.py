@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from problems.cases import CASES
-from problems.data import DataSettings, load, make_data, save
-from problems.forward import FEForwardModel
-from problems.inverse import build_objective, start_point
+from problems.inverse.cases import CASES
+from problems.inverse.data import DataSettings, load, make_data, save
+from problems.inverse.forward import FEForwardModel
+from problems.inverse.build import build_objective, start_point
 
 MESH = "3,3,6"
 CASE = CASES["linear-compression"]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bench.commands import material as cmd
-from problems.material_point import COLUMNS, PATHS, run_material_point
+from problems.materials.point_driver import COLUMNS, PATHS, run_material_point
 from problems.materials.drucker_prager import make_material
 from problems.materials.elastic import LinearElastic
 from problems.materials.verification import typical_parameters

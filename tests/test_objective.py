@@ -7,7 +7,7 @@ import pickle
 import numpy as np
 import pytest
 
-from problems.objective import FAILURE_COST, BudgetExhausted, ForwardResult, Objective
+from problems.inverse.objective import FAILURE_COST, BudgetExhausted, ForwardResult, Objective
 
 
 class Quadratic:

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from problems.objective import ForwardResult
-from problems.sensitivity import (
+from problems.inverse.objective import ForwardResult
+from problems.analysis.sensitivity import (
     ModelFields, layout_blocks, local_sensitivities, snapshot_sensitivities, split_measurements,
 )
 
@@ -103,7 +103,7 @@ class LayoutModel:
 
 
 def test_model_fields_adapter_layout_and_mapper():
-    from problems.forward import measurement_blocks
+    from problems.inverse.forward import measurement_blocks
 
     b = measurement_blocks(N, M)
     assert {k: b[k] for k in ("u_h", "u_v", "force")} == layout_blocks(N, M)

@@ -7,8 +7,8 @@ import warnings
 import numpy as np
 import pytest
 
-from problems.analytic import ANALYTIC_CASES, analytic_objective
-from problems.objective import ForwardResult, Objective
+from problems.inverse.analytic import ANALYTIC_CASES, analytic_objective
+from problems.inverse.objective import ForwardResult, Objective
 from solvers import METHODS, RunResult, solve
 from solvers.base import FAMILIES, get_method
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bench.cli import main
-from problems.analytic import ANALYTIC_CASES, analytic_objective
+from problems.inverse.analytic import ANALYTIC_CASES, analytic_objective
 from solvers import METHODS, RunResult, solve
 
 

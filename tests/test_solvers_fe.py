@@ -6,9 +6,9 @@ import pytest
 
 @pytest.mark.slow
 def test_lm_recovers_linear_compression_on_the_coarse_mesh():
-    from problems.cases import get_case
-    from problems.data import make_data
-    from problems.inverse import build_objective, start_point
+    from problems.inverse.cases import get_case
+    from problems.inverse.data import make_data
+    from problems.inverse.build import build_objective, start_point
     from solvers import solve
 
     case = get_case("linear-compression")

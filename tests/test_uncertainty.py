@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from bench.studies.uncertainty import compare, verdict
-from problems.analytic import analytic_model, analytic_objective
-from problems.identifiability import analyse_jacobian, refine_mode
+from problems.inverse.analytic import analytic_model, analytic_objective
+from problems.analysis.identifiability import analyse_jacobian, refine_mode
 
 
 def test_verdict_rule():

@@ -13,7 +13,7 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     import json
 
-    from problems.cases import CASES, all_cases
+    from problems.inverse.cases import CASES, all_cases
 
     cases = all_cases() if args.analytic else CASES
     if args.json:

@@ -25,8 +25,8 @@ def main(args) -> int:
 
     from tqdm import tqdm
 
-    from problems.cases import CASES, get_case
-    from problems.data import DataSettings, cached_path, default_path, make_data, save
+    from problems.inverse.cases import CASES, get_case
+    from problems.inverse.data import DataSettings, cached_path, default_path, make_data, save
 
     names = list(CASES) if args.case == "all" else [get_case(args.case).name]
     settings = DataSettings(mesh=args.mesh, resolution_um=args.resolution_um, noise_um=args.noise_um,

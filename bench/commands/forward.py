@@ -34,10 +34,10 @@ def parse_params(items: list[str]) -> dict[str, float]:
 def main(args) -> int:
     import json
 
-    from problems.fe import Loading, discretise, run
-    from problems.forward import material_from
-    from problems.measurement import measurement_grid
-    from problems.mesh import parse_mesh
+    from problems.fe.newton import Loading, discretise, run
+    from problems.inverse.forward import material_from
+    from problems.fe.front_face import measurement_grid
+    from problems.fe.mesh import parse_mesh
 
     material = material_from(args.case, parse_params(args.param))
     loading = Loading(args.displacement, args.snapshots, args.plates)
@@ -64,7 +64,7 @@ def main(args) -> int:
             json.dump(doc, fh, indent=1)
         print(f"wrote {args.json}")
     if args.vtu:
-        from problems.vtu import write_vtu
+        from problems.fe.vtu import write_vtu
 
         paths = write_vtu(response, args.vtu)
         print(f"wrote {len(paths)} VTU files to {args.vtu}")

@@ -35,7 +35,7 @@ def main(args) -> int:
 
     from bench.parallel import mapper
     from bench.studies.global_sensitivity import run_gsa
-    from problems.cases import get_case
+    from problems.inverse.cases import get_case
 
     case = get_case(args.case)
     samples = args.samples or (32 if args.method == "sobol" else 10)

@@ -28,7 +28,7 @@ def main(args) -> int:
     from bench.parallel import mapper
     from bench.studies import case_names, parse_assignments
     from bench.studies.identifiability import run_identifiability
-    from problems.cases import get_case
+    from problems.inverse.cases import get_case
 
     cases = case_names(args.cases)
     x = {}

@@ -61,8 +61,8 @@ def main(args) -> int:
     import json
     from pathlib import Path
 
-    from problems.cases import get_case
-    from problems.inverse import build_objective, start_point
+    from problems.inverse.cases import get_case
+    from problems.inverse.build import build_objective, start_point
     from solvers import solve
 
     case = get_case(args.case)

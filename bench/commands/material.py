@@ -60,9 +60,9 @@ def resolve_case(case: str, hardening: str | None) -> tuple[str, str]:
 
 
 def reference_parameters(form: str, hardening: str) -> dict[str, float]:
-    """The study's reference parameters of the case (problems.cases), else typical concrete."""
+    """The study's reference parameters of the case (problems.inverse.cases), else typical concrete."""
     try:
-        from problems.cases import CASES
+        from problems.inverse.cases import CASES
     except ImportError:  # the cases module is optional for this command
         CASES = {}
     case = CASES.get(f"{form}-{hardening}")
@@ -76,7 +76,7 @@ def reference_parameters(form: str, hardening: str) -> dict[str, float]:
 def main(args) -> int:
     import sys
 
-    from problems.material_point import run_material_point
+    from problems.materials.point_driver import run_material_point
     from problems.materials.drucker_prager import make_material
 
     form, hardening = resolve_case(args.case, args.hardening)

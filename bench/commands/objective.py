@@ -59,8 +59,8 @@ def main(args) -> int:
     import json
     import math
 
-    from problems.cases import get_case
-    from problems.inverse import build_objective
+    from problems.inverse.cases import get_case
+    from problems.inverse.build import build_objective
 
     case = get_case(args.case)
     x = point(case, args.x)

@@ -35,7 +35,7 @@ def main(args) -> int:
     from bench.parallel import mapper
     from bench.studies import parse_assignments
     from bench.studies.uncertainty import run_uncertainty
-    from problems.cases import get_case
+    from problems.inverse.cases import get_case
 
     case = get_case(args.case)
     x = parse_assignments(args.x, case.names)

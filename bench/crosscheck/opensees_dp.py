@@ -5,7 +5,7 @@ r"""Cross-check of the linear Drucker-Prager form (K = 1) against OpenSees (not 
 
 Needs ``openseespy`` (``pip install openseespy``; 3.7.1.2 used here) and matplotlib for the PNGs.
 Runs (1) one element under frictionless uniaxial compression and (2) the quarter cube between
-friction plates, both in femubench's FE (:mod:`problems.fe`) and in OpenSees (``bbarBrick`` /
+friction plates, both in femubench's FE (:mod:`problems.fe.newton`) and in OpenSees (``bbarBrick`` /
 ``stdBrick`` + ``nDMaterial DruckerPrager``) on the *same* mesh and load steps, prints a table and
 writes ``opensees_dp.json`` and PNG overlays to ``--out`` (default ``results/crosscheck``).
 Results and discussion: ``docs/crosscheck_opensees.md``.
@@ -245,7 +245,7 @@ def material_point_uniaxial(material, axial_strain, tol: float = 1e-11):
 def femubench_box(mesh, material, delta: float, steps: int, plates: str, substeps: int = 1):
     """femubench's FE run (default Newton settings, ``substeps`` increments per snapshot);
     returns its Response and the wall time."""
-    from problems.fe import Loading, NewtonSettings, discretise, run
+    from problems.fe.newton import Loading, NewtonSettings, discretise, run
 
     t0 = time.perf_counter()
     resp = run(discretise(mesh), material, Loading(delta, steps, plates), NewtonSettings(substeps=substeps))
@@ -458,7 +458,7 @@ def summarise_log(log: str, limit: int = 6) -> dict:
 def single_element(p: dict, steps: int, log_dir: Path) -> dict:
     """One 150 mm brick, frictionless plates, 1.5 mm: femubench FE (1x1x1), material point,
     closed form and OpenSees (bbarBrick and stdBrick)."""
-    from problems.mesh import box_mesh
+    from problems.fe.mesh import box_mesh
 
     mesh = box_mesh(1, 1, 1, size_mm=(SIZE_MM, SIZE_MM, SIZE_MM))
     mat = femubench_material(p)
@@ -508,8 +508,8 @@ def cube(p: dict, mesh_spec: str, steps: int, all_strategies: bool, log_dir: Pat
     Every OpenSees attempt is compared with femubench at the same increments (``substeps`` per
     snapshot): both integrate the same equations by backward Euler, so converged answers must
     agree to the solvers' tolerances whatever tangent each Newton uses."""
-    from problems.measurement import front_face_operator, measurement_grid
-    from problems.mesh import parse_mesh
+    from problems.fe.front_face import front_face_operator, measurement_grid
+    from problems.fe.mesh import parse_mesh
 
     mesh = parse_mesh(mesh_spec)
     mat = femubench_material(p)
@@ -623,7 +623,7 @@ def _one_element_prescribed(ops, u, osp, want_matrix=False):
     """Unit stdBrick with all 24 displacements prescribed (penalty), one step from the virgin
     state: element nodal forces, the assembled tangent (penalty on the diagonal only) and the
     Gauss-point-mean stress."""
-    from problems.mesh import HEX_CORNERS
+    from problems.fe.mesh import HEX_CORNERS
 
     ops.wipe()
     ops.model("basic", "-ndm", 3, "-ndf", 3)
@@ -659,8 +659,8 @@ def tangent_audit(osp: dict, log_dir: Path) -> list[dict]:
     :func:`dp_return`. Homogeneous strain in a unit stdBrick, so all Gauss points share one
     tangent C and the element matrix is linear in C: ``K_e = sum_g B_g^T C B_g dV_g``; the 36
     entries of C follow by least squares from the off-diagonal entries of K_e."""
-    from problems.element import GAUSS_WEIGHTS, gradients, strain_operator
-    from problems.mesh import HEX_CORNERS
+    from problems.fe.element import GAUSS_WEIGHTS, gradients, strain_operator
+    from problems.fe.mesh import HEX_CORNERS
 
     ops = load_opensees()
     X = HEX_CORNERS.astype(float)

@@ -11,11 +11,11 @@ from __future__ import annotations
 import argparse
 import time
 
-from problems.cases import CASES
-from problems.fe import Loading, discretise, run
-from problems.forward import FORWARD_SETTINGS, case_material
+from problems.inverse.cases import CASES
+from problems.fe.newton import Loading, discretise, run
+from problems.inverse.forward import FORWARD_SETTINGS, case_material
 from problems.materials import LinearElastic
-from problems.mesh import parse_mesh
+from problems.fe.mesh import parse_mesh
 
 
 def main(argv=None) -> None:

@@ -31,7 +31,7 @@ PARAM_TEX = {"E": r"$E$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$", "si
 def case_order(cases) -> list[str]:
     """The nine FE cases in the study's order, then the others alphabetically."""
     try:
-        from problems.cases import CASES
+        from problems.inverse.cases import CASES
 
         canon = list(CASES)
     except ImportError:  # pragma: no cover

@@ -1,7 +1,7 @@
 """Sensitivity, identifiability, global-sensitivity and uncertainty studies (orchestration and I/O).
 
-The mathematics lives in :mod:`problems.sensitivity`, :mod:`problems.identifiability` and
-:mod:`problems.global_sensitivity`; this package builds the objectives, runs the forward
+The mathematics lives in :mod:`problems.analysis.sensitivity`, :mod:`problems.analysis.identifiability` and
+:mod:`problems.analysis.global_sensitivity`; this package builds the objectives, runs the forward
 evaluations through :func:`bench.parallel.mapper` (the suites' evaluator), and writes CSV,
 markdown, JSON and figures (:mod:`bench.studies.figures`). Default output directory:
 ``results/studies/<command>/<case>/``.
@@ -34,7 +34,7 @@ def output_dir(command: str, case: str, out: str | Path | None = None) -> Path:
 
 def case_names(items: Iterable[str]) -> list[str]:
     """Expand ``all`` to the nine FE cases; validate the others."""
-    from problems.cases import CASES, get_case
+    from problems.inverse.cases import CASES, get_case
 
     names: list[str] = []
     for item in items:
@@ -51,13 +51,13 @@ def case_names(items: Iterable[str]) -> list[str]:
 
 def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto", mapper=None):
     """``(objective, description of the data)`` for the studies (see :data:`DATA_HELP`)."""
-    from problems.cases import get_case
-    from problems.inverse import build_objective
+    from problems.inverse.cases import get_case
+    from problems.inverse.build import build_objective
 
     case = get_case(case_name)
     if case.name.startswith("analytic-"):
         return build_objective(case, mapper=mapper), "analytic synthetic data (noise-free, at the reference)"
-    from problems.data import default_path, get_data, make_data
+    from problems.inverse.data import default_path, get_data, make_data
 
     if data == "auto":
         data = "shipped" if default_path(case.name).exists() else "synthetic"

@@ -52,8 +52,8 @@ def run_gsa(case_name: str, *, method: str = "sobol", samples: int = 32, mesh: s
             progress: bool = True, figures: bool = True, confirm=None) -> dict:
     """Sample, evaluate (through ``mapper``), analyse and write ``gsa_<method>.csv/md/json/png`` and the
     samples (``samples_<method>.csv``). ``confirm(planned_evals, box)`` may veto (return False)."""
-    from problems.cases import get_case
-    from problems.global_sensitivity import (
+    from problems.inverse.cases import get_case
+    from problems.analysis.global_sensitivity import (
         FE_OUTPUT_LABELS, FESummaries, feasible_scale, morris_analyze, morris_sample, scaled_box, sobol_analyze,
         sobol_sample,
     )

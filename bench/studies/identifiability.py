@@ -12,7 +12,7 @@ from bench.studies import markdown_table, output_dir, study_objective, write_csv
 def case_identifiability(case_name: str, *, mesh: str = "coarse", data: str = "auto", x: dict | None = None,
                          scheme: str = "forward", rel_step: float = 1e-6, mapper=None):
     """``(Identifiability, objective, data description)`` at the reference (or at ``x`` overrides)."""
-    from problems.identifiability import identifiability
+    from problems.analysis.identifiability import identifiability
 
     obj, text = study_objective(case_name, mesh=mesh, data=data, mapper=mapper)
     z = np.ones(obj.n_params)

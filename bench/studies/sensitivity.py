@@ -8,11 +8,11 @@ from bench.studies import markdown_table, output_dir, write_csv, write_json
 
 
 def fe_sensitivities(case_name: str, *, mesh: str = "coarse", delta: float = 0.01, mapper=None, loading=None):
-    """:class:`~problems.sensitivity.LocalSensitivities` of the FE case at its reference (1 + n runs)."""
-    from problems.cases import get_case
-    from problems.fe import Loading
-    from problems.forward import FEForwardModel, measurement_blocks
-    from problems.sensitivity import ModelFields, local_sensitivities
+    """:class:`~problems.analysis.sensitivity.LocalSensitivities` of the FE case at its reference (1 + n runs)."""
+    from problems.inverse.cases import get_case
+    from problems.fe.newton import Loading
+    from problems.inverse.forward import FEForwardModel, measurement_blocks
+    from problems.analysis.sensitivity import ModelFields, local_sensitivities
 
     case = get_case(case_name)
     if case.name.startswith("analytic-"):

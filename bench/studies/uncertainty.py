@@ -3,7 +3,7 @@
 Steps (all evaluations through the objective, counted):
 
 1. Laplace: Gauss-Newton polishing of the start point (reference or ``x``) to the nearest minimum
-   (:func:`problems.identifiability.refine_mode`, up to ``refine`` steps), Jacobian there, covariance
+   (:func:`problems.analysis.identifiability.refine_mode`, up to ``refine`` steps), Jacobian there, covariance
    ``(J^T J)^-1``; mean = that point, 95 % interval = mean +- 1.96 sd. Notes flag a mode on a box
    bound (truncated posterior), a misfit dominated by model error (cost / (m - n) > 2) and an MCMC
    sample better than the polished mode (polishing not converged).
@@ -66,7 +66,7 @@ def compare(names, mcmc: dict, laplace_mean, laplace_sd) -> list[dict]:
 def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto", budget: int = 2000, seed: int = 0,
                     x: dict | None = None, refine: int = 10, n_walkers: int | None = None, mapper=None, out=None,
                     figures: bool = True, workers: int = 1, scheme: str = "forward") -> dict:
-    from problems.identifiability import analyse_jacobian, refine_mode
+    from problems.analysis.identifiability import analyse_jacobian, refine_mode
     from solvers import solve
 
     t_start = time.perf_counter()
@@ -170,7 +170,7 @@ def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto",
         paths.append(d / "chain.npz")
     if figures and chain is not None:
         from bench.studies.figures import corner_plot
-        from problems.cases import get_case
+        from problems.inverse.cases import get_case
 
         kept = chain[ex["burn"]:].reshape(-1, len(names))
         units = {p.name: p.unit for p in get_case(case_name).parameters}

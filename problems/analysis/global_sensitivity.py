@@ -276,7 +276,7 @@ def summary_outputs(values, n_snapshots: int, n_points: int) -> tuple[float, flo
 
     Bulge: the largest front-face horizontal displacement at the last snapshot.
     """
-    from problems.sensitivity import split_measurements
+    from problems.analysis.sensitivity import split_measurements
 
     u_h, _, r = split_measurements(values, n_snapshots, n_points)
     return float(np.max(r)), float(np.max(u_h[-1]))
@@ -300,7 +300,7 @@ class FESummaries:
         self.fe_wall_s = 0.0
 
     def __call__(self, X) -> np.ndarray:
-        from problems.objective import RunModel
+        from problems.inverse.objective import RunModel
 
         obj = self.objective
         X = np.atleast_2d(np.asarray(X, float))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from problems.mesh import Mesh
+from problems.fe.mesh import Mesh
 
 
 def measurement_grid(spacing_mm: float = 5.0, margin_mm: float = 5.0, width_mm: float = 75.0,

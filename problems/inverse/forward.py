@@ -12,11 +12,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from problems.cases import Case, get_case
-from problems.fe import Discretisation, Loading, NewtonSettings, discretise, run
+from problems.inverse.cases import Case, get_case
+from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.materials import LinearElastic
-from problems.measurement import measurement_grid
-from problems.mesh import parse_mesh
+from problems.fe.front_face import measurement_grid
+from problems.fe.mesh import parse_mesh
 
 #: tighter than the solver defaults so that finite-difference Jacobians are clean
 FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
@@ -102,7 +102,7 @@ class FEForwardModel:
                    progress=progress)
 
     def __call__(self, x):
-        from problems.objective import ForwardResult
+        from problems.inverse.objective import ForwardResult
 
         t0 = time.perf_counter()
         try:

@@ -1,4 +1,4 @@
-"""Cheap analytic forward models that go through the very same :class:`~problems.objective.Objective`.
+"""Cheap analytic forward models that go through the very same :class:`~problems.inverse.objective.Objective`.
 
 They let every solver be tested in seconds, with known answers:
 
@@ -39,8 +39,8 @@ import math
 
 import numpy as np
 
-from problems.cases import Case, Parameter
-from problems.objective import ForwardResult, Objective
+from problems.inverse.cases import Case, Parameter
+from problems.inverse.objective import ForwardResult, Objective
 
 
 class StressStrainModel:

@@ -38,11 +38,11 @@ def front_face_fields(response) -> list:
 
 
 def dic_dataset(case, settings, x, response, *, progress: bool = True):
-    """A :class:`problems.data.Dataset` whose displacements were measured by DIC on rendered images."""
-    from problems.data import Dataset, _round, package_version
+    """A :class:`problems.inverse.data.Dataset` whose displacements were measured by DIC on rendered images."""
+    from problems.inverse.data import Dataset, _round, package_version
     from problems.dic import measure_front_face
 
-    from problems.data import DATA_DIR
+    from problems.inverse.data import DATA_DIR
 
     image_dir = DATA_DIR / "cache" / f"{case.name}__dic_images"   # images + Fig.-2-like subset figure
     m = measure_front_face(front_face_fields(response), settings.points, seed=settings.seed, progress=progress,

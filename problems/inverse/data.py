@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from problems.cases import Case, get_case
-from problems.fe import Loading
-from problems.measurement import measurement_grid
+from problems.inverse.cases import Case, get_case
+from problems.fe.newton import Loading
+from problems.fe.front_face import measurement_grid
 
 FORMAT = "femubench-data/1"
-DATA_DIR = Path(__file__).resolve().parent.parent / "results" / "data"
+DATA_DIR = Path(__file__).resolve().parents[2] / "results" / "data"
 
 
 @dataclass(frozen=True)
@@ -143,7 +143,7 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
     Keyword overrides go into :class:`DataSettings` (``make_data(case, mesh="coarse", resolution_um=0)``).
     Raises RuntimeError when the data model itself does not converge.
     """
-    from problems.forward import FEForwardModel
+    from problems.inverse.forward import FEForwardModel
 
     case = get_case(case) if isinstance(case, str) else case
     settings = DataSettings(**{**asdict(settings or DataSettings()), **overrides})
@@ -169,7 +169,7 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
 
 def _dic_dataset(case: Case, settings: DataSettings, x, resp) -> Dataset:
     """The DIC route: render speckle images of the response, correlate them back (see problems.dic)."""
-    from problems.dic_route import dic_dataset
+    from problems.dic.route import dic_dataset
 
     return dic_dataset(case, settings, x, resp)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
-from problems.fe import Response
+from problems.fe.newton import Response
 
 _VOIGT = ("xx", "yy", "zz", "yz", "xz", "xy")
 

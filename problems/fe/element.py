@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from problems.mesh import HEX_CORNERS
+from problems.fe.mesh import HEX_CORNERS
 
 _SIGNS = 2.0 * HEX_CORNERS - 1.0                      # natural coordinates of the corners, (8, 3)
 GAUSS_POINTS = _SIGNS / np.sqrt(3.0)                  # 2x2x2 Gauss rule, (8, 3)

@@ -176,7 +176,7 @@ CASES: dict[str, Case] = {c.name: c for c in (make_case(f, h) for f in FORMS for
 
 def all_cases() -> dict[str, Case]:
     """The nine FE cases plus the analytic test problems (``analytic-*``) by name."""
-    from problems.analytic import ANALYTIC_CASES  # analytic problems live with their models
+    from problems.inverse.analytic import ANALYTIC_CASES  # analytic problems live with their models
 
     return {**CASES, **ANALYTIC_CASES}
 

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from problems.cases import Case, get_case
-from problems.data import Dataset, get_data, load
+from problems.inverse.cases import Case, get_case
+from problems.inverse.data import Dataset, get_data, load
 
 
 def build_objective(case: Case | str, *, mesh: str = "coarse", data: Dataset | str | Path | None = None,
@@ -16,12 +16,12 @@ def build_objective(case: Case | str, *, mesh: str = "coarse", data: Dataset | s
     data : a :class:`Dataset`, a data-file path, or None for the case's shipped pseudo-experimental
            data (made on the ``fine`` mesh). Analytic cases (``analytic-*``) ignore mesh and data.
     """
-    from problems.forward import FEForwardModel, measurement_blocks
-    from problems.objective import Objective
+    from problems.inverse.forward import FEForwardModel, measurement_blocks
+    from problems.inverse.objective import Objective
 
     case = get_case(case) if isinstance(case, str) else case
     if case.name.startswith("analytic-"):
-        from problems.analytic import analytic_objective
+        from problems.inverse.analytic import analytic_objective
 
         return analytic_objective(case.name, mapper=mapper)
     if data is None:
@@ -64,6 +64,6 @@ def start_point(case: Case | str, kind: str = "default", seed: int = 0, index: i
         raise ValueError(f"start kind {kind!r} is unknown; allowed: default, random")
     if case.name.startswith("analytic-"):
         return x
-    from problems.forward import FEForwardModel
+    from problems.inverse.forward import FEForwardModel
 
     return feasible_toward_reference(case, x, FEForwardModel(case).check)

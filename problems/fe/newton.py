@@ -21,10 +21,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from problems.assembly import Pattern, build_pattern, element_forces, element_matrices
-from problems.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
+from problems.fe.assembly import Pattern, build_pattern, element_forces, element_matrices
+from problems.fe.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
 from problems.materials.base import Material
-from problems.mesh import Mesh, nested_dissection_order
+from problems.fe.mesh import Mesh, nested_dissection_order
 
 PLATES = ("friction", "frictionless")
 
@@ -188,7 +188,7 @@ class Response:
 
         Returns ``u_h`` (horizontal, u_y) and ``u_v`` (vertical, u_z), each (N, m) mm.
         """
-        from problems.measurement import front_face_operator
+        from problems.fe.front_face import front_face_operator
 
         W = front_face_operator(self.mesh, points_mm)
         return self.displacements[:, :, 1] @ W.T, self.displacements[:, :, 2] @ W.T

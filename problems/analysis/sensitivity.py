@@ -49,7 +49,7 @@ def layout_blocks(n_snapshots: int, n_points: int) -> dict[str, slice]:
 def split_measurements(values, n_snapshots: int, n_points: int, blocks: dict[str, slice] | None = None) -> Fields:
     """``(u_h (N, m), u_v (N, m), r (N,))`` from a measurement vector in the ``[u_h, u_v, r]`` layout.
 
-    ``blocks`` (e.g. :func:`problems.forward.measurement_blocks`) overrides the default slices; it
+    ``blocks`` (e.g. :func:`problems.inverse.forward.measurement_blocks`) overrides the default slices; it
     must name ``u_h``, ``u_v`` and ``force``.
     """
     v = np.asarray(values, dtype=float).ravel()
