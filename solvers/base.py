@@ -8,7 +8,7 @@ with :meth:`Run.record`, and returns an :class:`Outcome` (status, message, itera
 :func:`solve` does everything else, identically for all methods:
 
 * resets the objective (counters, log, cache, best point) and sets its budget: the objective
-  raises :class:`~problems.inverse.objective.BudgetExhausted` rather than exceed it; :func:`solve`
+  raises :class:`~problems.inverse.evaluator.BudgetExhausted` rather than exceed it; :func:`solve`
   catches it (status ``"budget"``) and returns the best point so far;
 * the final point is the best (lowest-cost, successful, feasible) point the objective evaluated
   during the run; if there is none, the status is ``"failed"`` and ``x = x0``, ``cost = inf``;
@@ -33,7 +33,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from problems.inverse.objective import BudgetExhausted, Objective
+from problems.inverse.evaluator import BudgetExhausted, Evaluator
 from solvers.result import RunResult
 
 FAMILIES = ("local", "global", "sampling")
@@ -101,7 +101,7 @@ def get_method(name: str) -> MethodInfo:
 class Run:
     """The context a method runs in: objective, start, seed, budget, options and the history."""
 
-    objective: Objective
+    objective: Evaluator
     method: str
     z0: np.ndarray
     seed: int
@@ -207,7 +207,7 @@ def isolated_global_rng(seed: int):
         np.random.set_state(state)
 
 
-def solve(objective: Objective, method: str, *, budget: int, seed: int | None = 0, x0=None,
+def solve(objective: Evaluator, method: str, *, budget: int, seed: int | None = 0, x0=None,
           **options) -> RunResult:
     """Minimise ``objective`` with ``method`` within ``budget`` forward evaluations.
 

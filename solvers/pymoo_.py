@@ -1,7 +1,7 @@
 """pymoo adapters: ``ga`` (real-coded GA, SBX + polynomial mutation) and ``de``.
 
 The whole population of a generation is one ``Problem._evaluate`` call (``elementwise=False``),
-i.e. one :meth:`Objective.costs` batch through the mapper. The initial population is a seeded
+i.e. one :meth:`Evaluator.costs` batch through the mapper. The initial population is a seeded
 Latin hypercube (optionally with the start point as its first member). pymoo's own evaluation
 count and termination are only a backstop: the objective's budget is the hard cap.
 """

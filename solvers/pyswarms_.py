@@ -5,7 +5,7 @@ pyswarms has no seed argument and draws from NumPy's *global* generator: the run
 import and with every optimizer) reconfigures the *root* logger and creates ``report.log`` in the
 working directory; here pyswarms is imported and built with ``logging.config.dictConfig``
 disabled, so neither happens. The Pyramid and Random topologies are not offered (they break on
-NumPy >= 1.24). Each iteration evaluates the swarm as one :meth:`Objective.costs` batch.
+NumPy >= 1.24). Each iteration evaluates the swarm as one :meth:`Evaluator.costs` batch.
 """
 from __future__ import annotations
 

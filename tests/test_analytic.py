@@ -9,7 +9,7 @@ import pytest
 from problems.inverse.analytic import (ANALYTIC_CASES, LinearModel, RastriginModel, SinusoidModel,
                                StressStrainModel, analytic_model, analytic_objective)
 from problems.inverse.cases import get_case
-from problems.inverse.objective import FAILURE_COST
+from problems.inverse.problem import FAILURE_COST
 
 NAMES = sorted(ANALYTIC_CASES)
 

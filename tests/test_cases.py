@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from problems.inverse.cases import A_REF, CASES, get_case, hyperbolic_l0
+from problems.inverse.cases import A_REF, CASES, get_case
+from problems.materials.drucker_prager import hyperbolic_l0
 
 
 def test_nine_cases_with_the_paper_active_parameters():
@@ -29,7 +30,7 @@ def test_shear_and_tension_variants_describe_the_same_initial_surface():
     tau = CASES["linear-shear"].reference[4]
     assert math.isclose((1 / K + tb / 3) * st, d, rel_tol=1e-12)
     assert math.isclose(math.sqrt(3) / 2 * (1 + 1 / K) * tau, d, rel_tol=1e-12)
-    l0 = hyperbolic_l0(20.0, 2.5, 35.0)
+    l0 = hyperbolic_l0("compression", 20.0, 2.5, 35.0)
     d0 = l0 + 2.5 * tb
     assert math.isclose(math.sqrt(l0**2 + 20.0**2) - 20.0 * tb / 3, d0, rel_tol=1e-12)
     st = CASES["hyperbolic-tension"].reference[3]

@@ -5,7 +5,8 @@ import pytest
 from problems.analysis.identifiability import (
     analyse_jacobian, correlation_matrix, fisher_information, identifiability, laplace_covariance, refine_mode,
 )
-from problems.inverse.objective import ForwardResult, Objective
+from problems.inverse.protocol import ForwardResult
+from tests.support import evaluator
 
 REF = np.array([2.0, 50.0, 0.3])
 SIGMA = np.array([0.1] * 8 + [0.5] * 4)
@@ -33,7 +34,7 @@ class Linear:
 def objective(A, data=None):
     model = Linear(A)
     data = model(REF).values if data is None else data
-    return Objective(model, data, lower=REF * 0.5, upper=REF * 1.5, reference=REF, sigma=SIGMA)
+    return evaluator(model, data, lower=REF * 0.5, upper=REF * 1.5, reference=REF, sigma=SIGMA)
 
 
 def closed_form(A):

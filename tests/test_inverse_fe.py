@@ -10,7 +10,8 @@ import pytest
 from problems.inverse.cases import CASES
 from problems.inverse.data import DataSettings, load, make_data, save
 from problems.inverse.forward import FEForwardModel
-from problems.inverse.build import build_objective, start_point
+from problems.inverse.build import build_objective
+from problems.inverse.starts import start_point
 
 MESH = "3,3,6"
 CASE = CASES["linear-compression"]

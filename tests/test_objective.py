@@ -7,7 +7,10 @@ import pickle
 import numpy as np
 import pytest
 
-from problems.inverse.objective import FAILURE_COST, BudgetExhausted, ForwardResult, Objective
+from problems.inverse.evaluator import BudgetExhausted
+from problems.inverse.problem import FAILURE_COST
+from problems.inverse.protocol import ForwardResult, RunModel
+from tests.support import evaluator
 
 
 class Quadratic:
@@ -37,7 +40,7 @@ class Quadratic:
 def make(sigma=None, covariance=None, **kw):
     model = Quadratic()
     data = model.values(np.array([1.0, 1.0])) + np.array([0.01, -0.02, 0.03, 0.0])
-    obj = Objective(model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0],
+    obj = evaluator(model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0],
                     sigma=sigma, covariance=covariance, **kw)
     return obj, model
 
@@ -90,7 +93,7 @@ def test_cost_split_sums_to_total():
 
 def test_scaling_and_bounds():
     model = Quadratic()
-    obj = Objective(model, model.values(np.array([2.0, 3.0])), lower=[1.0, 1.5], upper=[4.0, 6.0],
+    obj = evaluator(model, model.values(np.array([2.0, 3.0])), lower=[1.0, 1.5], upper=[4.0, 6.0],
                     reference=[2.0, 3.0])
     np.testing.assert_allclose(obj.lower_z, [0.5, 0.5])
     np.testing.assert_allclose(obj.upper_z, [2.0, 2.0])
@@ -139,7 +142,7 @@ def test_model_exception_becomes_failure():
         def __call__(self, x):
             raise ZeroDivisionError("boom")
 
-    obj = Objective(Raising(), np.zeros(4), lower=[0.5, 0.5], upper=[2, 2], reference=[1, 1])
+    obj = evaluator(Raising(), np.zeros(4), lower=[0.5, 0.5], upper=[2, 2], reference=[1, 1])
     with pytest.warns(RuntimeWarning, match="boom"):
         ev = obj.evaluate([1.0, 1.0])
     assert not ev.ok and ev.cost == FAILURE_COST and obj.n_failed == 1
@@ -217,7 +220,7 @@ def test_mapper_called_once_per_batch():
 
 def test_model_and_worker_function_pickle():
     obj, _ = make()
-    fn = pickle.loads(pickle.dumps(obj._runner))
+    fn = pickle.loads(pickle.dumps(RunModel(obj.model)))
     res = fn(np.array([1.0, 1.0]))
     assert res.ok and res.wall_s >= 0
     np.testing.assert_allclose(res.values, [1.0, 1.0, 1.0, 1.0])
@@ -226,13 +229,49 @@ def test_model_and_worker_function_pickle():
 def test_invalid_inputs_raise_value_error():
     model = Quadratic()
     with pytest.raises(ValueError, match="not both"):
-        Objective(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], sigma=1.0,
+        evaluator(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], sigma=1.0,
                   covariance=np.eye(4))
     with pytest.raises(ValueError, match="positive definite"):
-        Objective(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], covariance=-np.eye(4))
+        evaluator(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], covariance=-np.eye(4))
     with pytest.raises(ValueError, match="non-zero"):
-        Objective(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[0, 1])
+        evaluator(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[0, 1])
     obj, _ = make()
     with pytest.raises(ValueError, match="expected 2"):
         obj.cost([1.0, 1.0, 1.0])
     assert math.isinf(obj.remaining)
+
+
+class ExactQuadratic(Quadratic):
+    """Quadratic with exact sensitivities: ``model(x, jacobian=True)`` returns dU/dx too."""
+
+    provides_jacobian = True
+
+    def __call__(self, x, jacobian=False):
+        res = super().__call__(x)
+        if jacobian and res.ok:
+            return ForwardResult(True, res.values, jacobian=self.jacobian(x), wall_s=3.0)
+        return ForwardResult(res.ok, res.values, res.message, wall_s=1.0)
+
+
+def test_exact_jacobian_is_used_and_charged_as_one_run_in_forward_equivalents():
+    model = ExactQuadratic()
+    data = model.values(np.array([1.0, 1.0])) + np.array([0.01, -0.02, 0.03, 0.0])
+    obj = evaluator(model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[2.0, 1.0], sigma=[0.1, 0.2, 0.1, 0.5])
+    assert obj.exact_jacobian
+    z = np.array([0.6, 1.1])
+    obj.cost(z + 0.01)                      # one plain run: 1 s, the forward-equivalent unit
+    J = obj.jacobian(z)
+    x = obj.to_physical(z)
+    expected = -model.jacobian(x) / np.array([0.1, 0.2, 0.1, 0.5])[:, None] * np.array([2.0, 1.0])
+    np.testing.assert_allclose(J, expected, rtol=1e-14)
+    fd = evaluator(Quadratic(), data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[2.0, 1.0],
+                   sigma=[0.1, 0.2, 0.1, 0.5]).jacobian(z, scheme="central", rel_step=1e-6)
+    np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-8)
+    assert obj.n_evals == 2                 # the run with sensitivities is one evaluation ...
+    assert obj.forward_equivalents() == pytest.approx(1.0 + 3.0)   # ... costing 3 plain runs
+    assert obj.log[-1]["kind"] == "jacobian"
+    obj.jacobian(z)                         # cached with its Jacobian: no new run
+    assert obj.n_evals == 2 and obj.n_cache_hits == 1
+    cost, grad = obj.gradient(z)
+    np.testing.assert_allclose(grad, 2.0 * J.T @ obj.residual(z), rtol=1e-14)
+    assert obj.n_evals == 2

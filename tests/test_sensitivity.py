@@ -2,9 +2,10 @@
 import numpy as np
 import pytest
 
-from problems.inverse.objective import ForwardResult
+from problems.inverse import layout
+from problems.inverse.protocol import ForwardResult
 from problems.analysis.sensitivity import (
-    ModelFields, layout_blocks, local_sensitivities, snapshot_sensitivities, split_measurements,
+    ModelFields, local_sensitivities, snapshot_sensitivities,
 )
 
 N, M = 6, 5
@@ -103,22 +104,19 @@ class LayoutModel:
 
 
 def test_model_fields_adapter_layout_and_mapper():
-    from problems.inverse.forward import measurement_blocks
-
-    b = measurement_blocks(N, M)
-    assert {k: b[k] for k in ("u_h", "u_v", "force")} == layout_blocks(N, M)
     values = LayoutModel()(X_REF).values
-    for a, e in zip(split_measurements(values, N, M), fields(X_REF)):
+    for a, e in zip(layout.unstack(values, N, M), fields(X_REF)):
         assert np.array_equal(a, e)
+    assert np.array_equal(layout.stack(*fields(X_REF)), values)
     with pytest.raises(ValueError, match="2 N m"):
-        split_measurements(values[:-1], N, M)
+        layout.unstack(values[:-1], N, M)
     calls = []
 
     def mapper(fn, items):
         calls.append(len(items))
         return [fn(x) for x in items]
 
-    s = local_sensitivities(ModelFields(LayoutModel(), N, M, b), X_REF, delta=0.01, mapper=mapper)
+    s = local_sensitivities(ModelFields(LayoutModel(), N, M), X_REF, delta=0.01, mapper=mapper)
     assert calls == [4]  # the reference and the three perturbations in one batch
     assert np.allclose(s.summed["uy"], [closed_form(0.01)[0]["uy"].sum(), 0, 0])
     assert ModelFields(LayoutModel(), N, M)(np.array([-1.0, 0.7, 5.0])) is None  # check() rejects

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from problems.inverse.analytic import ANALYTIC_CASES, analytic_objective
-from problems.inverse.objective import ForwardResult, Objective
+from problems.inverse.protocol import ForwardResult
+from tests.support import evaluator
 from solvers import METHODS, RunResult, solve
 from solvers.base import FAMILIES, get_method
 
@@ -194,7 +195,7 @@ def test_lm_rejects_failed_trial_points_and_shrinks():
                 return ForwardResult(False, None, "diverged")
             return ForwardResult(True, np.array([x[0] - 2.0, x[1] - 1.0, 0.1 * x[0] * x[1]]))
 
-    obj = Objective(Bowl(), np.zeros(3), lower=[0.5, 0.5], upper=[3.0, 3.0], reference=[1.0, 1.0])
+    obj = evaluator(Bowl(), np.zeros(3), lower=[0.5, 0.5], upper=[3.0, 3.0], reference=[1.0, 1.0])
     res = solve(obj, "lm", budget=200, x0=[1.0, 1.5])
     assert res.n_failed >= 1 and res.n_evals <= 200
     assert 1.4 < res.x[0] <= 1.5  # pushed against the failing region, never inside it

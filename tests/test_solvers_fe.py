@@ -8,7 +8,8 @@ import pytest
 def test_lm_recovers_linear_compression_on_the_coarse_mesh():
     from problems.inverse.cases import get_case
     from problems.inverse.data import make_data
-    from problems.inverse.build import build_objective, start_point
+    from problems.inverse.build import build_objective
+    from problems.inverse.starts import start_point
     from solvers import solve
 
     case = get_case("linear-compression")

@@ -62,7 +62,8 @@ def main(args) -> int:
     from pathlib import Path
 
     from problems.inverse.cases import get_case
-    from problems.inverse.build import build_objective, start_point
+    from problems.inverse.build import build_objective
+    from problems.inverse.starts import start_point
     from solvers import solve
 
     case = get_case(args.case)

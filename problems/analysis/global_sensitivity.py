@@ -276,9 +276,9 @@ def summary_outputs(values, n_snapshots: int, n_points: int) -> tuple[float, flo
 
     Bulge: the largest front-face horizontal displacement at the last snapshot.
     """
-    from problems.analysis.sensitivity import split_measurements
+    from problems.inverse import layout
 
-    u_h, _, r = split_measurements(values, n_snapshots, n_points)
+    u_h, _, r = layout.unstack(values, n_snapshots, n_points)
     return float(np.max(r)), float(np.max(u_h[-1]))
 
 
@@ -300,7 +300,7 @@ class FESummaries:
         self.fe_wall_s = 0.0
 
     def __call__(self, X) -> np.ndarray:
-        from problems.inverse.objective import RunModel
+        from problems.inverse.protocol import RunModel
 
         obj = self.objective
         X = np.atleast_2d(np.asarray(X, float))

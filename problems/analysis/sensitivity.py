@@ -31,6 +31,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from problems.inverse import layout
+
 MEASURES = ("ux", "uy", "r")
 """Keys of the three sensitivity measures: horizontal field, vertical field, reaction force."""
 
@@ -40,39 +42,16 @@ MEASURE_LABELS = {"ux": "horizontal displacement $u^x$", "uy": "vertical displac
 Fields = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
-def layout_blocks(n_snapshots: int, n_points: int) -> dict[str, slice]:
-    """Slices of ``u_h``, ``u_v`` and the force in the measurement vector ``[u_h, u_v, r]``."""
-    nm = n_snapshots * n_points
-    return {"u_h": slice(0, nm), "u_v": slice(nm, 2 * nm), "force": slice(2 * nm, 2 * nm + n_snapshots)}
-
-
-def split_measurements(values, n_snapshots: int, n_points: int, blocks: dict[str, slice] | None = None) -> Fields:
-    """``(u_h (N, m), u_v (N, m), r (N,))`` from a measurement vector in the ``[u_h, u_v, r]`` layout.
-
-    ``blocks`` (e.g. :func:`problems.inverse.forward.measurement_blocks`) overrides the default slices; it
-    must name ``u_h``, ``u_v`` and ``force``.
-    """
-    v = np.asarray(values, dtype=float).ravel()
-    b = blocks or layout_blocks(n_snapshots, n_points)
-    expected = 2 * n_snapshots * n_points + n_snapshots
-    if blocks is None and v.size != expected:
-        raise ValueError(f"measurement vector has {v.size} values; N = {n_snapshots} snapshots and "
-                         f"m = {n_points} points need 2 N m + N = {expected}")
-    return (v[b["u_h"]].reshape(n_snapshots, n_points), v[b["u_v"]].reshape(n_snapshots, n_points),
-            v[b["force"]].reshape(n_snapshots))
-
-
 class ModelFields:
     """Picklable ``x -> (u_h, u_v, r)`` around a forward model (``model(x).values`` in the layout).
 
     Returns ``None`` when the model reports a failure (``ok=False``) or ``check(x)`` rejects ``x``.
     """
 
-    def __init__(self, model, n_snapshots: int, n_points: int, blocks: dict[str, slice] | None = None):
+    def __init__(self, model, n_snapshots: int, n_points: int):
         self.model = model
         self.n_snapshots = int(n_snapshots)
         self.n_points = int(n_points)
-        self.blocks = blocks
 
     def __call__(self, x) -> Fields | None:
         x = np.asarray(x, dtype=float)
@@ -82,7 +61,7 @@ class ModelFields:
         res = self.model(x)
         if not res.ok or res.values is None:
             return None
-        return split_measurements(res.values, self.n_snapshots, self.n_points, self.blocks)
+        return layout.unstack(res.values, self.n_snapshots, self.n_points)
 
 
 def snapshot_sensitivities(reference: Fields, perturbed: Fields, delta: float) -> dict[str, np.ndarray]:

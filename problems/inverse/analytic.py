@@ -1,4 +1,4 @@
-"""Cheap analytic forward models that go through the very same :class:`~problems.inverse.objective.Objective`.
+"""Cheap analytic forward models that go through the very same :class:`~problems.inverse.evaluator.Evaluator`.
 
 They let every solver be tested in seconds, with known answers:
 
@@ -39,8 +39,10 @@ import math
 
 import numpy as np
 
-from problems.inverse.cases import Case, Parameter
-from problems.inverse.objective import ForwardResult, Objective
+from problems.inverse.case import Case, Parameter
+from problems.inverse.evaluator import Evaluator
+from problems.inverse.problem import LeastSquaresProblem
+from problems.inverse.protocol import ForwardResult
 
 
 class StressStrainModel:
@@ -238,7 +240,7 @@ _MODELS = {
 }
 
 ANALYTIC_CASES: dict[str, Case] = {
-    name: Case(name, "analytic", "none", params(), {}) for name, (_, params) in _MODELS.items()
+    name: Case(name, "analytic", "none", params(), {}, kind="analytic") for name, (_, params) in _MODELS.items()
 }
 
 
@@ -249,7 +251,7 @@ def analytic_model(name: str):
     return _MODELS[name][0]()
 
 
-def analytic_objective(name: str, *, noise: float = 0.0, seed: int = 0, mapper=None) -> Objective:
+def analytic_objective(name: str, *, noise: float = 0.0, seed: int = 0, mapper=None) -> Evaluator:
     """Objective of the analytic case ``name`` with synthetic data made at the case's reference.
 
     ``noise`` is in units of the nominal measurement standard deviation (the objective's sigma):
@@ -269,5 +271,6 @@ def analytic_objective(name: str, *, noise: float = 0.0, seed: int = 0, mapper=N
         data[:] = 0.0  # exact zeros rather than rounding noise
     if noise:
         data = data + noise * np.broadcast_to(sigma, data.shape) * np.random.default_rng(seed).standard_normal(data.size)
-    return Objective(model, data, lower=case.lower, upper=case.upper, reference=case.reference,
-                     sigma=sigma, blocks=blocks, mapper=mapper)
+    problem = LeastSquaresProblem(model, data, case.lower, case.upper, case.reference, sigma=sigma, blocks=blocks,
+                                  provenance={"case": name, "data_tier": "synthetic", "noise": noise, "seed": seed})
+    return Evaluator(problem, mapper=mapper)

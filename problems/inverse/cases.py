@@ -11,99 +11,25 @@ Units: MPa for E, sigma0, H, pt0; degrees for beta and psi; ``a`` in MPa^(1-b); 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
-import numpy as np
 from scipy.optimize import brentq
-from scipy.stats import qmc
 
-FORMS = ("linear", "hyperbolic", "exponent")
-HARDENINGS = ("compression", "shear", "tension")
-ACTIVE = {
-    "linear": ("E", "beta", "K", "psi", "sigma0", "H"),
-    "hyperbolic": ("E", "beta", "psi", "sigma0", "H", "pt0"),
-    "exponent": ("E", "psi", "sigma0", "H", "a", "b"),
-}
-UNITS = {"E": "MPa", "beta": "deg", "K": "-", "psi": "deg", "sigma0": "MPa", "H": "MPa",
-         "pt0": "MPa", "a": "MPa^(1-b)", "b": "-"}
-FIXED = {"nu": 0.2, "eccentricity": 0.1}
+from problems.inverse.analytic import ANALYTIC_CASES
+from problems.inverse.case import Case, Parameter
+from problems.materials.drucker_prager import (
+    FORM_PARAMETERS, FORMS, OPTIONAL_PARAMETERS, PARAMETER_RANGES, hyperbolic_l0,
+)
+from problems.materials.hardening import HARDENINGS
+
+#: the active (identified) parameters of each form are the material's own parameters
+ACTIVE = FORM_PARAMETERS
+UNITS = {name: PARAMETER_RANGES[name][4] for names in FORM_PARAMETERS.values() for name in names}
+FIXED = dict(OPTIONAL_PARAMETERS)
 
 # Reference concrete (compression variants).
 E_REF, BETA_REF, K_REF, PSI_REF = 30_000.0, 35.0, 0.85, 15.0
 SIGMA_C0, PT0_REF, B_REF, H_OVER_SIGMA0 = 20.0, 2.5, 1.5, 75.0
 A_REF = (PT0_REF + SIGMA_C0 / 3.0) / SIGMA_C0**B_REF  # exponent surface through p = -pt0, q = 0
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """One identified parameter: reference value and box bounds in physical units."""
-
-    name: str
-    unit: str
-    reference: float
-    lower: float
-    upper: float
-
-    def __post_init__(self):
-        if not (self.lower <= self.reference <= self.upper):
-            raise ValueError(f"{self.name}: reference {self.reference} outside [{self.lower}, {self.upper}]")
-
-
-@dataclass(frozen=True)
-class Case:
-    """An identification problem: active parameters, bounds, default start and fixed constants."""
-
-    name: str
-    form: str
-    hardening: str
-    parameters: tuple[Parameter, ...]
-    fixed: dict = field(default_factory=dict)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.parameters)
-
-    @property
-    def reference(self) -> np.ndarray:
-        return np.array([p.reference for p in self.parameters])
-
-    @property
-    def lower(self) -> np.ndarray:
-        return np.array([p.lower for p in self.parameters])
-
-    @property
-    def upper(self) -> np.ndarray:
-        return np.array([p.upper for p in self.parameters])
-
-    @property
-    def start(self) -> np.ndarray:
-        """Default start: reference x (1 + 0.25 s), s = +1, -1, +1, ... in listed order, clipped."""
-        s = np.where(np.arange(len(self.parameters)) % 2 == 0, 1.0, -1.0)
-        return np.clip(self.reference * (1.0 + 0.25 * s), self.lower, self.upper)
-
-    def random_starts(self, n: int, seed: int) -> np.ndarray:
-        """``n`` seeded Latin-hypercube points in the bounds, shape (n, n_params)."""
-        unit = qmc.LatinHypercube(d=len(self.parameters), seed=np.random.default_rng(seed)).random(n)
-        return qmc.scale(unit, self.lower, self.upper)
-
-    def material_parameters(self, x) -> dict[str, float]:
-        """Full material parameter dict (active values from ``x`` plus the fixed constants)."""
-        x = np.asarray(x, float)
-        if x.shape != (len(self.parameters),):
-            raise ValueError(f"{self.name}: expected {len(self.parameters)} parameters {self.names}, got shape {x.shape}")
-        return {**self.fixed, **dict(zip(self.names, map(float, x)))}
-
-    def to_dict(self) -> dict:
-        """The JSON form listed by ``femubench cases --json``."""
-        return {
-            "name": self.name, "form": self.form, "hardening": self.hardening,
-            "parameters": [
-                {"name": p.name, "unit": p.unit, "reference": p.reference, "lower": p.lower,
-                 "upper": p.upper, "start": float(s)}
-                for p, s in zip(self.parameters, self.start)
-            ],
-            "fixed": dict(self.fixed),
-        }
 
 
 # --- the same concrete seen through each hardening test ------------------------------------
@@ -115,19 +41,9 @@ def _sigma0_linear(hardening: str) -> float:
             "shear": d / (math.sqrt(3.0) / 2.0 * (1.0 + 1.0 / K))}[hardening]
 
 
-def hyperbolic_l0(sigma_c: float, pt0: float, beta_deg: float) -> float:
-    """l0 (MPa) of the hyperbolic surface through p = -pt0, q = 0 and uniaxial compression sigma_c.
-
-    From sqrt(l0^2 + sc^2) - sc tanb/3 = l0 + pt0 tanb: with A = tanb (pt0 + sc/3),
-    (l0 + A)^2 = l0^2 + sc^2  =>  l0 = (sc^2 - A^2) / (2 A).
-    """
-    A = math.tan(math.radians(beta_deg)) * (pt0 + sigma_c / 3.0)
-    return (sigma_c**2 - A**2) / (2.0 * A)
-
-
 def _sigma0_hyperbolic(hardening: str) -> float:
     tb = math.tan(math.radians(BETA_REF))
-    l0 = hyperbolic_l0(SIGMA_C0, PT0_REF, BETA_REF)
+    l0 = hyperbolic_l0("compression", SIGMA_C0, PT0_REF, BETA_REF)
     d0 = l0 + PT0_REF * tb
     if hardening == "compression":
         return SIGMA_C0
@@ -176,8 +92,6 @@ CASES: dict[str, Case] = {c.name: c for c in (make_case(f, h) for f in FORMS for
 
 def all_cases() -> dict[str, Case]:
     """The nine FE cases plus the analytic test problems (``analytic-*``) by name."""
-    from problems.inverse.analytic import ANALYTIC_CASES  # analytic problems live with their models
-
     return {**CASES, **ANALYTIC_CASES}
 
 

@@ -1,8 +1,6 @@
 """The FE model of the cube test as a forward model of the objective: parameters -> measurements.
 
-The measurement vector of one run is ``[u_h (N x m), u_v (N x m), reaction (N)]``: front-face
-horizontal and vertical displacements (mm) at the m grid points for each of the N snapshots
-(snapshot-major), then the plate force (kN).
+The measurement vector of one run is laid out by :mod:`problems.inverse.layout`.
 """
 from __future__ import annotations
 
@@ -12,20 +10,29 @@ from functools import lru_cache
 
 import numpy as np
 
-from problems.inverse.cases import Case, get_case
+from problems.inverse import layout
+from problems.inverse.case import Case
+from problems.inverse.cases import get_case
 from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.materials import LinearElastic
 from problems.fe.front_face import measurement_grid
-from problems.fe.mesh import parse_mesh
+from problems.fe.mesh import parse_mesh_spec
 
 #: tighter than the solver defaults so that finite-difference Jacobians are clean
 FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
 
 
-@lru_cache(maxsize=4)
 def discretisation(mesh: str) -> Discretisation:
-    """Discretisation of a mesh spec, built once per process (workers reuse it across runs)."""
-    return discretise(parse_mesh(mesh))
+    """Discretisation of a mesh spec (``coarse``, ``coarse:quarter``, ``NX,NY,NZ[:eighth|:quarter]``),
+    built once per process (workers reuse it across runs). Presets and even NZ solve the eighth model
+    by default (same answers as the quarter, see docs/fe_model.md)."""
+    return _discretisation(str(parse_mesh_spec(mesh)))
+
+
+@lru_cache(maxsize=4)
+def _discretisation(canonical: str) -> Discretisation:
+    spec = parse_mesh_spec(canonical)
+    return discretise(spec.mesh, symmetry=spec.symmetry)
 
 
 def case_material(case: Case, x):
@@ -53,25 +60,13 @@ def material_from(case_name: str | None, overrides: dict[str, float]):
     return make_material(case.form, case.hardening, params)
 
 
-def measurement_blocks(n_snapshots: int, n_points: int) -> dict[str, slice]:
-    """Named slices of the measurement vector."""
-    nm = n_snapshots * n_points
-    return {"u_h": slice(0, nm), "u_v": slice(nm, 2 * nm), "displacement": slice(0, 2 * nm),
-            "force": slice(2 * nm, 2 * nm + n_snapshots)}
-
-
-def measurement_vector(response, points: np.ndarray) -> np.ndarray:
-    """Stack a response into ``[u_h, u_v, reaction_kN]`` (mm, mm, kN)."""
-    u_h, u_v = response.front_face(points)
-    return np.concatenate([u_h.ravel(), u_v.ravel(), response.reaction_kN])
-
-
 @dataclass(frozen=True, eq=False)
 class FEForwardModel:
     """Forward model of the objective backed by the FE cube test (picklable for Dask workers).
 
     case     : the identification case (which parameters are active)
-    mesh     : mesh spec (``coarse``, ``paper``, ``fine`` or ``NX,NY,NZ``)
+    mesh     : mesh spec (``coarse``, ``paper``, ``fine`` or ``NX,NY,NZ``, optionally ``:eighth`` or ``:quarter``;
+               by default the eighth model where it is exact)
     loading  : plate displacement, snapshots and plate condition
     points   : (m, 2) front-face measurement points (y, z), mm
     """
@@ -102,7 +97,7 @@ class FEForwardModel:
                    progress=progress)
 
     def __call__(self, x):
-        from problems.inverse.objective import ForwardResult
+        from problems.inverse.protocol import ForwardResult
 
         t0 = time.perf_counter()
         try:
@@ -111,4 +106,5 @@ class FEForwardModel:
             return ForwardResult(False, None, str(exc), time.perf_counter() - t0)
         if not resp.converged:
             return ForwardResult(False, None, resp.message, time.perf_counter() - t0)
-        return ForwardResult(True, measurement_vector(resp, self.points), "", time.perf_counter() - t0)
+        return ForwardResult(True, layout.stack(*resp.front_face(self.points), resp.reaction_kN), "",
+                             time.perf_counter() - t0)

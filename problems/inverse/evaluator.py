@@ -1,0 +1,389 @@
+"""What is paid: the evaluator counts, caches, budgets and logs every evaluation of a problem.
+
+The :class:`Evaluator` is what a solver sees as its objective. It wraps a
+:class:`~problems.inverse.problem.LeastSquaresProblem` (which knows the data and the weights) the
+way pymoo's ``core/evaluator.py`` and scipy's ``_differentiable_functions.py`` keep counting apart
+from the problem. Every public method takes scaled points ``z = x / reference``.
+
+Accounting (honest: what a user pays for)
+-----------------------------------------
+* ``n_evals`` counts every forward evaluation: finite-difference columns, runs with exact
+  sensitivities, failed points (``ok=False``) and infeasible points (``check`` returned a message,
+  or the point lies outside the box; the model is *not* called, but the point still counts, and is
+  also counted in ``n_infeasible``). ``n_failed`` counts the ``ok=False`` results.
+* Exact repeats of a point already evaluated are served from a cache; they are counted apart in
+  ``n_cache_hits`` and are *not* in ``n_evals``, nor charged to the budget.
+* :meth:`forward_equivalents` converts the evaluations into plain forward runs by measured wall
+  time: a plain or infeasible evaluation is one, a run with sensitivities is its wall time over
+  the median wall time of the plain runs of the same evaluator.
+* ``log`` holds one dict per evaluation, cache hits included (``cached=True``):
+  ``{"x", "cost", "ok", "feasible", "wall_s", "cached", "n_evals", "kind"}``, ``kind`` being
+  ``"plain"`` or ``"jacobian"``.
+* ``set_budget(n)``: an evaluation that would make ``n_evals`` exceed ``n`` raises
+  :class:`BudgetExhausted`; for a batch, the points that fit are evaluated and recorded first.
+  ``best`` (the lowest-cost successful point so far) lets any solver return a result then.
+
+Failure policy (never raise into a solver)
+------------------------------------------
+A failed point (the model returned ``ok=False``, non-finite or wrongly shaped values, or raised)
+and an infeasible point get ``cost = FAILURE_COST`` (1e12: finite, so that population methods can
+rank it) and a residual vector whose squared norm equals ``FAILURE_COST`` (so that a trust-region
+method rejects the step and shrinks its radius; a line search backtracks). Samplers treat these
+points as ``log p = -inf``. Such points are never ``best``. A model that *raises* is treated as
+failed with the exception text as message (a ``RuntimeWarning`` is issued once per evaluator).
+
+Batches and parallelism
+-----------------------
+:meth:`costs`, :meth:`evaluate_many` and :meth:`jacobian` send all uncached feasible points of
+one batch through a single ``mapper(fn, items)`` call (``fn`` is a picklable callable wrapping
+the model, ``items`` the physical points); ``mapper=None`` is :func:`sequential_map`.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from problems.inverse.problem import FAILURE_COST, LeastSquaresProblem
+from problems.inverse.protocol import ForwardResult, RunModel, provides_jacobian
+
+Mapper = Callable[[Callable[[np.ndarray], ForwardResult], Sequence[np.ndarray]], Iterable[ForwardResult]]
+
+
+def sequential_map(fn, items) -> list:
+    """The in-process mapper: ``[fn(x) for x in items]``."""
+    return [fn(x) for x in items]
+
+
+class BudgetExhausted(Exception):
+    """Raised by the evaluator when an evaluation would exceed the budget."""
+
+    def __init__(self, budget: int, n_evals: int):
+        super().__init__(f"evaluation budget of {budget} forward evaluations exhausted ({n_evals} used)")
+        self.budget = budget
+        self.n_evals = n_evals
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluated point. ``x`` is physical; ``residual`` is the whitened residual.
+
+    ``jacobian`` is dR/dz (m, n) when the point was run with exact sensitivities.
+    """
+
+    x: np.ndarray
+    cost: float
+    residual: np.ndarray | None
+    ok: bool
+    feasible: bool
+    message: str = ""
+    cached: bool = False
+    wall_s: float = 0.0
+    jacobian: np.ndarray | None = None
+
+    @property
+    def usable(self) -> bool:
+        """Feasible and successfully evaluated (a sampler's ``log p`` is finite only then)."""
+        return self.ok and self.feasible
+
+
+class Evaluator:
+    """Counting, caching, budgeted evaluation of a least-squares problem (a solver's objective).
+
+    problem  : the :class:`LeastSquaresProblem`
+    mapper   : ``mapper(fn, items) -> iterable`` used for every batch; ``None`` = sequential
+    cache    : True (unbounded), False, or an int (keep the most recent ``cache`` points)
+    exact_jacobian : use the model's exact Jacobian when it provides one (else finite differences)
+    """
+
+    def __init__(self, problem: LeastSquaresProblem, *, mapper: Mapper | None = None,
+                 cache: bool | int = True, exact_jacobian: bool = True):
+        self.problem = problem
+        self.mapper = mapper
+        self.cache = cache
+        self.exact_jacobian = exact_jacobian and provides_jacobian(problem.model)
+        self._warned = False
+        self.reset()
+
+    # --- the problem, as a solver sees it --------------------------------------------------------
+    model = property(lambda self: self.problem.model)
+    data = property(lambda self: self.problem.data)
+    names = property(lambda self: self.problem.names)
+    reference = property(lambda self: self.problem.reference)
+    lower = property(lambda self: self.problem.lower)
+    upper = property(lambda self: self.problem.upper)
+    lower_z = property(lambda self: self.problem.lower_z)
+    upper_z = property(lambda self: self.problem.upper_z)
+    blocks = property(lambda self: self.problem.blocks)
+    n_params = property(lambda self: self.problem.n_params)
+    n_residuals = property(lambda self: self.problem.n_residuals)
+    provenance = property(lambda self: self.problem.provenance)
+    data_hash = property(lambda self: self.problem.provenance.get("data_hash"))
+
+    def to_physical(self, z) -> np.ndarray:
+        return self.problem.to_physical(z)
+
+    def to_scaled(self, x) -> np.ndarray:
+        return self.problem.to_scaled(x)
+
+    def whiten(self, d) -> np.ndarray:
+        return self.problem.whiten(d)
+
+    # --- bookkeeping -----------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Clear counters, log, cache, best point and budget."""
+        self.n_evals = 0
+        self.n_failed = 0
+        self.n_infeasible = 0
+        self.n_cache_hits = 0
+        self.n_jacobian_failures = 0
+        self.log: list[dict[str, Any]] = []
+        self.best: Evaluation | None = None
+        self._cache: OrderedDict[bytes, Evaluation] = OrderedDict()
+        self.budget: int | None = None
+
+    def set_budget(self, n: int | None) -> None:
+        """Cap ``n_evals`` at ``n`` (``None``: no cap)."""
+        if n is not None and int(n) < 0:
+            raise ValueError(f"budget = {n} is out of range: must be >= 0")
+        self.budget = None if n is None else int(n)
+
+    @property
+    def remaining(self) -> float:
+        """Forward evaluations left in the budget (``inf`` without budget)."""
+        return math.inf if self.budget is None else max(0, self.budget - self.n_evals)
+
+    def counters(self) -> dict[str, float]:
+        return {"n_evals": self.n_evals, "n_failed": self.n_failed, "n_infeasible": self.n_infeasible,
+                "n_cache_hits": self.n_cache_hits, "forward_equivalents": self.forward_equivalents()}
+
+    def forward_equivalents(self) -> float:
+        """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall time)."""
+        new = [e for e in self.log if not e["cached"]]
+        plain = [e["wall_s"] for e in new if e["kind"] == "plain" and e["ok"] and e["feasible"]]
+        unit = float(np.median(plain)) if plain else None
+        total = 0.0
+        for e in new:
+            if e["kind"] == "jacobian" and e["ok"] and unit:
+                total += e["wall_s"] / unit
+            else:
+                total += 1.0
+        return total
+
+    @property
+    def best_z(self) -> np.ndarray | None:
+        return None if self.best is None else self.to_scaled(self.best.x)
+
+    # --- evaluation ------------------------------------------------------------------------------
+    def _finish(self, x: np.ndarray, res: ForwardResult) -> Evaluation:
+        if not res.ok:
+            return self._failure(x, res.message or "forward model failed", res.wall_s)
+        r, why = self.problem.residual(res.values)
+        if r is None:
+            return self._failure(x, why, res.wall_s)
+        J = None if res.jacobian is None else self.problem.residual_jacobian(res.jacobian)
+        return Evaluation(x, float(r @ r), r, True, True, res.message, False, res.wall_s, J)
+
+    def _failure(self, x, message, wall_s=0.0, feasible=True) -> Evaluation:
+        if message.startswith("model raised") and not self._warned:
+            self._warned = True
+            warnings.warn(f"forward model raised an exception, treated as a failed point: {message}",
+                          RuntimeWarning, stacklevel=3)
+        return Evaluation(x, FAILURE_COST, self.problem.failure_residual.copy(), False, feasible, message,
+                          False, wall_s)
+
+    def _record(self, ev: Evaluation, key: bytes | None, kind: str) -> None:
+        if ev.cached:
+            self.n_cache_hits += 1
+        else:
+            self.n_evals += 1
+            if not ev.feasible:
+                self.n_infeasible += 1
+            elif not ev.ok:
+                self.n_failed += 1
+            if self.cache and key is not None:
+                self._cache[key] = ev
+                if not isinstance(self.cache, bool) and len(self._cache) > int(self.cache):
+                    self._cache.popitem(last=False)
+            if ev.ok and ev.feasible and (self.best is None or ev.cost < self.best.cost):
+                self.best = ev
+        self.log.append({"x": ev.x, "cost": ev.cost, "ok": ev.ok, "feasible": ev.feasible,
+                         "wall_s": ev.wall_s, "cached": ev.cached, "n_evals": self.n_evals, "kind": kind})
+
+    def evaluate_many(self, Z, *, with_jacobian: bool = False) -> list[Evaluation]:
+        """Evaluate a batch of scaled points; the uncached feasible ones go through one mapper call.
+
+        Order of the log = order of ``Z``. If the budget does not cover every new point, the first
+        ones that fit are evaluated and recorded, then :class:`BudgetExhausted` is raised.
+        ``with_jacobian`` runs the model with exact sensitivities (only a cached evaluation that
+        already has them is reused).
+        """
+        prepared = self.problem.classify(Z)
+        keys = [x.tobytes() for x, _ in prepared]
+        kind = "jacobian" if with_jacobian else "plain"
+        hits: dict[int, Evaluation | int] = {}  # index -> cached Evaluation, or index of its first copy
+        new: list[int] = []
+        first: dict[bytes, int] = {}
+        for i, key in enumerate(keys):
+            cached = self._cache.get(key) if self.cache else None
+            if cached is not None and (not with_jacobian or cached.jacobian is not None or not cached.usable):
+                hits[i] = cached
+                self._cache.move_to_end(key)
+            elif self.cache and key in first:
+                hits[i] = first[key]
+            else:
+                new.append(i)
+                first[key] = i
+        allowed = len(new) if self.budget is None else max(0, self.budget - self.n_evals)
+        todo = new[:allowed]
+        run_idx = [i for i in todo if prepared[i][1] is None]
+        done: dict[int, Evaluation] = {}
+        if run_idx:
+            mapper = self.mapper or sequential_map
+            results = list(mapper(RunModel(self.model, with_jacobian), [prepared[i][0] for i in run_idx]))
+            if len(results) != len(run_idx):
+                raise RuntimeError(f"mapper returned {len(results)} results for {len(run_idx)} points")
+            for i, res in zip(run_idx, results):
+                done[i] = self._finish(prepared[i][0], res)
+        for i in todo:
+            if i not in done:
+                done[i] = self._failure(prepared[i][0], prepared[i][1], feasible=False)
+        out: list[Evaluation] = []
+        for i in range(len(prepared)):
+            if i in done:
+                ev = done[i]
+                self._record(ev, keys[i], kind)
+            elif i in hits:
+                src = hits[i]
+                if isinstance(src, int):
+                    if src not in done:
+                        continue  # repeat of a point left out by the budget
+                    src = done[src]
+                ev = replace(src, cached=True, wall_s=0.0)
+                self._record(ev, None, kind)
+            else:
+                continue  # left out by the budget
+            out.append(ev)
+        if len(new) > allowed:
+            raise BudgetExhausted(self.budget, self.n_evals)
+        return out
+
+    def evaluate(self, z, *, with_jacobian: bool = False) -> Evaluation:
+        """Evaluate one scaled point (cache first; counts and budget as documented)."""
+        return self.evaluate_many(np.asarray(z, dtype=float).reshape(1, -1), with_jacobian=with_jacobian)[0]
+
+    def cost(self, z) -> float:
+        return self.evaluate(z).cost
+
+    def residual(self, z) -> np.ndarray:
+        return self.evaluate(z).residual.copy()
+
+    def costs(self, Z) -> np.ndarray:
+        """Costs of a batch of scaled points (one mapper call for the uncached ones)."""
+        return np.array([ev.cost for ev in self.evaluate_many(Z)])
+
+    def cost_split(self, z) -> dict[str, float]:
+        """Cost per named block plus ``"total"``; blocks are ``nan`` for a failed/infeasible point."""
+        ev = self.evaluate(z)
+        if not ev.usable:
+            return {**{name: math.nan for name in self.blocks}, "total": ev.cost}
+        return {**self.problem.split(ev.residual), "total": ev.cost}
+
+    # --- derivatives -----------------------------------------------------------------------------
+    def jacobian(self, z, *, scheme: str = "forward", rel_step: float = 1e-6, r0=None) -> np.ndarray:
+        """Jacobian ``dR/dz`` (m, n) of the whitened residual: exact when the model provides it
+        (one run with sensitivities, ``scheme`` ignored), else by finite differences.
+
+        Finite differences: step ``h_i = rel_step * max(|z_i|, 1)``; a step that would leave the
+        box is flipped inward (``central`` falls back to a one-sided inward difference there). All
+        columns are one batch. A column whose point failed is retried once on the other side; if
+        that fails too, the column is set to zero and ``n_jacobian_failures`` is incremented. If
+        ``z`` itself failed, the Jacobian is zero (nothing sensible can be differenced).
+        """
+        if scheme not in ("forward", "central"):
+            raise ValueError(f"scheme = {scheme!r} is unknown; allowed: forward, central")
+        z = np.clip(np.asarray(z, dtype=float).ravel(), self.lower_z, self.upper_z)
+        if self.exact_jacobian:
+            ev = self.evaluate(z, with_jacobian=True)
+            if ev.usable and ev.jacobian is not None:
+                return ev.jacobian.copy()
+            if not ev.usable:
+                return np.zeros((self.n_residuals, self.n_params))
+        return self._fd_jacobian(z, scheme, rel_step, r0)
+
+    def _fd_jacobian(self, z, scheme, rel_step, r0) -> np.ndarray:
+        n, m = self.n_params, self.n_residuals
+        if r0 is None:
+            ev0 = self.evaluate(z)
+            if not ev0.usable:
+                return np.zeros((m, n))
+            r0 = ev0.residual
+        r0 = np.asarray(r0, dtype=float)
+        h = rel_step * np.maximum(np.abs(z), 1.0)
+        up_room, down_room = self.upper_z - z, z - self.lower_z
+        plus = np.where(h <= up_room, h, np.where(down_room >= up_room, -np.minimum(h, down_room), up_room))
+        central = scheme == "central"
+        pts, cols = [], []
+        for i in range(n):
+            if central and h[i] <= up_room[i] and h[i] <= down_room[i]:
+                pts += [_shift(z, i, h[i]), _shift(z, i, -h[i])]
+                cols.append((i, "c"))
+            else:
+                pts.append(_shift(z, i, plus[i]))
+                cols.append((i, "f"))
+        evs = self.evaluate_many(np.array(pts))
+        J = np.zeros((m, n))
+        k, retry = 0, []
+        for i, kind in cols:
+            if kind == "c":
+                ea, eb = evs[k], evs[k + 1]
+                k += 2
+                if ea.usable and eb.usable:
+                    J[:, i] = (ea.residual - eb.residual) / (self.to_scaled(ea.x)[i] - self.to_scaled(eb.x)[i])
+                    continue
+                good = ea if ea.usable else (eb if eb.usable else None)
+                if good is not None:
+                    J[:, i] = (good.residual - r0) / (self.to_scaled(good.x)[i] - z[i])
+                else:
+                    self.n_jacobian_failures += 1
+                continue
+            ev = evs[k]
+            k += 1
+            dz = self.to_scaled(ev.x)[i] - z[i]
+            if ev.usable and dz != 0:
+                J[:, i] = (ev.residual - r0) / dz
+            else:
+                retry.append((i, -plus[i]))
+        todo = []
+        for i, s in retry:
+            if self.lower_z[i] <= z[i] + s <= self.upper_z[i]:
+                todo.append((i, s))
+            else:
+                self.n_jacobian_failures += 1
+        if todo:
+            evs = self.evaluate_many(np.array([_shift(z, i, s) for i, s in todo]))
+            for (i, _), ev in zip(todo, evs):
+                dz = self.to_scaled(ev.x)[i] - z[i]
+                if ev.usable and dz != 0:
+                    J[:, i] = (ev.residual - r0) / dz
+                else:
+                    self.n_jacobian_failures += 1
+        return J
+
+    def gradient(self, z, **kw) -> tuple[float, np.ndarray]:
+        """``cost`` and its gradient ``2 J^T R`` in z (through :meth:`jacobian`)."""
+        ev = self.evaluate(z, with_jacobian=self.exact_jacobian)
+        if not ev.usable:
+            return ev.cost, np.zeros(self.n_params)
+        J = ev.jacobian if ev.jacobian is not None else self.jacobian(z, r0=ev.residual, **kw)
+        return ev.cost, 2.0 * J.T @ ev.residual
+
+
+def _shift(z, i, s):
+    p = z.copy()
+    p[i] = z[i] + s
+    return p

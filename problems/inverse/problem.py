@@ -1,0 +1,165 @@
+"""The weighted least-squares problem: data, whitening, scaling, bounds and the residual.
+
+It knows nothing of FE and nothing of counting (that is the evaluator's job)::
+
+    R(x) = C^(-1/2) (U_E - U_N(x)),     cost(x) = R^T R
+
+with ``C`` diagonal (``sigma``: scalar or vector of standard deviations) or full
+(``covariance``; its lower Cholesky factor ``L`` is used, ``R = L^-1 (U_E - U_N)``, so that
+``R^T R = d^T C^-1 d``). ``blocks`` names slices of the measurement vector so that the cost can be
+split; with a full covariance the split is that of the Cholesky-whitened residual (it still sums
+to the total). Solvers work in the *scaled* space ``z = x / reference`` (the reference is z = 1).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import cholesky, solve_triangular
+
+from problems.inverse.protocol import ForwardModel
+
+FAILURE_COST = 1e12
+"""Cost given to failed and infeasible points (finite, far above any sensible cost)."""
+
+BOX_TOL = 1e-9
+"""Points outside the box by less than ``BOX_TOL * (upper - lower)`` are clipped, not rejected."""
+
+
+@dataclass(eq=False)
+class LeastSquaresProblem:
+    """Data, weights, box and scaling of one identification problem over a forward model.
+
+    model      : the forward model (see :mod:`problems.inverse.protocol`)
+    data       : (m,) measured vector ``U_E`` (same layout as the model's values)
+    lower, upper, reference : (n,) physical bounds and reference values (reference != 0)
+    sigma      : scalar or (m,) standard deviations (diagonal covariance); default 1
+    covariance : (m, m) full covariance (exclusive with ``sigma``)
+    blocks     : names of slices of the measurement vector, for :meth:`split`
+    provenance : where the data and the model come from (case, tier, hashes, meshes), reported
+    """
+
+    model: ForwardModel
+    data: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    reference: np.ndarray
+    sigma: np.ndarray | float | None = None
+    covariance: np.ndarray | None = None
+    blocks: dict[str, slice] | None = None
+    provenance: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.data = np.asarray(self.data, dtype=float).ravel()
+        m = self.data.size
+        if m == 0:
+            raise ValueError("the data vector is empty")
+        self.reference = np.asarray(self.reference, dtype=float).ravel().copy()
+        self.lower = np.asarray(self.lower, dtype=float).ravel().copy()
+        self.upper = np.asarray(self.upper, dtype=float).ravel().copy()
+        n = self.reference.size
+        self.names = tuple(getattr(self.model, "names", ())) or tuple(f"x{i}" for i in range(n))
+        if not (len(self.names) == self.lower.size == self.upper.size == n):
+            raise ValueError(f"names {self.names}, lower, upper and reference must have the same length "
+                             f"(got {len(self.names)}, {self.lower.size}, {self.upper.size}, {n})")
+        if np.any(self.reference == 0) or not np.all(np.isfinite(self.reference)):
+            raise ValueError("reference values must be finite and non-zero (z = x / reference)")
+        if np.any(self.lower > self.upper):
+            raise ValueError("a lower bound is above its upper bound")
+        zl, zu = self.lower / self.reference, self.upper / self.reference
+        self.lower_z, self.upper_z = np.minimum(zl, zu), np.maximum(zl, zu)
+        self._chol = self._sigma = None
+        if self.sigma is not None and self.covariance is not None:
+            raise ValueError("give sigma or covariance, not both")
+        if self.covariance is not None:
+            cov = np.asarray(self.covariance, dtype=float)
+            if cov.shape != (m, m):
+                raise ValueError(f"covariance must be ({m}, {m}), got {cov.shape}")
+            try:
+                self._chol = cholesky(cov, lower=True)
+            except np.linalg.LinAlgError as exc:
+                raise ValueError(f"covariance is not positive definite ({exc})") from None
+        else:
+            s = np.ones(m) if self.sigma is None else np.broadcast_to(np.asarray(self.sigma, float), (m,)).copy()
+            if np.any(s <= 0) or not np.all(np.isfinite(s)):
+                raise ValueError("sigma must be positive and finite")
+            self._sigma = s
+        self.blocks = dict(self.blocks) if self.blocks else {"all": slice(0, m)}
+        for name, sl in self.blocks.items():
+            if not isinstance(sl, slice) or len(range(m)[sl]) == 0:
+                raise ValueError(f"block {name!r} must be a non-empty slice of the {m} measurements")
+        self.failure_residual = np.full(m, math.sqrt(FAILURE_COST / m))
+
+    # --- shape and scaling ---------------------------------------------------------------------
+    @property
+    def n_params(self) -> int:
+        return self.reference.size
+
+    @property
+    def n_residuals(self) -> int:
+        return self.data.size
+
+    def to_physical(self, z) -> np.ndarray:
+        return np.asarray(z, dtype=float) * self.reference
+
+    def to_scaled(self, x) -> np.ndarray:
+        return np.asarray(x, dtype=float) / self.reference
+
+    def whiten(self, d) -> np.ndarray:
+        """``C^(-1/2) d`` (``L^-1 d`` for a full covariance); ``d`` is (m,) or (m, k)."""
+        d = np.asarray(d, dtype=float)
+        if self._chol is not None:
+            return solve_triangular(self._chol, d, lower=True)
+        return d / (self._sigma[:, None] if d.ndim == 2 else self._sigma)
+
+    # --- points and residuals ------------------------------------------------------------------
+    def classify(self, Z) -> list[tuple[np.ndarray, str | None]]:
+        """For scaled points Z (k, n): the physical point (clipped within tolerance) and why it is
+        infeasible (non-finite, outside the box, or the model's ``check``), or None if feasible."""
+        Z = np.atleast_2d(np.asarray(Z, dtype=float))
+        if Z.ndim != 2 or Z.shape[1] != self.n_params:
+            raise ValueError(f"expected {self.n_params} parameters {self.names}, got shape {Z.shape[1:]}")
+        X = Z * self.reference
+        tol = BOX_TOL * np.maximum(self.upper - self.lower, np.abs(self.reference) * 1e-12)
+        finite = np.all(np.isfinite(X), axis=1)
+        out = (X < self.lower - tol) | (X > self.upper + tol)
+        Xc = np.clip(X, self.lower, self.upper)
+        prepared = []
+        for k in range(len(X)):
+            if not finite[k]:
+                prepared.append((X[k].copy(), "non-finite parameters"))
+            elif out[k].any():
+                bad = ", ".join(f"{self.names[i]} = {X[k, i]:.6g} is outside [{self.lower[i]:.6g}, "
+                                f"{self.upper[i]:.6g}]" for i in np.flatnonzero(out[k]))
+                prepared.append((X[k].copy(), f"outside the bounds: {bad}"))
+            else:
+                x = Xc[k].copy()
+                try:
+                    msg = self.model.check(x)
+                except Exception as exc:
+                    msg = f"check raised {type(exc).__name__}: {exc}"
+                prepared.append((x, msg))
+        return prepared
+
+    def residual(self, values) -> tuple[np.ndarray | None, str]:
+        """Whitened residual of predicted ``values`` (m,), or (None, why) when they are unusable."""
+        if values is None:
+            return None, "model returned no values"
+        values = np.asarray(values, dtype=float).ravel()
+        if values.shape != self.data.shape:
+            return None, f"model returned {values.size} values, data has {self.data.size}"
+        if not np.all(np.isfinite(values)):
+            return None, "model returned non-finite values"
+        r = self.whiten(self.data - values)
+        if not math.isfinite(float(r @ r)):
+            return None, "non-finite cost"
+        return r, ""
+
+    def residual_jacobian(self, jacobian_x) -> np.ndarray:
+        """dR/dz (m, n) of the whitened residual from the model's dU_N/dx (m, n) in physical units."""
+        return -self.whiten(np.asarray(jacobian_x, float)) * self.reference[None, :]
+
+    def split(self, r) -> dict[str, float]:
+        """Cost per named block of the whitened residual ``r``."""
+        return {name: float(r[sl] @ r[sl]) for name, sl in self.blocks.items()}
