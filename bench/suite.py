@@ -40,16 +40,6 @@ CONFIG_SCHEMA = 1
 
 START_KINDS = ("default", "random")
 
-#: Meshes accepted when the FE package does not publish its own list.
-FALLBACK_MESHES = ("coarse", "paper", "fine")
-
-#: Data settings accepted when problems.inverse.build does not publish its own (name -> type).
-FALLBACK_DATA_SETTINGS: dict[str, tuple] = {
-    "mesh": (str,), "resolution_um": (float,), "noise_um": (float,), "force_resolution_kN": (float,),
-    "seed": (int,), "displacement_mm": (float,), "snapshots": (int,), "plates": (str,),
-    "spacing_mm": (float,), "margin_mm": (float,), "route": (str,),
-}
-
 SUITE_KEYS = {
     "name": "suite name (string; default: the file name without .toml)",
     "description": "free text",
@@ -160,70 +150,10 @@ class Suite:
 
 # --- what is allowed ------------------------------------------------------------------------
 
-def _known_cases() -> dict:
-    from problems.inverse.cases import CASES
-
-    try:
-        from problems.inverse.cases import all_cases
-
-        return all_cases()
-    except ImportError:  # analytic problems not available
-        return dict(CASES)
-
-
-def _fe_cases() -> list[str]:
-    from problems.inverse.cases import CASES
-
-    return list(CASES)
-
-
-def _methods() -> dict | None:
-    """solvers.METHODS, or None when the solver package is not importable."""
-    try:
-        from solvers import METHODS
-    except ImportError:
-        return None
-    return METHODS
-
-
-def _get_method(method: str):
-    """solvers' MethodInfo for ``method`` (registered or resolved, e.g. nlopt:<ALGO>), or None."""
-    try:
-        from solvers.base import get_method
-    except ImportError:
-        get_method = None
-    if get_method is not None:
-        try:
-            return get_method(method)
-        except (ValueError, KeyError):
-            return None
-    methods = _methods()
-    return None if methods is None else methods.get(method)
-
-
-def method_options(method: str, methods: dict | None = None) -> dict | None:
-    """The option table ``{name: (default, description)}`` of a method, None if unknown."""
-    info = _get_method(method)
-    return None if info is None else dict(getattr(info, "options", {}) or {})
-
-
-def _method_known(method: str, methods: dict | None) -> bool:
-    if methods is None:  # solvers not importable: only the names of the contract
-        return method in _CONTRACT_METHODS
-    return _get_method(method) is not None
-
-
-_CONTRACT_METHODS = ("lm", "gauss-newton", "ga", "de", "pso", "sa", "mcmc", "nlopt:BOBYQA",
-                     "nlopt:SBPLX", "nlopt:NELDERMEAD", "nlopt:CRS2_LM", "nlopt:DIRECT_L",
-                     "nlopt:ESCH", "nlopt:ISRES", "nlopt:MLSL", "multistart-lm", "pso+lm")
-
-
 def _meshes() -> tuple[str, ...]:
     """Named mesh presets of the FE model (a mesh may also be given as "NX,NY,NZ")."""
-    try:
-        from problems.fe.mesh import MESH_PRESETS
-    except ImportError:
-        return FALLBACK_MESHES
+    from problems.fe.mesh import MESH_PRESETS
+
     return tuple(MESH_PRESETS)
 
 
@@ -238,24 +168,28 @@ def _mesh_ok(mesh) -> bool:
 
 def _data_settings() -> dict[str, tuple]:
     """Allowed [data] keys (the fields of problems.inverse.data.DataSettings) -> accepted Python types."""
-    try:
-        from problems.inverse.data import DataSettings
-    except ImportError:
-        return dict(FALLBACK_DATA_SETTINGS)
+    from problems.inverse.data import DataSettings
+
     return {f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings)}
 
 
 def _check_data_settings(data: dict) -> str | None:
     """The reason ``data`` does not make valid DataSettings, or None."""
-    try:
-        from problems.inverse.data import DataSettings
-    except ImportError:
-        return None
+    from problems.inverse.data import DataSettings
+
     try:
         DataSettings(**data)
     except (ValueError, TypeError) as exc:
         return str(exc)
     return None
+
+
+def method_options(method: str) -> dict | None:
+    """The option table ``{name: (default, description)}`` of a method, None if unknown."""
+    from solvers import find_method
+
+    info = find_method(method)
+    return None if info is None else dict(info.options or {})
 
 
 def _types_like(default) -> tuple:
@@ -326,13 +260,16 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         description = ""
 
     # cases
-    known_cases = _known_cases()
+    from problems.inverse.cases import CASES, all_cases
+    from solvers import METHODS, find_method
+
+    known_cases = all_cases()
     cases = s.get("cases")
     if cases is None:
         err('[suite] missing key \'cases\' ("all" or a list of case names)')
         cases = []
     elif cases == "all":
-        cases = _fe_cases()
+        cases = list(CASES)
     elif not isinstance(cases, list) or not cases:
         err(f'[suite] cases must be "all" or a non-empty list of case names, got {cases!r}')
         cases = []
@@ -343,7 +280,6 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         _no_duplicates("cases", cases, err)
 
     # methods
-    methods_table = _methods()
     methods = s.get("methods")
     if methods is None:
         err("[suite] missing key 'methods' (a list of method names)")
@@ -352,10 +288,9 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         err(f"[suite] methods must be a non-empty list of method names, got {methods!r}")
         methods = []
     else:
-        allowed = list(methods_table) if methods_table is not None else list(_CONTRACT_METHODS)
-        allowed = [a for a in allowed if a in _CONTRACT_METHODS] + [a for a in allowed if a not in _CONTRACT_METHODS]
+        allowed = list(METHODS)
         for m in methods:
-            if not isinstance(m, str) or not _method_known(m, methods_table):
+            if not isinstance(m, str) or find_method(m) is None:
                 hint = _did_you_mean(m, allowed) if isinstance(m, str) else ""
                 err(f"[suite] methods: method {m!r} is unknown{hint}; allowed: {', '.join(allowed)}"
                     " (or nlopt:<ALGORITHM>)")
@@ -423,7 +358,7 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         if not isinstance(opts, dict):
             err(f"[options.{_q(m)}] must be a table of option = value")
             continue
-        table = method_options(m, methods_table)
+        table = method_options(m)
         clean = {}
         for key, value in opts.items():
             if table is not None and key not in table:

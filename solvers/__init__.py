@@ -5,9 +5,9 @@
 
 Importing the package registers every adapter in :data:`METHODS`.
 """
-from solvers.base import METHODS, MethodInfo, Outcome, Run, get_method, register, solve
+from solvers.base import METHODS, MethodInfo, Outcome, Run, find_method, get_method, register, solve
 from solvers.result import RunResult
 
 from solvers import scipy_, gauss_newton, pymoo_, pyswarms_, nlopt_, emcee_, hybrid  # noqa: E402,F401  (registration)
 
-__all__ = ["solve", "METHODS", "RunResult", "MethodInfo", "Outcome", "Run", "get_method", "register"]
+__all__ = ["solve", "METHODS", "RunResult", "MethodInfo", "Outcome", "Run", "get_method", "find_method", "register"]

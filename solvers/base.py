@@ -85,6 +85,19 @@ def register(name: str, *, library: str, family: str, options: dict[str, tuple[A
     return deco
 
 
+def register_resolver(resolve: Callable[[str], MethodInfo | None]) -> None:
+    """Add a resolver of dynamic method names (e.g. any ``nlopt:<ALGORITHM>``) to :func:`get_method`."""
+    _RESOLVERS.append(resolve)
+
+
+def find_method(name: str) -> MethodInfo | None:
+    """The method ``name`` (registered or resolved), or None when it is unknown."""
+    try:
+        return get_method(name)
+    except ValueError:
+        return None
+
+
 def get_method(name: str) -> MethodInfo:
     """The registered method ``name`` (or one resolved dynamically, e.g. any ``nlopt:<ALGORITHM>``)."""
     if name in METHODS:

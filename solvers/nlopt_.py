@@ -18,7 +18,7 @@ from __future__ import annotations
 import nlopt
 import numpy as np
 
-from solvers.base import _RESOLVERS, METHODS, MethodInfo, Outcome, Run
+from solvers.base import METHODS, MethodInfo, Outcome, Run, register_resolver
 from solvers.scipy_ import JAC_OPTIONS
 
 LOCAL = ("BOBYQA", "SBPLX", "NELDERMEAD", "COBYLA", "LBFGS")
@@ -173,4 +173,4 @@ def _resolve(name: str) -> MethodInfo | None:
     return _info(name, name.split(":", 1)[1])
 
 
-_RESOLVERS.append(_resolve)
+register_resolver(_resolve)

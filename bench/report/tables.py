@@ -30,25 +30,22 @@ PARAM_TEX = {"E": r"$E$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$", "si
 
 def case_order(cases) -> list[str]:
     """The nine FE cases in the study's order, then the others alphabetically."""
-    try:
-        from problems.inverse.cases import CASES
+    from problems.inverse.cases import CASES
 
-        canon = list(CASES)
-    except ImportError:  # pragma: no cover
-        canon = []
+    canon = list(CASES)
     cases = list(dict.fromkeys(cases))
     return [c for c in canon if c in cases] + sorted(c for c in cases if c not in canon)
 
 
 def method_order(methods) -> list[str]:
     """Methods by family (local, global, sampling), then in the order of the study's list."""
-    from bench.suite import _CONTRACT_METHODS, _get_method
+    from solvers import METHODS, find_method
 
     rank = {"local": 0, "global": 1, "sampling": 2}
-    canon = list(_CONTRACT_METHODS)
+    canon = list(METHODS)  # registration order
 
     def key(m):
-        info = _get_method(m)
+        info = find_method(m)
         fam = rank.get(getattr(info, "family", None), 3)
         return fam, canon.index(m) if m in canon else len(canon), m
 
