@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
+
+from problems.io import jsonio
 
 
 @dataclass
@@ -44,7 +45,7 @@ class RunResult:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON dict; non-finite floats become the strings "inf", "-inf", "nan"."""
-        return _encode(asdict(self))
+        return jsonio.encode(asdict(self))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "RunResult":
@@ -52,10 +53,10 @@ class RunResult:
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"RunResult: unknown fields {sorted(unknown)}; allowed: {sorted(names)}")
-        return cls(**_decode(d))
+        return cls(**jsonio.decode(d))
 
     def to_json(self, **kw) -> str:
-        return json.dumps(self.to_dict(), **kw)
+        return jsonio.dumps(self.to_dict(), **kw)
 
     @classmethod
     def from_json(cls, text: str) -> "RunResult":
@@ -64,26 +65,3 @@ class RunResult:
     def errors_percent(self) -> dict[str, float]:
         """Signed error of each parameter with respect to its reference, in percent."""
         return {n: 100.0 * (xn - 1.0) for n, xn in zip(self.parameter_names, self.x_normalised)}
-
-
-_SPECIAL = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}
-
-
-def _encode(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
-    if isinstance(obj, dict):
-        return {k: _encode(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_encode(v) for v in obj]
-    return obj
-
-
-def _decode(obj):
-    if isinstance(obj, str) and obj in _SPECIAL:
-        return _SPECIAL[obj]
-    if isinstance(obj, dict):
-        return {k: _decode(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_decode(v) for v in obj]
-    return obj

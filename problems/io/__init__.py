@@ -1,0 +1,1 @@
+"""Reading and writing: the one JSON encoding of numbers every file of femubench uses."""
