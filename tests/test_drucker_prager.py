@@ -1,5 +1,8 @@
 """Extended Drucker-Prager: hardening tests, return-mapping properties, apex, failure flags."""
 import math
+from problems.materials.drucker_prager import FORMS
+from problems.materials.hardening import HARDENINGS
+from tests.support import VARIANTS, material
 
 import numpy as np
 import pytest
@@ -9,14 +12,8 @@ from problems.materials import drucker_prager as dp
 from problems.materials.invariants import M_VEC, deviator, mises, pressure
 from problems.materials.verification import typical_parameters
 
-FORMS = ("linear", "hyperbolic", "exponent")
-HARDENINGS = ("compression", "shear", "tension")
-VARIANTS = [(f, h) for f in FORMS for h in HARDENINGS]
 PATH = {"compression": "uniaxial-compression", "tension": "uniaxial-tension", "shear": "shear"}
 
-
-def material(form, hardening, **overrides):
-    return dp.make_material(form, hardening, {**typical_parameters(form, hardening), **overrides})
 
 
 def _alternative(form, hardening):

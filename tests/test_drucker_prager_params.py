@@ -1,6 +1,9 @@
 """Extended Drucker-Prager: public API, parameter validation, surface constants."""
 import math
 import pickle
+from problems.materials.drucker_prager import FORMS
+from problems.materials.hardening import HARDENINGS
+from tests.support import VARIANTS, material
 
 import numpy as np
 import pytest
@@ -11,9 +14,6 @@ from problems.materials.hardening import REFERENCE_TESTS
 from problems.materials.invariants import HESS_J2, deviator, grad_j2, grad_j3, hess_j3, j2, j3, mises, third_invariant_r
 from problems.materials.verification import typical_parameters, voigt_rotations, rotation_matrix
 
-FORMS = ("linear", "hyperbolic", "exponent")
-HARDENINGS = ("compression", "shear", "tension")
-VARIANTS = [(f, h) for f in FORMS for h in HARDENINGS]
 
 
 def test_form_parameters_are_the_published_contract():

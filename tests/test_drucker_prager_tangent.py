@@ -7,6 +7,9 @@ two orders smaller than E so the same round-off in the stress weighs 100x more; 
 error stays < 1e-8 either way. Comparisons are Frobenius-norm relative per point.
 """
 import math
+from problems.materials.drucker_prager import FORMS
+from problems.materials.hardening import HARDENINGS
+from tests.support import VARIANTS, material
 
 import numpy as np
 import pytest
@@ -18,14 +21,8 @@ from problems.materials.verification import (
 )
 from tests.test_drucker_prager import apex_trials, is_apex, random_deviators, trial_strain
 
-FORMS = ("linear", "hyperbolic", "exponent")
-HARDENINGS = ("compression", "shear", "tension")
-VARIANTS = [(f, h) for f in FORMS for h in HARDENINGS]
 TOL = 1e-6
 
-
-def material(form, hardening, **overrides):
-    return dp.make_material(form, hardening, {**typical_parameters(form, hardening), **overrides})
 
 
 def _yielded_states(mat, n, rng):

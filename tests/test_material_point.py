@@ -11,10 +11,11 @@ from problems.materials.point_driver import COLUMNS, PATHS, run_material_point
 from problems.materials.drucker_prager import make_material
 from problems.materials.elastic import LinearElastic
 from problems.materials.verification import typical_parameters
+from tests.support import material
 
 
 def _dp(form="linear", hardening="compression", **over):
-    return make_material(form, hardening, {**typical_parameters(form, hardening), **over})
+    return material(form, hardening, **over)
 
 
 @pytest.mark.parametrize("path", PATHS)
