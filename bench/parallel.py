@@ -10,14 +10,11 @@ import logging
 import os
 from collections.abc import Callable, Iterator
 
+from problems.inverse.evaluator import sequential_map
+
 #: environment that pins BLAS/OpenMP to one thread in each worker process
 SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                                        "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
-
-
-def sequential_map(fn, items) -> list:
-    """In-process map (debugging, ``--workers 1``)."""
-    return list(map(fn, items))
 
 
 class DaskMapper:
@@ -39,6 +36,23 @@ class DaskMapper:
 
 def _sequential():
     return sequential_map
+
+
+class WorkerClientMapper:
+    """``mapper(fn, items)`` that fans ``items`` out to the cluster the calling task runs on.
+
+    Only valid inside a Dask task; the task secedes from the worker's thread pool while it
+    waits, so it never deadlocks a saturated cluster. Falls back to a loop for one item.
+    """
+
+    def __call__(self, fn, items):
+        items = list(items)
+        if len(items) <= 1:
+            return sequential_map(fn, items)
+        from distributed import worker_client
+
+        with worker_client() as client:
+            return client.gather(client.map(fn, items, pure=False))
 
 
 @contextlib.contextmanager

@@ -300,6 +300,7 @@ class FESummaries:
         self.fe_wall_s = 0.0
 
     def __call__(self, X) -> np.ndarray:
+        from problems.inverse.evaluator import sequential_map
         from problems.inverse.protocol import RunModel
 
         obj = self.objective
@@ -312,7 +313,7 @@ class FESummaries:
                 self.n_infeasible += 1
             else:
                 feasible.append(i)
-        mapper = self.mapper or (lambda fn, items: [fn(x) for x in items])
+        mapper = self.mapper or sequential_map
         results = list(mapper(RunModel(obj.model), [X[i] for i in feasible]))
         self.n_evals += len(feasible)
         for i, res in zip(feasible, results):

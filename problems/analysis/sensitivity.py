@@ -32,6 +32,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from problems.inverse import layout
+from problems.inverse.evaluator import sequential_map
 
 MEASURES = ("ux", "uy", "r")
 """Keys of the three sensitivity measures: horizontal field, vertical field, reaction force."""
@@ -142,10 +143,6 @@ class LocalSensitivities:
         return out
 
 
-def _sequential(fn, items):
-    return [fn(x) for x in items]
-
-
 def local_sensitivities(fields: Callable[[np.ndarray], Fields | None], x_ref, *, delta: float = 0.01,
                         names: Sequence[str] | None = None, mapper=None,
                         active: Sequence[int] | None = None) -> LocalSensitivities:
@@ -169,7 +166,7 @@ def local_sensitivities(fields: Callable[[np.ndarray], Fields | None], x_ref, *,
     if np.any(x_ref == 0):
         raise ValueError("x_ref has zero entries: a relative perturbation is undefined there")
     idx = list(range(n)) if active is None else [int(i) for i in active]
-    mapper = mapper or _sequential
+    mapper = mapper or sequential_map
     safe = _Safe(fields)
 
     def shifted(i, d):
