@@ -157,7 +157,7 @@ def test_shipped_suites_are_valid(name):
     assert s.name == name and len(s.runs()) == len(s) > 0
 
 
-def test_default_and_paper_suites_match_the_issue():
+def test_default_and_paper_suites_have_the_documented_shape():
     from problems.inverse.cases import CASES
 
     d = load_suite(ROOT / "suites" / "default.toml")

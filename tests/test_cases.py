@@ -1,4 +1,4 @@
-"""The nine cases (issue 4): names, parameters, reference values, bounds, starts."""
+"""The nine cases: names, parameters, reference values, bounds, starts."""
 import json
 import math
 

@@ -1,4 +1,4 @@
-"""The Drucker-Prager family in the cube (issue 3): all nine variants converge, quadratically,
+"""The Drucker-Prager family in the cube : all nine variants converge, quadratically,
 and the B-bar element does not lock under isochoric plastic flow."""
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The DIC route of the data (issue 7): FE field -> speckle images -> IC-GN -> measured grid."""
+"""The DIC route of the data: FE field -> speckle images -> IC-GN -> measured grid."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Verification of the FE model of the cube test (issue 2): patch test, analytic answers, convergence."""
+"""Verification of the FE model of the cube test: patch test, analytic answers, convergence."""
 import json
 
 import numpy as np

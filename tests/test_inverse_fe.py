@@ -1,4 +1,4 @@
-"""The FE-backed inverse problem (issue 4): data sets, the objective at the reference, Jacobians.
+"""The FE-backed inverse problem: data sets, the objective at the reference, Jacobians.
 
 A 3 x 3 x 6 mesh keeps these fast; the physics is the same as on the presets.
 """
