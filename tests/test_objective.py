@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from problems.inverse.evaluator import BudgetExhausted
-from problems.inverse.problem import FAILURE_COST
+from problems.inverse.problem import FAILURE_COST, LeastSquaresProblem
 from problems.inverse.protocol import ForwardResult, RunModel
 from tests.support import evaluator
 
@@ -275,3 +275,23 @@ def test_exact_jacobian_is_used_and_charged_as_one_run_in_forward_equivalents():
     cost, grad = obj.gradient(z)
     np.testing.assert_allclose(grad, 2.0 * J.T @ obj.residual(z), rtol=1e-14)
     assert obj.n_evals == 2
+
+
+def test_low_rank_plus_diagonal_covariance_whitens_like_the_full_one():
+    rng = np.random.default_rng(3)
+    m, k = 40, 3
+    sigma = rng.uniform(0.5, 2.0, m)
+    V = rng.normal(size=(m, k))
+    d = rng.normal(size=m)
+    ref = np.ones(2)
+    full = LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref,
+                               covariance=np.diag(sigma**2) + V @ V.T)
+    low = LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, sigma=sigma, covariance_factor=V)
+    cinv = np.linalg.inv(np.diag(sigma**2) + V @ V.T)
+    assert low.whiten(d) @ low.whiten(d) == pytest.approx(d @ cinv @ d, rel=1e-12)
+    assert full.whiten(d) @ full.whiten(d) == pytest.approx(d @ cinv @ d, rel=1e-12)
+    D = rng.normal(size=(m, 2))
+    np.testing.assert_allclose(low.whiten(D)[:, 1], low.whiten(D[:, 1]), rtol=1e-13)
+    with pytest.raises(ValueError, match="covariance_factor"):
+        LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, covariance=np.eye(m),
+                            covariance_factor=V)

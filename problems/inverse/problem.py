@@ -4,9 +4,11 @@ It knows nothing of FE and nothing of counting (that is the evaluator's job)::
 
     R(x) = C^(-1/2) (U_E - U_N(x)),     cost(x) = R^T R
 
-with ``C`` diagonal (``sigma``: scalar or vector of standard deviations) or full
-(``covariance``; its lower Cholesky factor ``L`` is used, ``R = L^-1 (U_E - U_N)``, so that
-``R^T R = d^T C^-1 d``). ``blocks`` names slices of the measurement vector so that the cost can be
+with ``C`` diagonal (``sigma``: scalar or vector of standard deviations), diagonal plus low rank
+(``sigma`` and ``covariance_factor`` V: ``C = diag(sigma^2) + V V^T``, e.g. a model-error
+covariance; whitened with the symmetric square root of the Woodbury form, O(m k)) or full
+(``covariance``; its lower Cholesky factor ``L`` is used, ``R = L^-1 (U_E - U_N)``). In every
+case ``R^T R = d^T C^-1 d``. ``blocks`` names slices of the measurement vector so that the cost can be
 split; with a full covariance the split is that of the Cholesky-whitened residual (it still sums
 to the total). Solvers work in the *scaled* space ``z = x / reference`` (the reference is z = 1).
 """
@@ -36,6 +38,7 @@ class LeastSquaresProblem:
     lower, upper, reference : (n,) physical bounds and reference values (reference != 0)
     sigma      : scalar or (m,) standard deviations (diagonal covariance); default 1
     covariance : (m, m) full covariance (exclusive with ``sigma``)
+    covariance_factor : (m, k) V of an added low-rank covariance ``V V^T`` (with ``sigma``)
     blocks     : names of slices of the measurement vector, for :meth:`split`
     provenance : where the data and the model come from (case, tier, hashes, meshes), reported
     """
@@ -47,6 +50,7 @@ class LeastSquaresProblem:
     reference: np.ndarray
     sigma: np.ndarray | float | None = None
     covariance: np.ndarray | None = None
+    covariance_factor: np.ndarray | None = None
     blocks: dict[str, slice] | None = None
     provenance: dict = field(default_factory=dict)
 
@@ -85,6 +89,13 @@ class LeastSquaresProblem:
             if np.any(s <= 0) or not np.all(np.isfinite(s)):
                 raise ValueError("sigma must be positive and finite")
             self._sigma = s
+        self._lowrank = None
+        if self.covariance_factor is not None:
+            if self.covariance is not None:
+                raise ValueError("covariance_factor goes with sigma, not with a full covariance")
+            V = np.asarray(self.covariance_factor, dtype=float).reshape(m, -1)
+            Q, S, _ = np.linalg.svd(V / self._sigma[:, None], full_matrices=False)
+            self._lowrank = (Q, 1.0 - 1.0 / np.sqrt(1.0 + S * S))   # (I + U U^T)^(-1/2) = I - Q c Q^T
         self.blocks = dict(self.blocks) if self.blocks else {"all": slice(0, m)}
         for name, sl in self.blocks.items():
             if not isinstance(sl, slice) or len(range(m)[sl]) == 0:
@@ -111,7 +122,11 @@ class LeastSquaresProblem:
         d = np.asarray(d, dtype=float)
         if self._chol is not None:
             return solve_triangular(self._chol, d, lower=True)
-        return d / (self._sigma[:, None] if d.ndim == 2 else self._sigma)
+        w = d / (self._sigma[:, None] if d.ndim == 2 else self._sigma)
+        if self._lowrank is not None:
+            Q, c = self._lowrank
+            w = w - Q @ ((c[:, None] if d.ndim == 2 else c) * (Q.T @ w))
+        return w
 
     # --- points and residuals ------------------------------------------------------------------
     def classify(self, Z) -> list[tuple[np.ndarray, str | None]]:

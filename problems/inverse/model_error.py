@@ -1,0 +1,177 @@
+"""Model-error treatments: what the inverse model's discretisation gets wrong, and how the
+objective accounts for it.
+
+With data ``U_E`` made on a fine discretisation and an inverse model ``U_N`` on a coarser one,
+the misfit ``U_E - U_N(x)`` holds the measurement noise *and* the discretisation error
+``eps(x) = U_hifi(x) - U_N(x)``. The treatments, all behind the objective:
+
+* ``none``      : the plain residual.
+* ``one-point`` : ``eps`` evaluated once at the start ``x0`` with a high-fidelity model and
+  subtracted from the data: ``U_E - eps(x0) - U_N(x)``.
+* ``iterated``  : the one-point correction re-evaluated at the current solution, the problem
+  re-solved from there, until the parameters move less than a tolerance (see
+  :func:`solvers.corrected.solve_iterated`).
+* ``bae``       : the Bayesian approximation error approach (Kaipio & Somersalo): ``eps`` over K
+  prior samples (Latin hypercube in the bounds); the data are shifted by its mean and its
+  covariance is added to that of the noise, ``C + C_eps``, kept as low rank plus diagonal.
+
+The honesty rule: the discretisation that made a model-error data set is never used inside the
+inverse loop (forward model, high-fidelity model of a correction, BAE statistics, surrogate
+training); :func:`check_honest` enforces it. Every high-fidelity run is counted apart
+(:class:`Correction` ``n_hifi``, ``hifi_wall_s``) so that it can be charged.
+"""
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from problems.inverse.evaluator import sequential_map
+from problems.inverse.protocol import RunModel
+
+TREATMENTS = ("none", "one-point", "iterated", "bae")
+
+
+class HonestyError(ValueError):
+    """A model inside the inverse loop uses the discretisation that made the data."""
+
+
+def check_honest(data_discretisation: str | None, tier: str, **models_in_loop: str | None) -> None:
+    """Refuse a model-error data set whose discretisation is used by any model in the loop.
+
+    data_discretisation : canonical key of the discretisation that made the data (None: unknown)
+    tier                : ``consistent`` (the data were made with the inverse model itself: allowed,
+                          labelled) or ``model-error``
+    models_in_loop      : role -> canonical discretisation key (e.g. ``forward="coarse/eighth"``,
+                          ``hifi="fine/eighth"``); None entries are ignored
+    """
+    if tier == "consistent" or data_discretisation is None:
+        return
+    for role, key in models_in_loop.items():
+        if key is not None and key == data_discretisation:
+            raise HonestyError(
+                f"the {role} model uses discretisation {key}, which made the model-error data: the "
+                "discretisation that makes pseudo-experimental data is never used inside the inverse loop "
+                "(use the consistent tier, or data made on another discretisation)")
+
+
+@dataclass
+class Correction:
+    """A model-error treatment's effect on the objective.
+
+    treatment  : one of :data:`TREATMENTS`
+    shift      : (m,) subtracted from the data (mean model error), same units as the data
+    factor     : (m, K) low-rank factor V of the added covariance ``C_eps = V V^T`` (or None)
+    n_hifi     : high-fidelity runs it took; ``hifi_wall_s`` their total wall time, s
+    n_inverse  : inverse-model runs it took (beyond the identification's own); ``inverse_wall_s``
+    n_failed   : sample points whose high-fidelity or inverse run failed (left out)
+    points     : (k, n) physical parameter points where eps was evaluated
+    provenance : hifi and inverse discretisations, sample seed, content hash
+    """
+
+    treatment: str
+    shift: np.ndarray | None = None
+    factor: np.ndarray | None = None
+    n_hifi: int = 0
+    hifi_wall_s: float = 0.0
+    n_inverse: int = 0
+    inverse_wall_s: float = 0.0
+    n_failed: int = 0
+    points: np.ndarray | None = None
+    provenance: dict = field(default_factory=dict)
+
+    @property
+    def hash(self) -> str:
+        """Content hash of the statistics (shift, factor, points)."""
+        h = hashlib.sha256(self.treatment.encode())
+        for a in (self.shift, self.factor, self.points):
+            if a is not None:
+                h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+        return h.hexdigest()
+
+    def save(self, path) -> None:
+        """Write the statistics to ``path`` (npz, with the hash and provenance)."""
+        import json
+
+        np.savez_compressed(path, treatment=self.treatment, shift=_or_empty(self.shift),
+                            factor=_or_empty(self.factor), points=_or_empty(self.points),
+                            counts=np.array([self.n_hifi, self.hifi_wall_s, self.n_inverse, self.inverse_wall_s,
+                                             self.n_failed]),
+                            provenance=json.dumps(self.provenance, sort_keys=True), hash=self.hash)
+
+    @classmethod
+    def load(cls, path) -> "Correction":
+        """Read statistics written by :meth:`save`; the content hash is verified."""
+        import json
+
+        with np.load(path, allow_pickle=False) as f:
+            counts = f["counts"]
+            c = cls(str(f["treatment"]), _or_none(f["shift"]), _or_none(f["factor"]), int(counts[0]),
+                    float(counts[1]), int(counts[2]), float(counts[3]), int(counts[4]), _or_none(f["points"]),
+                    json.loads(str(f["provenance"])))
+            if str(f["hash"]) != c.hash:
+                raise ValueError(f"{path}: content hash mismatch (file modified or torn)")
+        return c
+
+
+def _or_empty(a):
+    return np.zeros(0) if a is None else np.asarray(a, float)
+
+
+def _or_none(a):
+    return None if a.size == 0 else np.array(a)
+
+
+def _run_pair(hifi, inverse, X, mapper):
+    """Values of both models at the points X; per point (u_hifi, u_inverse) or None if either failed."""
+    mapper = mapper or sequential_map
+    t0 = time.perf_counter()
+    hi = list(mapper(RunModel(hifi), list(X)))
+    t1 = time.perf_counter()
+    lo = list(mapper(RunModel(inverse), list(X)))
+    t2 = time.perf_counter()
+    pairs = [(h.values, lo_.values) if (h.ok and lo_.ok) else None for h, lo_ in zip(hi, lo)]
+    # wall times: the models' own timings (summed over workers), not the elapsed time of the batch
+    hifi_s = sum(r.wall_s for r in hi) or (t1 - t0)
+    inv_s = sum(r.wall_s for r in lo) or (t2 - t1)
+    return pairs, hifi_s, inv_s
+
+
+def one_point(hifi, inverse, x0, *, mapper=None, provenance: dict | None = None) -> Correction:
+    """The one-point additive correction ``eps(x0) = U_hifi(x0) - U_inverse(x0)`` (physical ``x0``)."""
+    x0 = np.asarray(x0, float)
+    pairs, hifi_s, inv_s = _run_pair(hifi, inverse, [x0], mapper)
+    if pairs[0] is None:
+        raise RuntimeError(f"model-error correction: a model failed at x0 = {x0.tolist()}")
+    hi, lo = pairs[0]
+    return Correction("one-point", shift=np.asarray(hi) - np.asarray(lo), n_hifi=1, hifi_wall_s=hifi_s,
+                      n_inverse=1, inverse_wall_s=inv_s, points=x0[None, :], provenance=dict(provenance or {}))
+
+
+def bae_statistics(hifi, inverse, lower, upper, *, samples: int = 32, seed: int = 0, mapper=None,
+                   rank: int | None = None, provenance: dict | None = None) -> Correction:
+    """Bayesian approximation error: mean and low-rank covariance of ``eps`` over a seeded Latin
+    hypercube of ``samples`` points in the box [lower, upper] (physical units).
+
+    The covariance factor keeps the leading ``rank`` (default: all) principal directions of the
+    centred errors, ``C_eps = V V^T`` with ``V = E_c Q S / sqrt(K - 1)``.
+    """
+    from scipy.stats import qmc
+
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    X = qmc.scale(qmc.LatinHypercube(d=lower.size, seed=np.random.default_rng(seed)).random(samples), lower, upper)
+    X = np.array([x for x in X if hifi.check(x) is None and inverse.check(x) is None])
+    pairs, hifi_s, inv_s = _run_pair(hifi, inverse, X, mapper)
+    good = [i for i, p in enumerate(pairs) if p is not None]
+    if len(good) < 2:
+        raise RuntimeError(f"BAE statistics: only {len(good)} of {len(X)} sample points ran on both models")
+    E = np.array([np.asarray(pairs[i][0]) - np.asarray(pairs[i][1]) for i in good])   # (K, m)
+    mean = E.mean(axis=0)
+    U, S, _ = np.linalg.svd((E - mean).T, full_matrices=False)                       # (m, K)
+    k = len(S) if rank is None else min(rank, len(S))
+    factor = U[:, :k] * (S[:k] / np.sqrt(len(good) - 1))
+    return Correction("bae", shift=mean, factor=factor, n_hifi=len(X), hifi_wall_s=hifi_s, n_inverse=len(X),
+                      inverse_wall_s=inv_s, n_failed=len(X) - len(good), points=X[good],
+                      provenance={**(provenance or {}), "samples": samples, "seed": seed, "rank": k})

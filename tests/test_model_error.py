@@ -1,0 +1,77 @@
+"""Model-error treatments: the honesty rule, one-point and BAE corrections on analytic model pairs."""
+import numpy as np
+import pytest
+
+from problems.inverse.model_error import Correction, HonestyError, bae_statistics, check_honest, one_point
+from problems.inverse.problem import LeastSquaresProblem
+from problems.inverse.protocol import ForwardResult
+
+T = np.linspace(0.0, 1.0, 30)
+
+
+class Coarse:
+    """U(x) = x0 sin(T) + x1 T^2: the 'inverse model'."""
+
+    names = ("x0", "x1")
+
+    def check(self, x):
+        return None
+
+    def values(self, x):
+        return x[0] * np.sin(T) + x[1] * T**2
+
+    def __call__(self, x):
+        return ForwardResult(True, self.values(np.asarray(x)))
+
+
+class Fine(Coarse):
+    """The 'high-fidelity model': the coarse one plus a parameter-dependent bias b(x) = 0.01 x0 T + 0.003."""
+
+    def values(self, x):
+        return super().values(x) + 0.01 * x[0] * T + 0.003
+
+
+def test_honesty_rule_refuses_the_data_discretisation_in_the_loop():
+    check_honest("fine/eighth", "model-error", forward="coarse/eighth", hifi="paper/eighth")
+    with pytest.raises(HonestyError, match="hifi model uses discretisation fine/eighth"):
+        check_honest("fine/eighth", "model-error", forward="coarse/eighth", hifi="fine/eighth")
+    with pytest.raises(HonestyError, match="forward"):
+        check_honest("coarse/eighth", "model-error", forward="coarse/eighth")
+    check_honest("coarse/eighth", "consistent", forward="coarse/eighth")   # the labelled consistent tier
+
+
+def test_one_point_correction_removes_the_bias_at_its_point_and_is_charged():
+    x0 = np.array([2.0, 1.0])
+    c = one_point(Fine(), Coarse(), x0)
+    np.testing.assert_allclose(c.shift, 0.01 * 2.0 * T + 0.003, atol=1e-15)
+    assert (c.n_hifi, c.n_inverse) == (1, 1) and c.hifi_wall_s > 0
+    data = Fine().values(np.array([2.1, 0.9]))
+    p = LeastSquaresProblem(Coarse(), data - c.shift, [1, 0.5], [3, 2], [2, 1], sigma=1e-3)
+    r, _ = p.residual(Coarse().values(np.array([2.1, 0.9])))
+    # the remaining error is the bias difference between x0 and the true point only: 0.01 * 0.1 * T
+    np.testing.assert_allclose(np.abs(r) * 1e-3, 0.001 * T, atol=1e-12)
+
+
+def test_bae_statistics_mean_and_covariance_of_the_model_error():
+    c = bae_statistics(Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=40, seed=1)
+    X = c.points
+    E = 0.01 * X[:, :1] * T[None, :] + 0.003
+    np.testing.assert_allclose(c.shift, E.mean(axis=0), atol=1e-14)
+    np.testing.assert_allclose(c.factor @ c.factor.T, np.cov(E.T), atol=1e-12)
+    assert c.n_hifi == 40 and c.n_failed == 0
+    # same seed, same statistics
+    assert bae_statistics(Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=40, seed=1).hash == c.hash
+
+
+def test_correction_round_trip_and_tamper_detection(tmp_path):
+    c = bae_statistics(Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=8, seed=0, provenance={"hifi": "f"})
+    path = tmp_path / "bae.npz"
+    c.save(path)
+    back = Correction.load(path)
+    assert back.hash == c.hash and back.provenance["hifi"] == "f" and back.n_hifi == 8
+    with np.load(path) as f:
+        arrays = dict(f)
+    arrays["shift"] = arrays["shift"] + 1e-9
+    np.savez(path, **arrays)
+    with pytest.raises(ValueError, match="hash mismatch"):
+        Correction.load(path)
