@@ -15,7 +15,7 @@ from problems.inverse.cases import CASES
 from problems.fe.newton import Loading, discretise, run
 from problems.inverse.forward import FORWARD_SETTINGS, case_material
 from problems.materials import LinearElastic
-from problems.fe.mesh import parse_mesh
+from problems.fe.mesh import parse_mesh_spec
 
 
 def main(argv=None) -> None:
@@ -29,7 +29,8 @@ def main(argv=None) -> None:
           f"{'wall s':>8} {'assem s':>8} {'mater s':>8} {'solve s':>8} {'F kN':>9}")
     for spec in args.meshes.split(","):
         t = time.perf_counter()
-        disc = discretise(parse_mesh(spec))
+        ms = parse_mesh_spec(spec)  # "coarse" solves the eighth model, "coarse:quarter" the whole height
+        disc = discretise(ms.mesh, symmetry=ms.symmetry)
         setup = time.perf_counter() - t
         for name in ["elastic"] + [n for n in names if n != "elastic"] if args.cases == "all" else names:
             mat = LinearElastic() if name == "elastic" else case_material(CASES[name], CASES[name].reference)

@@ -1,8 +1,15 @@
-"""Structured 8-node hexahedral mesh of the quarter cube and its named node sets.
+"""Structured 8-node hexahedral mesh of the quarter cube, its named node sets and its mid-height symmetry.
 
 The quarter model spans x, y in [0, 75] mm and z in [0, 150] mm; x = 0 and y = 0 are symmetry
 planes, z = 0 and z = 150 mm the plates, x = 75 mm the front face the camera sees.
 Node (i, j, k) of the (nx+1) x (ny+1) x (nz+1) grid has index ``i + (nx+1) (j + (ny+1) k)``.
+
+With identical plates top and bottom the test is also symmetric about the mid-height plane
+z = 75 mm, so the FE model may solve only the *eighth* z in [0, 75] mm (the lower half of the
+quarter mesh: a prefix of its node and element arrays) and unfold the answer onto the quarter
+mesh. A mesh spec names the quarter mesh and, optionally, the model that solves it:
+``"coarse"``, ``"coarse:quarter"``, ``"6,6,12:eighth"`` (see :func:`parse_mesh_spec`). The eighth
+is the default wherever it is exact, i.e. whenever nz is even (a node plane at mid-height).
 """
 from __future__ import annotations
 
@@ -15,9 +22,12 @@ SIZE_MM = (75.0, 75.0, 150.0)
 #: named presets: ``coarse`` ~ 400-600, ``paper`` ~ 5 000 (paper: 4 960), ``fine`` 15 000-20 000 elements
 MESH_PRESETS: dict[str, tuple[int, int, int]] = {
     "coarse": (6, 6, 12),   # 432 elements, 12.5 mm cubes
-    "paper": (14, 14, 25),  # 4 900 elements
+    "paper": (14, 14, 26),  # 5 096 elements (was 14 x 14 x 25: nz even gives the exact eighth model)
     "fine": (20, 20, 40),   # 16 000 elements, 3.75 mm cubes (pseudo-experimental data only)
 }
+
+#: models of the quarter mesh: ``eighth`` solves z in [0, 75] mm and unfolds it (nz even only), ``quarter`` all of it
+SYMMETRIES = ("eighth", "quarter")
 
 # Corner order of the 8-node hexahedron (VTK / Abaqus C3D8 order) in the (i, j, k) offsets.
 HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
@@ -85,15 +95,136 @@ def box_mesh(nx: int, ny: int, nz: int, size_mm: tuple[float, float, float] = SI
     return Mesh(nodes, elements[order], (nx, ny, nz))
 
 
-def parse_mesh(spec: str | tuple[int, int, int]) -> Mesh:
-    """Mesh from a preset name (``coarse``, ``paper``, ``fine``), ``"NX,NY,NZ"`` or a tuple."""
+@dataclass(frozen=True)
+class MeshSpec:
+    """A parsed mesh spec: the quarter mesh (nx, ny, nz over the full height) and the model that solves it.
+
+    symmetry : ``eighth`` (solve the lower half z <= 75 mm, unfold the answer; needs nz even) or
+               ``quarter`` (solve the whole height)
+    """
+
+    shape: tuple[int, int, int]
+    symmetry: str
+
+    @property
+    def mesh(self) -> Mesh:
+        """The quarter mesh of the whole height (what responses are reported on)."""
+        return box_mesh(*self.shape)
+
+    def __str__(self) -> str:
+        return f"{','.join(map(str, self.shape))}:{self.symmetry}"
+
+
+def default_symmetry(shape: tuple[int, int, int]) -> str:
+    """``eighth`` where it is exact (nz even: a node plane at mid-height), else ``quarter``."""
+    return "eighth" if shape[2] % 2 == 0 else "quarter"
+
+
+def check_symmetry(symmetry: str, shape: tuple[int, int, int], what: str = "symmetry") -> str:
+    """``symmetry`` if it is known and exact on a mesh of ``shape``; ValueError naming ``what`` otherwise."""
+    if symmetry not in SYMMETRIES:
+        raise ValueError(f"{what} {symmetry!r} is unknown; allowed: {', '.join(SYMMETRIES)}")
+    if symmetry == "eighth" and shape[2] % 2:
+        raise ValueError(f"{what} 'eighth' needs an even NZ (a node plane at mid-height), got NZ = {shape[2]}; "
+                         f"use NZ = {shape[2] + 1} or 'quarter'")
+    return symmetry
+
+
+def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
+    """Parse ``MESH[:SYMMETRY]``: MESH a preset (``coarse``, ``paper``, ``fine``), ``NX,NY,NZ`` or a tuple;
+    SYMMETRY ``eighth`` or ``quarter``, by default ``eighth`` where it is exact (NZ even)."""
+    if isinstance(spec, MeshSpec):
+        return spec
+    symmetry = None
     if isinstance(spec, tuple):
-        return box_mesh(*spec)
-    if spec in MESH_PRESETS:
-        return box_mesh(*MESH_PRESETS[spec])
-    if re.fullmatch(r"\s*\d+\s*,\s*\d+\s*,\s*\d+\s*", spec):
-        return box_mesh(*(int(s) for s in spec.split(",")))
-    raise ValueError(f"mesh {spec!r} is unknown; allowed: {', '.join(MESH_PRESETS)} or NX,NY,NZ (whole numbers >= 1)")
+        for name, n in zip("xyz", spec):
+            if int(n) != n or n < 1:
+                raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
+        shape = tuple(int(n) for n in spec)
+    else:
+        base, sep, symmetry = str(spec).partition(":")
+        base, symmetry = base.strip(), (symmetry.strip() if sep else None)
+        if base in MESH_PRESETS:
+            shape = MESH_PRESETS[base]
+        elif re.fullmatch(r"\s*\d+\s*,\s*\d+\s*,\s*\d+\s*", base):
+            shape = tuple(int(t) for t in base.split(","))
+            for name, n in zip("xyz", shape):
+                if n < 1:
+                    raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
+        else:
+            raise ValueError(f"mesh {spec!r} is unknown; allowed: {', '.join(MESH_PRESETS)} or NX,NY,NZ "
+                             f"(whole numbers >= 1), optionally followed by :{'|:'.join(SYMMETRIES)}")
+    if symmetry is None:
+        return MeshSpec(shape, default_symmetry(shape))
+    return MeshSpec(shape, check_symmetry(symmetry, shape, f"mesh {spec!r}: symmetry"))
+
+
+def parse_mesh(spec: str | tuple[int, int, int] | MeshSpec) -> Mesh:
+    """The quarter mesh of a spec (see :func:`parse_mesh_spec`; the symmetry suffix does not change it)."""
+    return parse_mesh_spec(spec).mesh
+
+
+def mid_height_mirror(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Source of every node and element of a mesh symmetric about mid-height in its lower half.
+
+    Returns ``node_src, node_upper, elem_src, elem_upper``: for each node (element) of ``mesh`` the
+    index of its mirror image in the lower half z <= z_mid (itself when it lies there), and whether it
+    lies strictly above the mid-plane. The lower half is a prefix of the node and element arrays, so
+    the indices are also those of :func:`lower_half`.
+    """
+    nx, ny, nz = mesh.shape
+    if nz % 2:
+        raise ValueError(f"the mid-height mirror needs an even nz (a node plane at mid-height), got nz = {nz}")
+    layer_n, layer_e = (nx + 1) * (ny + 1), nx * ny
+    k = np.arange(mesh.n_nodes) // layer_n
+    node_src = np.arange(mesh.n_nodes) - (k - np.minimum(k, nz - k)) * layer_n
+    ke = np.arange(mesh.n_elements) // layer_e
+    elem_src = np.arange(mesh.n_elements) - (ke - np.minimum(ke, nz - 1 - ke)) * layer_e
+    z = mesh.nodes[:, 2]
+    z0, z1 = z[0], z[-1]
+    if not (np.allclose(mesh.nodes[:, :2], mesh.nodes[node_src, :2], rtol=0, atol=1e-9 * (z1 - z0))
+            and np.allclose(np.where(k > nz // 2, z0 + z1 - z, z), z[node_src], rtol=0, atol=1e-9 * (z1 - z0))):
+        raise ValueError("the mesh is not symmetric about its mid-height plane")
+    return node_src, k > nz // 2, elem_src, ke >= nz // 2
+
+
+def lower_half(mesh: Mesh) -> Mesh:
+    """The part z <= z_mid of a mesh symmetric about mid-height (nz even): nz / 2 layers, same element size."""
+    mid_height_mirror(mesh)  # checks nz even and the symmetry of the nodes
+    nx, ny, nz = mesh.shape
+    n_nodes, n_elements = (nx + 1) * (ny + 1) * (nz // 2 + 1), nx * ny * (nz // 2)
+    return Mesh(mesh.nodes[:n_nodes].copy(), mesh.elements[:n_elements].copy(), (nx, ny, nz // 2))
+
+
+#: Voigt order of the stress (xx, yy, zz, yz, xz, xy); the mirror z -> -z flips yz and xz
+Z_MIRROR_VOIGT = np.array([1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
+def z_mirror_signs(names) -> np.ndarray:
+    """Sign of each named history variable under z -> -z: -1 for the ``*_yz`` and ``*_xz`` tensor components."""
+    return np.array([-1.0 if n.endswith(("_yz", "_xz", "_zy", "_zx")) else 1.0 for n in names])
+
+
+def unfold_mid_height(mesh: Mesh, top_mm: np.ndarray, displacements: np.ndarray, stress: np.ndarray,
+                      state: np.ndarray, state_names) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fields of the eighth model (lower half of ``mesh``) unfolded onto the whole of ``mesh``.
+
+    top_mm        : (N,) top-plate displacement per snapshot, mm (compression positive)
+    displacements : (N, n_half_nodes, 3) mm;  stress : (N, n_half_elements, 6) MPa;  state : (N, n_half_elements, s)
+
+    Mirror image of the point (x, y, z) is (x, y, L - z): u_x, u_y are even, u_z(L - z) = -delta - u_z(z)
+    (the top moves by -delta, the bottom is fixed); stress and tensor history variables keep their
+    components except yz and xz, which change sign.
+    """
+    node_src, node_up, elem_src, elem_up = mid_height_mirror(mesh)
+    u = displacements[:, node_src].copy()
+    top = np.asarray(top_mm, float).reshape(-1, 1)
+    u[:, node_up, 2] = -top - u[:, node_up, 2]
+    s = stress[:, elem_src].copy()
+    s[:, elem_up] *= Z_MIRROR_VOIGT
+    h = state[:, elem_src].copy()
+    h[:, elem_up] *= z_mirror_signs(state_names)
+    return u, s, h
 
 
 def distort(mesh: Mesh, amount: float, seed: int = 0) -> Mesh:

@@ -1,5 +1,10 @@
 """Quasi-static small-strain FE analysis of the quarter cube between rigid plates.
 
+The quarter (x, y in [0, 75], z in [0, 150] mm) is solved whole (``symmetry="quarter"``) or, using
+the mid-height symmetry of identical plates, as its lower half (``symmetry="eighth"``: z in [0, 75]
+mm, mid-plane u_z = -delta/2 prescribed, u_x and u_y free there) whose answer :func:`run` unfolds onto
+the quarter mesh, so a :class:`Response` is the same whichever model solved it.
+
 Full Newton-Raphson with the material's consistent tangent (possibly non-symmetric), one sparse
 direct solve per iteration (SuperLU), convergence on the relative residual force *and* the relative
 displacement correction, fixed sub-increments between snapshots and automatic bisection of an
@@ -24,7 +29,7 @@ import scipy.sparse.linalg as spla
 from problems.fe.assembly import Pattern, build_pattern, element_forces, element_matrices
 from problems.fe.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
 from problems.materials.base import Material
-from problems.fe.mesh import Mesh, nested_dissection_order
+from problems.fe.mesh import Mesh, check_symmetry, lower_half, nested_dissection_order, unfold_mid_height
 
 PLATES = ("friction", "frictionless")
 
@@ -78,32 +83,57 @@ class NewtonSettings:
 
 @dataclass(frozen=True, eq=False)
 class Discretisation:
-    """Everything about a mesh that does not change between runs: B-bar, volumes, sparsity."""
+    """Everything about a mesh that does not change between runs: B-bar, volumes, sparsity.
+
+    ``mesh`` is the mesh that is solved; ``full_mesh`` the quarter mesh of the whole height that
+    responses are reported on (the same mesh for ``symmetry="quarter"``, twice as tall for ``eighth``).
+    """
 
     mesh: Mesh
     B: np.ndarray        # (ne, 8, 6, 24)
     dV: np.ndarray       # (ne, 8) mm^3
     pattern: Pattern
+    symmetry: str = "quarter"
+    full_mesh: Mesh | None = None
+
+    def __post_init__(self):
+        if self.full_mesh is None:
+            object.__setattr__(self, "full_mesh", self.mesh)
 
     @property
     def n_points(self) -> int:
         return self.dV.size
 
 
-def discretise(mesh: Mesh, *, use_b_bar: bool = True) -> Discretisation:
+def discretise(mesh: Mesh, *, use_b_bar: bool = True, symmetry: str = "quarter") -> Discretisation:
     """Precompute the strain operators, integration weights and sparsity pattern of ``mesh``.
 
+    ``mesh`` is the quarter mesh of the whole height. ``symmetry="eighth"`` solves only its lower
+    half (nz even, mesh symmetric about mid-height; exact for identical plates, which are the only
+    option); runs still report on ``mesh``. Mesh specs choose it by default where it is exact
+    (:func:`problems.fe.mesh.parse_mesh_spec`); this low-level call solves what it is given.
     ``use_b_bar=False`` gives the standard fully integrated element, which locks under
     (nearly) isochoric deformation; it exists to demonstrate that, not for production runs.
     """
+    check_symmetry(symmetry, mesh.shape)
+    full = mesh
+    if symmetry == "eighth":
+        mesh = lower_half(mesh)
     dNdx, detJ = gradients(mesh.nodes[mesh.elements])
     B = b_bar(dNdx, detJ) if use_b_bar else strain_operator(dNdx)
-    return Discretisation(mesh, B, detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes))
+    return Discretisation(mesh, B, detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes),
+                          symmetry, full)
 
 
 @dataclass(frozen=True, eq=False)
 class BoundaryConditions:
-    """Constrained dofs of the plate test and the extraction map of the free-free block."""
+    """Constrained dofs of the plate test and the extraction map of the free-free block.
+
+    quarter: x0 u_x = 0, y0 u_y = 0, z0 (bottom plate) u_z = 0, z1 (top plate) u_z = -delta;
+             friction plates also fix u_x, u_y on z0 and z1.
+    eighth : the same on x0, y0 and z0; z1 is the mid-height plane: u_z = -delta/2, u_x and u_y
+             free (no shear traction on a symmetry plane), whatever the plates.
+    """
 
     disc: Discretisation
     plates: str
@@ -113,13 +143,29 @@ class BoundaryConditions:
         m = self.disc.mesh
         dofs = [3 * m.face("x0"), 3 * m.face("y0") + 1, 3 * m.face("z0") + 2, self.top_z]
         if self.plates == "friction":
-            for face in ("z0", "z1"):
+            for face in ("z0", "z1") if self.disc.symmetry == "quarter" else ("z0",):
                 dofs += [3 * m.face(face), 3 * m.face(face) + 1]
         return np.unique(np.concatenate(dofs))
 
     @cached_property
     def top_z(self) -> np.ndarray:
+        """The prescribed moving dofs: u_z of the top plate (quarter) or of the mid-height plane (eighth)."""
         return 3 * self.disc.mesh.face("z1") + 2
+
+    @property
+    def top_fraction(self) -> float:
+        """Displacement of the ``top_z`` dofs per unit top-plate displacement."""
+        return 0.5 if self.disc.symmetry == "eighth" else 1.0
+
+    def plate_force_kN(self, f_int: np.ndarray) -> float:
+        """Vertical force of the whole specimen on the top plate, kN, compression positive.
+
+        quarter: -4 x the z internal forces on the top plate; eighth: 4 x those on the bottom plate,
+        the mirror image of the top plate (equal to the mid-plane force to the Newton tolerance).
+        """
+        if self.disc.symmetry == "eighth":
+            return 4.0 * f_int[3 * self.disc.mesh.face("z0") + 2].sum() / 1000.0
+        return -4.0 * f_int[self.top_z].sum() / 1000.0
 
     @cached_property
     def free(self) -> np.ndarray:
@@ -160,11 +206,13 @@ class BoundaryConditions:
 class Response:
     """Result of one forward run (only the completed snapshots when ``converged`` is False).
 
+    mesh          : the quarter mesh of the whole height (also when the eighth model solved it)
     snapshots_mm  : (N,) top-plate displacement at each snapshot, mm (compression positive)
     reaction_kN   : (N,) vertical plate force on the whole specimen (4 x quarter), kN, compression positive
     displacements : (N, n_nodes, 3) nodal displacement field, mm
     stress        : (N, n_elements, 6) element-mean stress, MPa
     state         : (N, n_elements, n_state) element-mean history variables (e.g. eqps)
+    symmetry      : the model that was solved (``eighth``: fields above z = 75 mm are mirror images)
     """
 
     mesh: Mesh
@@ -182,6 +230,7 @@ class Response:
     wall_s: float
     timing: dict = field(default_factory=dict)
     residual_history: list = field(default_factory=list)  # per increment: relative residual norms
+    symmetry: str = "quarter"
 
     def front_face(self, points_mm) -> tuple[np.ndarray, np.ndarray]:
         """In-plane displacements of the front face x = 75 mm at points (m, 2) = (y, z) mm.
@@ -221,7 +270,7 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         target = k / loading.snapshots
         while lam < target - 1e-12:
             dlam = min(step, target - lam)
-            inc = solver.increment(u, stress, state, D, -dlam * loading.displacement_mm)
+            inc = solver.increment(u, stress, state, D, -dlam * loading.displacement_mm * bc.top_fraction)
             if inc.ok:
                 u, stress, state, D, f_int = inc.u, inc.stress, inc.state, inc.tangent, inc.f_int
                 lam += dlam
@@ -241,20 +290,24 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         out_u.append(u.reshape(nn, 3).copy())
         out_s.append(stress.reshape(ne, 8, 6).mean(axis=1))
         out_h.append(state.reshape(ne, 8, -1).mean(axis=1))
-        out_f.append(-4.0 * f_int[bc.top_z].sum() / 1000.0)
+        out_f.append(bc.plate_force_kN(f_int))
         out_d.append(lam * loading.displacement_mm)
         if bar is not None:
             bar.update(1)
     if bar is not None:
         bar.close()
     n_state = len(material.state_names)
+    fields = (np.array(out_u).reshape(len(out_u), nn, 3), np.array(out_s).reshape(len(out_s), ne, 6),
+              np.array(out_h).reshape(len(out_h), ne, n_state))
+    if disc.symmetry == "eighth":
+        fields = unfold_mid_height(disc.full_mesh, np.array(out_d), *fields, material.state_names)
     return Response(
-        mesh=disc.mesh,
+        mesh=disc.full_mesh,
         snapshots_mm=np.array(out_d),
         reaction_kN=np.array(out_f),
-        displacements=np.array(out_u).reshape(len(out_u), nn, 3),
-        stress=np.array(out_s).reshape(len(out_s), ne, 6),
-        state=np.array(out_h).reshape(len(out_h), ne, n_state),
+        displacements=fields[0],
+        stress=fields[1],
+        state=fields[2],
         state_names=tuple(material.state_names),
         converged=converged,
         message=message,
@@ -264,6 +317,7 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         wall_s=time.perf_counter() - t0,
         timing=dict(solver.timing),
         residual_history=solver.residual_history,
+        symmetry=disc.symmetry,
     )
 
 
