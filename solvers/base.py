@@ -34,6 +34,7 @@ from typing import Any, Callable
 import numpy as np
 
 from problems.inverse.evaluator import BudgetExhausted, Evaluator
+from problems.io import jsonio
 from solvers.result import RunResult
 
 FAMILIES = ("local", "global", "sampling")
@@ -55,7 +56,7 @@ class MethodInfo:
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "library": self.library, "family": self.family,
                 "stochastic": self.stochastic, "description": self.description,
-                "options": {k: {"default": _plain(d), "description": s} for k, (d, s) in self.options.items()}}
+                "options": {k: {"default": jsonio.plain(d), "description": s} for k, (d, s) in self.options.items()}}
 
 
 @dataclass
@@ -151,7 +152,7 @@ class Run:
                "x": [] if z is None else [float(v) for v in obj.to_physical(z)]}
         if self.phase:
             row["phase"] = self.phase
-        row.update({k: _plain(v) for k, v in more.items()})
+        row.update({k: jsonio.plain(v) for k, v in more.items()})
         self.history.append(row)
 
     def record_log(self, start: int = 0) -> None:
@@ -271,18 +272,20 @@ def solve(objective: Evaluator, method: str, *, budget: int, seed: int | None = 
     else:
         x, cost = best.x.copy(), best.cost
     success = status == "converged" or (info.family != "local" and status in ("budget", "max_iterations"))
-    extra = {k: _plain(v) for k, v in out.extra.items()}
+    extra = {k: jsonio.plain(v) for k, v in out.extra.items()}
     if obj.n_jacobian_failures:
         extra["n_jacobian_failures"] = obj.n_jacobian_failures
     return RunResult(
-        method=run.method, options={k: _plain(v) for k, v in opts.items()}, seed=seed, budget=budget,
+        method=run.method, options={k: jsonio.plain(v) for k, v in opts.items()}, seed=seed, budget=budget,
         parameter_names=list(obj.names), reference=[float(v) for v in obj.reference],
         x0=[float(v) for v in x0], x=[float(v) for v in x],
         x_normalised=[float(v) for v in obj.to_scaled(x)], cost=float(cost), status=status,
         success=bool(success), message=message, n_evals=obj.n_evals, n_failed=obj.n_failed,
         n_infeasible=obj.n_infeasible, n_cache_hits=obj.n_cache_hits,
         n_iterations=int(out.n_iterations if out.n_iterations is not None else run.n_iterations),
-        wall_s=wall, history=run.history, extra=extra,
+        wall_s=wall, forward_equivalents=obj.forward_equivalents(),
+        charges={k: {**c, "forward_equivalents": obj.charged_equivalents()[k]} for k, c in obj.charges.items()},
+        provenance=jsonio.plain(dict(obj.provenance)), history=run.history, extra=extra,
     )
 
 
@@ -293,16 +296,3 @@ def lhs(n: int, lower, upper, rng: np.random.Generator) -> np.ndarray:
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     unit = qmc.LatinHypercube(d=lower.size, seed=rng).random(n)
     return lower + unit * (upper - lower)
-
-
-def _plain(v):
-    """JSON-friendly: numpy scalars/arrays become Python floats/lists, recursively."""
-    if isinstance(v, np.ndarray):
-        return _plain(v.tolist())
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, dict):
-        return {str(k): _plain(w) for k, w in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(w) for w in v]
-    return v

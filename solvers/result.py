@@ -17,6 +17,11 @@ class RunResult:
 
     ``n_evals`` counts *every* forward-model evaluation the run triggered (Jacobian columns,
     failed and infeasible points included); cache hits are counted apart in ``n_cache_hits``.
+    ``forward_equivalents`` is ``n_evals`` in plain-forward-run units (a run with exact
+    sensitivities weighs its measured wall time over the median plain run); ``charges`` holds the
+    runs made on the run's behalf outside the objective (``{kind: {"n", "wall_s",
+    "forward_equivalents"}}``: high-fidelity corrections, surrogate training); ``provenance`` says
+    which case, data (tier, hash, discretisation), inverse model and treatment were used.
     ``history`` has one row per iteration or generation: ``{"iteration", "n_evals",
     "best_cost", "cost", "x"}``.
     """
@@ -40,6 +45,9 @@ class RunResult:
     n_cache_hits: int = 0
     n_iterations: int = 0
     wall_s: float = 0.0
+    forward_equivalents: float = 0.0
+    charges: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
     history: list[dict[str, Any]] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
 

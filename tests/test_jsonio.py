@@ -23,3 +23,8 @@ def test_plain_json_is_unchanged():
     assert jsonio.encode(doc) == doc
     with pytest.raises(ValueError):
         jsonio.loads("{not json")
+
+
+def test_plain_keeps_non_finite_floats():
+    out = jsonio.plain({"a": np.array([np.nan, 1.0]), "b": (np.float64(np.inf),)})
+    assert math.isnan(out["a"][0]) and out["b"] == [math.inf] and type(out["a"][1]) is float

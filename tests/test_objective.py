@@ -295,3 +295,13 @@ def test_low_rank_plus_diagonal_covariance_whitens_like_the_full_one():
     with pytest.raises(ValueError, match="covariance_factor"):
         LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, covariance=np.eye(m),
                             covariance_factor=V)
+
+
+def test_charges_survive_reset_and_convert_to_forward_equivalents():
+    model = ExactQuadratic()
+    obj = evaluator(model, np.zeros(4), lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0])
+    obj.charge("hifi", 2, 10.0)            # two high-fidelity runs, 5 s each
+    obj.reset()
+    obj.costs([[1.0, 1.0], [1.1, 1.0]])    # plain runs of 1 s each
+    assert obj.charges == {"hifi": {"n": 2, "wall_s": 10.0}}
+    assert obj.charged_equivalents() == {"hifi": pytest.approx(10.0)}

@@ -16,6 +16,10 @@ Accounting (honest: what a user pays for)
 * :meth:`forward_equivalents` converts the evaluations into plain forward runs by measured wall
   time: a plain or infeasible evaluation is one, a run with sensitivities is its wall time over
   the median wall time of the plain runs of the same evaluator.
+* :meth:`charge` records runs made on the identification's behalf outside the evaluator
+  (high-fidelity runs of a model-error correction, surrogate training runs); they survive
+  :meth:`reset` (they belong to how the objective was set up) and are converted to
+  forward-equivalents the same way (:meth:`charged_equivalents`).
 * ``log`` holds one dict per evaluation, cache hits included (``cached=True``):
   ``{"x", "cost", "ok", "feasible", "wall_s", "cached", "n_evals", "kind"}``, ``kind`` being
   ``"plain"`` or ``"jacobian"``.
@@ -107,6 +111,7 @@ class Evaluator:
         self.cache = cache
         self.exact_jacobian = exact_jacobian and provides_jacobian(problem.model)
         self._warned = False
+        self.charges: dict[str, dict[str, float]] = {}
         self.reset()
 
     # --- the problem, as a solver sees it --------------------------------------------------------
@@ -161,11 +166,27 @@ class Evaluator:
         return {"n_evals": self.n_evals, "n_failed": self.n_failed, "n_infeasible": self.n_infeasible,
                 "n_cache_hits": self.n_cache_hits, "forward_equivalents": self.forward_equivalents()}
 
+    def charge(self, kind: str, n: int, wall_s: float) -> None:
+        """Record ``n`` runs of ``kind`` (e.g. ``"hifi"``, ``"training"``) taking ``wall_s`` s in all."""
+        c = self.charges.setdefault(kind, {"n": 0, "wall_s": 0.0})
+        c["n"] += int(n)
+        c["wall_s"] += float(wall_s)
+
+    def _unit_s(self) -> float | None:
+        """Median wall time of this evaluator's successful plain runs, s (the forward-equivalent)."""
+        plain = [e["wall_s"] for e in self.log
+                 if not e["cached"] and e["kind"] == "plain" and e["ok"] and e["feasible"]]
+        return float(np.median(plain)) if plain else None
+
+    def charged_equivalents(self) -> dict[str, float]:
+        """Each charged kind in forward-equivalents (its wall time over the plain-run median)."""
+        unit = self._unit_s()
+        return {k: (c["wall_s"] / unit if unit else float(c["n"])) for k, c in self.charges.items()}
+
     def forward_equivalents(self) -> float:
         """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall time)."""
         new = [e for e in self.log if not e["cached"]]
-        plain = [e["wall_s"] for e in new if e["kind"] == "plain" and e["ok"] and e["feasible"]]
-        unit = float(np.median(plain)) if plain else None
+        unit = self._unit_s()
         total = 0.0
         for e in new:
             if e["kind"] == "jacobian" and e["ok"] and unit:

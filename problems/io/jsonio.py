@@ -11,6 +11,18 @@ from typing import Any
 _SPECIAL = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}
 
 
+def plain(obj: Any) -> Any:
+    """A copy of ``obj`` with numpy arrays and scalars as Python lists and numbers, dict keys as
+    strings and tuples as lists (non-finite floats are kept: see :func:`encode`)."""
+    if isinstance(obj, dict):
+        return {str(k): plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v) for v in obj]
+    if hasattr(obj, "tolist") and not isinstance(obj, (str, bytes)):  # numpy arrays and scalars
+        return plain(obj.tolist())
+    return obj
+
+
 def encode(obj: Any) -> Any:
     """A JSON-ready copy of ``obj``: dict keys as strings, numpy arrays and scalars as Python,
     non-finite floats as ``"inf"``, ``"-inf"``, ``"nan"``."""
