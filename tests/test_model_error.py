@@ -75,3 +75,28 @@ def test_correction_round_trip_and_tamper_detection(tmp_path):
     np.savez(path, **arrays)
     with pytest.raises(ValueError, match="hash mismatch"):
         Correction.load(path)
+
+
+def _objective(correction, data):
+    from problems.inverse.evaluator import Evaluator
+
+    shift = 0.0 if correction is None else correction.shift
+    return Evaluator(LeastSquaresProblem(Coarse(), data - shift, [1.0, 0.5], [3.0, 1.5], [2.0, 1.0], sigma=1e-3))
+
+
+def test_iterated_correction_converges_to_the_truth_where_one_point_does_not():
+    from solvers import solve
+    from solvers.corrected import solve_iterated
+
+    truth, x0 = np.array([2.4, 0.8]), np.array([1.6, 1.2])
+    data = Fine().values(truth)
+    plain = solve(_objective(None, data), "lm", budget=200, x0=x0)
+    once = solve(_objective(one_point(Fine(), Coarse(), x0), data), "lm", budget=200, x0=x0)
+    it = solve_iterated(lambda c: _objective(c, data), lambda x: one_point(Fine(), Coarse(), x), "lm",
+                        budget=400, x0=x0, tol=1e-6)
+    err = {k: np.max(np.abs(np.asarray(r.x) / truth - 1)) for k, r in
+           {"none": plain, "one-point": once, "iterated": it}.items()}
+    assert err["iterated"] < 1e-6 < err["one-point"] < err["none"]
+    assert it.extra["correction_converged"] and len(it.extra["correction_rounds"]) >= 2
+    assert it.charges["hifi"]["n"] == len(it.extra["correction_rounds"])
+    assert it.n_evals == sum(r["n_evals"] for r in it.extra["correction_rounds"]) <= 400
