@@ -150,20 +150,17 @@ class Suite:
 
 # --- what is allowed ------------------------------------------------------------------------
 
-def _meshes() -> tuple[str, ...]:
-    """Named mesh presets of the FE model (a mesh may also be given as "NX,NY,NZ")."""
-    from problems.fe.mesh import MESH_PRESETS
+def _mesh_error(mesh) -> str | None:
+    """Why ``mesh`` is not a valid mesh spec (``coarse``, ``NX,NY,NZ``, optionally ``:quarter``), or None."""
+    from problems.fe.mesh import parse_mesh_spec
 
-    return tuple(MESH_PRESETS)
-
-
-def _mesh_ok(mesh) -> bool:
     if not isinstance(mesh, str):
-        return False
-    if mesh in _meshes():
-        return True
-    parts = mesh.split(",")
-    return len(parts) == 3 and all(p.strip().isdigit() and int(p) >= 1 for p in parts)
+        return f"mesh must be a string, got {mesh!r}"
+    try:
+        parse_mesh_spec(mesh)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 def _data_settings() -> dict[str, tuple]:
@@ -318,8 +315,9 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         err('[suite] random_starts is set but starts does not list "random"')
 
     mesh = s.get("mesh", "coarse")
-    if not _mesh_ok(mesh):
-        err(f"[suite] mesh {mesh!r} is unknown; allowed: {', '.join(_meshes())} or \"NX,NY,NZ\" (integers >= 1)")
+    why = _mesh_error(mesh)
+    if why:
+        err(f"[suite] {why}")
 
     # [data]
     raw_data = raw.get("data", {})
