@@ -4,7 +4,8 @@
   raises — any exception becomes a record with ``status == "failed"`` and the traceback in the
   message (and in ``record["error"]``), so one crash never takes a suite down.
 * :func:`run_suite` skips every run that already has a record in ``DIR/runs/`` and runs the
-  rest: ``workers=1`` in a plain loop in this process (debugging, profiling), otherwise on a
+  rest (a record file that cannot be read is moved into ``DIR/runs/corrupt/``, logged, and its
+  run runs again): ``workers=1`` in a plain loop in this process (debugging, profiling), otherwise on a
   Dask ``LocalCluster`` of ``workers`` single-threaded worker processes (default: one per
   core, BLAS/OpenMP pinned to one thread), or on an existing cluster given by ``scheduler``.
   Records are written by this process (the client) as runs complete, atomically, so a
@@ -257,11 +258,16 @@ class SuiteSummary:
     removed_tmp: int = 0
     log_file: Path | None = None
     failures: list[str] = field(default_factory=list)
+    set_aside: list[Path] = field(default_factory=list)
 
     def __str__(self) -> str:
-        return (f"suite {self.name!r}: {self.total} runs, {self.skipped} already done, {self.ran} run now "
+        text = (f"suite {self.name!r}: {self.total} runs, {self.skipped} already done, {self.ran} run now "
                 f"({self.failed} not successful, {self.crashed} crashed) in {self.wall_s:.1f} s; "
                 f"records in {store.runs_dir(self.out_dir)}")
+        if self.set_aside:
+            text += (f"; {len(self.set_aside)} unreadable record(s) moved to {store.corrupt_dir(self.out_dir)} "
+                     "(their runs were run again)")
+        return text
 
 
 def default_workers() -> int:
@@ -305,25 +311,25 @@ def _suite_log(path: Path):
 
 
 def pending_runs(suite: Suite, out_dir: str | Path, *, force: bool = False, retry_failed: bool = False):
-    """``(all_runs, pending)``: the suite's runs and those to run now (no record yet, or all of
-    them with ``force``, or also the crashed ones with ``retry_failed``)."""
+    """``(all_runs, pending)``: the suite's runs and those to run now (no readable record yet, or
+    all of them with ``force``, or also the crashed ones with ``retry_failed``)."""
     runs = suite.runs()
     if force:
         return runs, list(runs)
-    done = store.done_hashes(out_dir)
+    done = {rec["config_hash"]: rec for rec in store.scan_records(out_dir)[0]}
     pending = [r for r in runs if config_hash(r) not in done]
     if retry_failed:
-        for r in runs:
-            h = config_hash(r)
-            if h in done:
-                try:
-                    rec = store.read_record(store.record_path(out_dir, h))
-                except (OSError, ValueError):
-                    pending.append(r)
-                    continue
-                if rec.get("error"):
-                    pending.append(r)
+        pending += [r for r in runs if done.get(config_hash(r), {}).get("error")]
     return runs, pending
+
+
+def set_aside_unreadable(out_dir: Path) -> list[Path]:
+    """Move the unreadable records of ``out_dir`` aside (logged); return their new paths."""
+    moved = []
+    for old, new, why in store.set_aside_unreadable(out_dir):
+        log.warning("unreadable record %s (%s) moved to %s; its run counts as not done", old.name, why, new)
+        moved.append(new)
+    return moved
 
 
 def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, scheduler: str | None = None,
@@ -343,9 +349,10 @@ def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, 
             store.atomic_write_text(out_dir / f"{suite.name}.suite.toml", suite.source)
         log_file = out_dir / f"{suite.name}.log"
         with _suite_log(log_file):
+            set_aside = set_aside_unreadable(out_dir)
             runs, pending = pending_runs(suite, out_dir, force=force, retry_failed=retry_failed)
             summary = SuiteSummary(suite.name, out_dir, len(runs), len(runs) - len(pending),
-                                   removed_tmp=removed, log_file=log_file)
+                                   removed_tmp=removed, log_file=log_file, set_aside=set_aside)
             if removed:
                 log.warning("removed %d stray temporary file(s) left by an interrupted run", removed)
             n_workers = workers if workers is not None else min(default_workers(), max(1, len(pending)))

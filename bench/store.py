@@ -7,6 +7,12 @@ and lives in ``DIR/runs/<hash>.json``. It is written to a temporary file in the 
 none. Stray ``*.tmp`` files left by a killed writer are ignored by the loaders and removed by
 :func:`clean_tmp` (which the runner calls while holding the directory lock).
 
+A record file that cannot be read as a record (truncated, empty, not JSON, JSON of the wrong
+shape, or named after another hash) counts as missing: the loaders skip it and return it in
+:func:`scan_records`'s ``unreadable`` list, and the runner moves it into ``DIR/runs/corrupt/``
+(as ``<hash>.json.corrupt-<UTC time>``, see :func:`set_aside_unreadable`) before running its
+run again.
+
 Record (JSON object)::
 
     schema       int, RECORD_SCHEMA
@@ -29,11 +35,16 @@ import logging
 import math
 import os
 import tempfile
+import time
 from pathlib import Path
 from typing import Any, Iterator
 
 RECORD_SCHEMA = 1
 RUNS = "runs"
+#: Sub-folder of ``DIR/runs`` holding the unreadable records the runner moved aside.
+CORRUPT = "corrupt"
+#: Keys the ``config`` of a record must have.
+CONFIG_KEYS = ("case", "method", "seed", "start", "start_index", "budget")
 
 log = logging.getLogger("femubench.store")
 
@@ -47,6 +58,10 @@ def runs_dir(out_dir: str | Path) -> Path:
 
 def record_path(out_dir: str | Path, config_hash: str) -> Path:
     return runs_dir(out_dir) / f"{config_hash}.json"
+
+
+def corrupt_dir(out_dir: str | Path) -> Path:
+    return runs_dir(out_dir) / CORRUPT
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
@@ -89,6 +104,39 @@ def read_record(path: str | Path) -> dict[str, Any]:
         return json.load(fh)
 
 
+def load_record(path: str | Path) -> dict[str, Any]:
+    """Read the record file ``path`` and check its shape; ValueError saying what is wrong."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ValueError("not UTF-8 text") from None
+    except OSError as exc:
+        raise ValueError(f"cannot be read ({exc.strerror or exc})") from None
+    if not text.strip():
+        raise ValueError("empty file")
+    try:
+        rec = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"not valid JSON (truncated?): {exc}") from None
+    check_record(rec, path.stem)
+    return rec
+
+
+def check_record(rec, config_hash: str) -> None:
+    """ValueError unless ``rec`` has the shape of a record stored under ``config_hash``."""
+    if not isinstance(rec, dict):
+        raise ValueError(f"a JSON {type(rec).__name__}, not a record object")
+    if rec.get("config_hash") != config_hash:
+        raise ValueError(f"config_hash {rec.get('config_hash')!r} does not match the file name")
+    config, result = rec.get("config"), rec.get("result")
+    if not isinstance(config, dict) or not isinstance(result, dict):
+        raise ValueError("'config' or 'result' missing or not an object")
+    missing = [k for k in CONFIG_KEYS if k not in config]
+    if missing:
+        raise ValueError(f"config lacks {', '.join(missing)}")
+
+
 def has_record(out_dir: str | Path, config_hash: str) -> bool:
     return record_path(out_dir, config_hash).is_file()
 
@@ -111,25 +159,32 @@ def clean_tmp(out_dir: str | Path) -> int:
     return n
 
 
-def iter_records(out_dir: str | Path) -> Iterator[dict[str, Any]]:
-    """Yield every complete record of ``DIR/runs`` (sorted by hash); unreadable files are skipped
-    with a warning, stray ``*.tmp`` files are ignored and reported."""
+def scan_records(out_dir: str | Path) -> tuple[list[dict[str, Any]], list[tuple[Path, str]]]:
+    """``(records, unreadable)``: every complete record of ``DIR/runs`` (sorted by hash) and the
+    ``(path, reason)`` of every record file that could not be read as a record. Stray ``*.tmp``
+    files are ignored and reported."""
     d = runs_dir(out_dir)
     if not d.is_dir():
-        return
+        return [], []
     tmp = stray_tmp(out_dir)
     if tmp:
         log.warning("ignoring %d stray temporary file(s) in %s (left by an interrupted run)", len(tmp), d)
+    records, unreadable = [], []
     for p in sorted(d.glob("*.json")):
         try:
-            rec = read_record(p)
-        except (OSError, json.JSONDecodeError) as exc:  # should not happen with atomic writes
-            log.warning("skipping unreadable record %s: %s", p, exc)
-            continue
-        if not isinstance(rec, dict) or "config_hash" not in rec or "result" not in rec:
-            log.warning("skipping %s: not a femubench record", p)
-            continue
-        yield rec
+            records.append(load_record(p))
+        except ValueError as exc:
+            unreadable.append((p, str(exc)))
+    return records, unreadable
+
+
+def iter_records(out_dir: str | Path) -> Iterator[dict[str, Any]]:
+    """Yield every complete record of ``DIR/runs`` (sorted by hash); unreadable files are skipped
+    with a warning, stray ``*.tmp`` files are ignored and reported."""
+    records, unreadable = scan_records(out_dir)
+    for p, why in unreadable:
+        log.warning("skipping unreadable record %s: %s", p, why)
+    yield from records
 
 
 def load_records(out_dir: str | Path) -> list[dict[str, Any]]:
@@ -138,9 +193,32 @@ def load_records(out_dir: str | Path) -> list[dict[str, Any]]:
 
 
 def done_hashes(out_dir: str | Path) -> set[str]:
-    """Hashes of the runs that have a record (by file name; no parsing)."""
-    d = runs_dir(out_dir)
-    return {p.stem for p in d.glob("*.json")} if d.is_dir() else set()
+    """Hashes of the runs that have a readable record."""
+    return {rec["config_hash"] for rec in scan_records(out_dir)[0]}
+
+
+def set_aside(path: Path) -> Path:
+    """Move the record file ``path`` into ``runs/corrupt/<name>.corrupt-<UTC time>``; return the new path."""
+    dest_dir = path.parent / CORRUPT
+    dest_dir.mkdir(exist_ok=True)
+    stem = f"{path.name}.corrupt-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    dest, n = dest_dir / stem, 1
+    while dest.exists():
+        dest, n = dest_dir / f"{stem}-{n}", n + 1
+    os.replace(path, dest)
+    return dest
+
+
+def set_aside_unreadable(out_dir: str | Path) -> list[tuple[Path, Path, str]]:
+    """Move every unreadable record of ``DIR/runs`` into ``DIR/runs/corrupt/`` (only call while no
+    writer is active: the runner's lock); return ``(old path, new path, reason)`` of each."""
+    return [(p, set_aside(p), why) for p, why in scan_records(out_dir)[1]]
+
+
+def set_aside_files(out_dir: str | Path) -> list[Path]:
+    """The unreadable record files moved aside so far (``DIR/runs/corrupt/``)."""
+    d = corrupt_dir(out_dir)
+    return sorted(p for p in d.iterdir() if p.is_file()) if d.is_dir() else []
 
 
 def parameter_order(names) -> list[str]:

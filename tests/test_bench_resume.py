@@ -114,6 +114,42 @@ def test_sigkill_part_way_then_resume_gives_the_uninterrupted_result(tmp_path):
     assert _tables(out) == _tables(ref)
 
 
+def test_torn_records_are_rerun_kept_aside_and_reported_by_the_cli(tmp_path, capsys):
+    from bench.cli import main
+
+    suite_file = tmp_path / "torn.toml"
+    suite_file.write_text('[suite]\nname = "torn"\ncases = ["analytic-linear"]\nmethods = ["lm"]\n'
+                          'seeds = [0, 1, 2]\nbudgets = [40]\n')
+    out = tmp_path / "out"
+    assert main(["run", str(suite_file), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    paths = sorted(store.runs_dir(out).glob("*.json"))
+    assert len(paths) == 3
+    paths[0].write_text(paths[0].read_text()[:100])      # truncated, as by a full disk
+    paths[1].write_text("")                              # empty
+    paths[2].write_bytes(b"\xff\xfe garbage")            # not even text
+    capsys.readouterr()
+
+    assert main(["report", str(out), "--format", "md", "--no-figures"]) == 2  # nothing readable: an error ...
+    err = capsys.readouterr().err
+    assert all(f"unreadable record {p} left out" in err for p in paths)      # ... naming every bad file
+    assert "(3 unreadable)" in err
+
+    assert main(["run", str(suite_file), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    stdout = capsys.readouterr().out
+    assert "0 already done, 3 run now" in stdout and "3 unreadable record(s) moved to" in stdout
+    aside = store.set_aside_files(out)
+    assert sorted(p.name.split(".corrupt-")[0] for p in aside) == [p.name for p in paths]
+    assert len(store.load_records(out)) == 3
+    log = (out / "torn.log").read_text()
+    assert all(f"moved to {a}" in log for a in aside)
+
+    assert main(["report", str(out), "--format", "md", "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    md = (out / "report" / "report.md").read_text()
+    for a in aside:
+        assert str(a) in err and f"runs/corrupt/{a.name}" in md
+
+
 def config_hash_of(record) -> str:
     from bench.suite import RunConfig
 

@@ -167,3 +167,47 @@ def test_dry_run_counts_and_runs_nothing(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "16 runs, 0 with a record" in out and "16 to run" in out and "at most 800 forward evaluations" in out
     assert not (tmp_path / "o" / "runs").exists()
+
+
+CORRUPTIONS = {
+    "truncated": lambda text: text[: len(text) // 2],
+    "empty": lambda text: "",
+    "garbage": lambda text: "\x00\x17 not json at all {{{",
+    "wrong shape": lambda text: json.dumps([{"config_hash": "x"}]),
+    "other hash": lambda text: text.replace('"config_hash":"', '"config_hash":"0', 1),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(CORRUPTIONS))
+def test_an_unreadable_record_is_moved_aside_rerun_and_reported(tmp_path, kind, capsys):
+    from bench.report import write_report
+
+    suite = parse_suite(SUITE)
+    run_suite(suite, tmp_path, workers=1, progress=False)
+    victim = store.record_path(tmp_path, config_hash(suite.runs()[0]))
+    bad = CORRUPTIONS[kind](victim.read_text())
+    victim.write_text(bad)
+    assert victim.stem not in store.done_hashes(tmp_path)
+    assert len(store.scan_records(tmp_path)[1]) == 1
+
+    write_report(tmp_path, ["md"], figures=False)  # before the rerun: the record is left out, and named
+    err = capsys.readouterr().err
+    assert f"unreadable record {victim} left out" in err
+    md = (tmp_path / "report" / "report.md").read_text()
+    assert "## Unreadable records" in md and f"runs/{victim.name} left out" in md
+    assert "**3 runs**" in md
+
+    summary = run_suite(suite, tmp_path, workers=1, progress=False)
+    assert summary.skipped == 3 and summary.ran == 1  # the torn run is run again, the others not
+    (aside,) = store.set_aside_files(tmp_path)
+    assert aside.parent == store.corrupt_dir(tmp_path) and aside.name.startswith(f"{victim.name}.corrupt-")
+    assert aside.read_text() == bad  # kept as found, for inspection
+    assert summary.set_aside == [aside] and "1 unreadable record(s) moved to" in str(summary)
+    log = (tmp_path / "tiny.log").read_text()
+    assert f"unreadable record {victim.name}" in log and str(aside) in log
+    assert len(store.load_records(tmp_path)) == 4 and store.scan_records(tmp_path)[1] == []
+
+    write_report(tmp_path, ["md"], figures=False)  # after the rerun: complete, the file kept aside is named
+    assert f"kept aside by 'femubench run' (its run was run again): {aside}" in capsys.readouterr().err
+    md = (tmp_path / "report" / "report.md").read_text()
+    assert "**4 runs**" in md and f"runs/corrupt/{aside.name}" in md

@@ -1,4 +1,11 @@
-"""``femubench data``: make (or check) pseudo-experimental data sets."""
+"""``femubench data``: make (or check) pseudo-experimental data sets.
+
+Where a data set is written: ``--out FILE`` for one case, ``--out DIR`` (``DIR/<case>.json``) for
+``all``; without ``--out``, default settings go to the default data set (shipped, or in
+``$FEMUBENCH_DATA_DIR``) — only with ``--force`` when that file exists — and other settings to the
+cache (``$FEMUBENCH_CACHE_DIR``). DIC-route images go next to the data file, in
+``<stem>__dic_images/``.
+"""
 from __future__ import annotations
 
 NAME = "data"
@@ -13,28 +20,65 @@ def add_arguments(p) -> None:
     p.add_argument("--force-resolution-kN", type=float, default=0.1, help="force rounding, kN (default 0.1)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     p.add_argument("--route", choices=["fe", "dic"], default="fe",
-                   help="fe: displacements from the FE field; dic: rendered speckle images correlated by DIC")
-    p.add_argument("--out", metavar="FILE", help="write here (default: the shipped file or the cache)")
+                   help="fe: displacements from the FE field; dic: rendered speckle images correlated by DIC "
+                        "(images in <data file stem>__dic_images/ next to the data file)")
+    p.add_argument("--out", metavar="FILE|DIR",
+                   help="write here: a file for one case, a directory (DIR/<case>.json) for 'all' "
+                        "(default: the shipped file for default settings, else the cache)")
+    p.add_argument("--force", action="store_true", help="allow overwriting a shipped (default) data set")
     p.add_argument("--check", action="store_true",
                    help="recompute and compare byte for byte with the existing file (exit 1 on a difference)")
 
 
+def target_paths(names: list[str], settings, out: str | None, *, every: bool) -> dict:
+    """``{case: path}`` each data set is written to (or checked against); ValueError for an
+    ``--out`` that does not fit: a file name for ``all``."""
+    from pathlib import Path
+
+    from problems.inverse.data import DataSettings, cached_path, default_path
+
+    if out is None:
+        default = settings == DataSettings()
+        return {n: default_path(n) if default else cached_path(n, settings) for n in names}
+    out = Path(out)
+    if every:
+        if (out.exists() and not out.is_dir()) or out.suffix == ".json":
+            raise ValueError(f"--out {out}: 'all' writes one file per case, so --out must be a directory")
+        return {n: out / f"{n}.json" for n in names}
+    return {n: out / f"{n}.json" if out.is_dir() else out for n in names}
+
+
+def refuse_shipped(paths, force: bool) -> None:
+    """ValueError if a path is an existing default data set (shipped, or in ``$FEMUBENCH_DATA_DIR``)
+    and ``force`` is not given."""
+    from problems.inverse.data import SHIPPED_DIR, data_dir
+
+    protected = {SHIPPED_DIR.resolve(), data_dir().resolve()}
+    for path in paths:
+        if not force and path.exists() and path.resolve().parent in protected:
+            raise ValueError(f"{path} is a shipped data set; add --force to overwrite it")
+
+
 def main(args) -> int:
     from dataclasses import replace
-    from pathlib import Path
 
     from tqdm import tqdm
 
     from problems.inverse.cases import CASES, get_case
-    from problems.inverse.data import DataSettings, cached_path, default_path, make_data, save
+    from problems.inverse.data import DataSettings, dic_image_dir, make_data, save
 
-    names = list(CASES) if args.case == "all" else [get_case(args.case).name]
+    every = args.case == "all"
+    names = list(CASES) if every else [get_case(args.case).name]
     settings = DataSettings(mesh=args.mesh, resolution_um=args.resolution_um, noise_um=args.noise_um,
                             force_resolution_kN=args.force_resolution_kN, seed=args.seed, route=args.route)
+    paths = target_paths(names, settings, args.out, every=every)
+    if not args.check:
+        refuse_shipped(paths.values(), args.force)
     status = 0
     for name in tqdm(names, desc="data sets", disable=len(names) == 1):
-        path = Path(args.out) if args.out else (default_path(name) if settings == DataSettings() else cached_path(name, settings))
-        ds = make_data(name, replace(settings), progress=True)
+        path = paths[name]
+        images = None if args.check else dic_image_dir(path)
+        ds = make_data(name, replace(settings), progress=True, image_dir=images)
         text = ds.to_json()
         if args.check:
             same = path.exists() and path.read_text() == text

@@ -1,7 +1,8 @@
 """The report of a results directory: tables, figures and ``report.md`` in ``DIR/report/``.
 
 The report reads only the records on disk (through :func:`bench.store.to_frames`); it knows
-nothing of how the runs were executed. It is rebuilt from scratch each time in a temporary
+nothing of how the runs were executed. Record files it cannot read (and those ``femubench run``
+moved into ``DIR/runs/corrupt/``) are listed in report.md and on stderr. It is rebuilt from scratch each time in a temporary
 directory that then replaces ``DIR/report`` (so no stale table or figure survives).
 
 Layout::
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -32,18 +34,26 @@ def write_report(out_dir: str | Path, formats=("md", "csv", "tex"), *, tol: floa
 
     ``formats``: any of md, csv, tex (tables), pdf (figures also as PDF), parquet (the tidy
     DataFrames ``runs.parquet`` and ``history.parquet``). ``tol``: success tolerance in percent.
+    Every record file that could not be read is named on stderr and in report.md.
     """
     from bench import store
 
     out_dir = Path(out_dir)
     formats = [f.lower() for f in formats]
-    runs, history = store.to_frames(out_dir)
+    records, unreadable = store.scan_records(out_dir)
+    set_aside = store.set_aside_files(out_dir)
+    for line in unreadable_lines(unreadable, set_aside):
+        print(f"femubench report: {line}", file=sys.stderr)
+    runs, history = store.to_frames(out_dir, records)
     if not len(runs):
-        raise ValueError(f"no run records in {store.runs_dir(out_dir)}; run 'femubench run SUITE --out {out_dir}' first")
+        raise ValueError(f"no run records in {store.runs_dir(out_dir)}"
+                         + (f" that could be read ({len(unreadable)} unreadable)" if unreadable else "")
+                         + f"; run 'femubench run SUITE --out {out_dir}' first")
     final = out_dir / "report"
     tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".report-"))
     try:
-        build_report(runs, history, tmp, formats, tol=tol, figures=figures, source=out_dir)
+        build_report(runs, history, tmp, formats, tol=tol, figures=figures, source=out_dir,
+                     unreadable=unreadable, set_aside=set_aside)
         old = None
         if final.exists():
             old = out_dir / f".report-old-{os.getpid()}"
@@ -57,7 +67,24 @@ def write_report(out_dir: str | Path, formats=("md", "csv", "tex"), *, tol: floa
     return final / "report.md"
 
 
-def build_report(runs, history, dest: Path, formats, *, tol: float, figures: bool, source: Path) -> Path:
+def unreadable_lines(unreadable, set_aside, base: Path | None = None) -> list[str]:
+    """One line per record file the report could not use: unreadable ones (left out of every
+    table) and those ``femubench run`` moved aside for inspection; paths relative to ``base`` if given."""
+    def show(p):
+        return _rel(p, base) if base is not None else str(p)
+
+    lines = [f"unreadable record {show(p)} left out: {why}" for p, why in unreadable]
+    lines += [f"unreadable record kept aside by 'femubench run' (its run was run again): {show(p)}"
+              for p in set_aside]
+    return lines
+
+
+def build_report(runs, history, dest: Path, formats, *, tol: float, figures: bool, source: Path,
+                 unreadable=(), set_aside=()) -> Path:
+    """Write the tables, figures and report.md of ``runs``/``history`` into ``dest``.
+
+    ``unreadable``: ``(path, reason)`` of the record files that could not be read; ``set_aside``:
+    the files moved into ``runs/corrupt/``; both are listed in report.md."""
     from bench.report import tables as T
 
     dest.mkdir(parents=True, exist_ok=True)
@@ -69,6 +96,13 @@ def build_report(runs, history, dest: Path, formats, *, tol: float, figures: boo
     md: list[str] = []
     md.append(f"# femubench report: `{source.resolve().name}`\n")
     md += _overview(runs, history, cases, methods, budgets, tol)
+    if unreadable or set_aside:
+        md.append("## Unreadable records\n")
+        md.append("Record files that could not be read as records (truncated, empty, not JSON or of the wrong "
+                  "shape). Unreadable records in `runs/` are left out of every table below; rerun the suite to "
+                  "redo their runs (`femubench run` moves them to `runs/corrupt/` first).\n")
+        lines = unreadable_lines(unreadable, set_aside, base=source)
+        md.append("".join(f"- {line}\n" for line in lines))
 
     # --- Table 1 per method (x budget) ------------------------------------------------------
     md.append("## Table 1: residual error of the identified parameters\n")

@@ -7,7 +7,8 @@ value and infinite standard deviation: they carry no weight in the objective. Th
 taken diagonal: on the 5 mm grid the 21 px subsets do not overlap, so points are independent, and
 the u_h-u_v covariance of one point is small for an isotropic speckle (it is kept in ``meta``).
 The images (PackBits TIFF) and a Fig.-2-like figure of a few subsets (reference, warped,
-deformed) are written to ``results/data/cache/<case>__dic_images/``; they are not part of the
+deformed) are written to the ``image_dir`` the caller gives (``femubench data`` and the data
+cache use ``<data file stem>__dic_images/`` next to the data file); they are not part of the
 data file: camera, speckle and DIC settings and the seed regenerate them.
 """
 from __future__ import annotations
@@ -37,14 +38,14 @@ def front_face_fields(response) -> list:
     return fields
 
 
-def dic_dataset(case, settings, x, response, *, progress: bool = True):
-    """A :class:`problems.inverse.data.Dataset` whose displacements were measured by DIC on rendered images."""
+def dic_dataset(case, settings, x, response, *, progress: bool = True, image_dir=None):
+    """A :class:`problems.inverse.data.Dataset` whose displacements were measured by DIC on rendered images.
+
+    ``image_dir``: where the images and the Fig.-2-like subset figure go (None: not written).
+    """
     from problems.inverse.data import Dataset, _round, package_version
     from problems.dic import measure_front_face
 
-    from problems.inverse.data import DATA_DIR
-
-    image_dir = DATA_DIR / "cache" / f"{case.name}__dic_images"   # images + Fig.-2-like subset figure
     m = measure_front_face(front_face_fields(response), settings.points, seed=settings.seed, progress=progress,
                            image_dir=image_dir, figure=True)
     ok = m.converged

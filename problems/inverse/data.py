@@ -2,13 +2,22 @@
 
 One data set is one JSON file (format ``femubench-data/1``) holding the measurements, the
 settings that made them and a SHA-256 content hash. The same settings give the same bytes.
-The nine default sets ship in ``results/data/`` so that the main job never needs the fine mesh.
+
+Where data sets live:
+
+* the nine default sets ship as package data in ``problems/inverse/datasets/`` (so that the main
+  job never needs the fine mesh); the environment variable ``FEMUBENCH_DATA_DIR`` points the
+  look-up at another directory of ``<case>.json`` files instead;
+* data sets of other settings are computed on first use and cached in ``FEMUBENCH_CACHE_DIR``
+  (default ``$XDG_CACHE_HOME/femubench/data``, i.e. ``~/.cache/femubench/data``), never inside
+  the installed package; DIC-route images go next to the data file, in ``<stem>__dic_images/``.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import math
+import os
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -20,7 +29,28 @@ from problems.fe.newton import Loading
 from problems.fe.front_face import measurement_grid
 
 FORMAT = "femubench-data/1"
-DATA_DIR = Path(__file__).resolve().parents[2] / "results" / "data"
+#: The shipped default data sets (package data of problems.inverse).
+SHIPPED_DIR = Path(__file__).resolve().parent / "datasets"
+#: Environment variable: directory of the default data sets, instead of :data:`SHIPPED_DIR`.
+DATA_DIR_ENV = "FEMUBENCH_DATA_DIR"
+#: Environment variable: directory of the cache of computed non-default data sets.
+CACHE_DIR_ENV = "FEMUBENCH_CACHE_DIR"
+
+
+def data_dir() -> Path:
+    """Directory of the default data sets: ``$FEMUBENCH_DATA_DIR`` if set, else the shipped ones."""
+    env = os.environ.get(DATA_DIR_ENV)
+    return Path(env).expanduser() if env else SHIPPED_DIR
+
+
+def cache_dir() -> Path:
+    """Directory of computed non-default data sets: ``$FEMUBENCH_CACHE_DIR`` if set, else
+    ``$XDG_CACHE_HOME/femubench/data`` (default ``~/.cache/femubench/data``)."""
+    env = os.environ.get(CACHE_DIR_ENV)
+    if env:
+        return Path(env).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base).expanduser() / "femubench" / "data"
 
 
 @dataclass(frozen=True)
@@ -137,10 +167,11 @@ def displacement_std_mm(settings: DataSettings) -> float:
 
 
 def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None, progress: bool = False,
-              **overrides) -> Dataset:
+              image_dir: str | Path | None = None, **overrides) -> Dataset:
     """Compute a data set: the FE response at ``x`` (default: the case's reference) on ``settings.mesh``.
 
     Keyword overrides go into :class:`DataSettings` (``make_data(case, mesh="coarse", resolution_um=0)``).
+    ``image_dir``: where the DIC route writes its images (default: nowhere; see :func:`dic_image_dir`).
     Raises RuntimeError when the data model itself does not converge.
     """
     from problems.inverse.forward import FEForwardModel
@@ -154,7 +185,7 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
         raise RuntimeError(f"data model of {case.name} on mesh {settings.mesh} failed: {resp.message}")
     u_h, u_v = resp.front_face(settings.points)
     if settings.route == "dic":
-        return _dic_dataset(case, settings, x, resp)
+        return _dic_dataset(case, settings, x, resp, image_dir)
     rng = np.random.default_rng(settings.seed)
     noise = settings.noise_um * 1e-3
     if noise > 0:
@@ -167,11 +198,17 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
                    {"package_version": package_version(), "mesh": resp.mesh.info()})
 
 
-def _dic_dataset(case: Case, settings: DataSettings, x, resp) -> Dataset:
+def _dic_dataset(case: Case, settings: DataSettings, x, resp, image_dir=None) -> Dataset:
     """The DIC route: render speckle images of the response, correlate them back (see problems.dic)."""
     from problems.dic.route import dic_dataset
 
-    return dic_dataset(case, settings, x, resp)
+    return dic_dataset(case, settings, x, resp, image_dir=image_dir)
+
+
+def dic_image_dir(path: str | Path) -> Path:
+    """Where the DIC images of the data file ``path`` go: ``<parent>/<stem>__dic_images/``."""
+    path = Path(path)
+    return path.parent / f"{path.stem}__dic_images"
 
 
 def save(ds: Dataset, path: str | Path) -> Path:
@@ -185,30 +222,81 @@ def save(ds: Dataset, path: str | Path) -> Path:
 
 
 def load(path: str | Path) -> Dataset:
-    """Read a data set, checking its format and content hash."""
+    """Read a data set, checking its format, fields, shapes and content hash.
+
+    Raises ValueError (one line, naming the file and the offending field) for a file that is not
+    a data set, and FileNotFoundError for a missing one.
+    """
     path = Path(path)
     try:
-        doc = json.loads(path.read_text())
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"data file {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"data file {path} cannot be read: {exc}") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"data file {path} is not valid JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"data file {path}: expected a JSON object, got a {type(doc).__name__}")
     if doc.get("format") != FORMAT:
         raise ValueError(f"data file {path}: format {doc.get('format')!r} is not {FORMAT!r}")
+    missing = [k for k in _FIELDS if k not in doc]
+    if missing:
+        raise ValueError(f"data file {path}: field(s) {', '.join(missing)} missing")
     if doc.get("hash") != _digest(doc):
         raise ValueError(f"data file {path}: content hash does not match (file modified or truncated)")
-    return Dataset(doc["case"], DataSettings(**doc["settings"]), doc["parameters"], np.array(doc["points"]),
-                   np.array(doc["snapshots_mm"]), np.array(doc["u_h"]), np.array(doc["u_v"]),
-                   np.array(doc["reaction_kN"]), np.array(doc["std_u_mm"]), doc.get("meta", {}))
+    try:
+        return _dataset_from_doc(doc)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"data file {path}: {exc}") from None
+
+
+#: Fields every data file must have (``meta`` is optional).
+_FIELDS = ("case", "settings", "parameters", "points", "snapshots_mm", "u_h", "u_v", "reaction_kN", "std_u_mm",
+           "hash")
+
+
+def _dataset_from_doc(doc: dict) -> Dataset:
+    """The Dataset of a parsed data file; ValueError naming the field whose type or shape is wrong."""
+    for name, kind in (("case", str), ("settings", dict), ("parameters", dict)):
+        if not isinstance(doc[name], kind):
+            raise ValueError(f"field {name} must be a JSON {'string' if kind is str else 'object'}")
+    try:
+        settings = DataSettings(**doc["settings"])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"field settings: {exc}") from None
+    arrays = {name: _array(doc, name) for name in ("points", "snapshots_mm", "u_h", "u_v", "reaction_kN", "std_u_mm")}
+    n, m = settings.snapshots, len(arrays["points"])
+    expected = {"points": (m, 2), "snapshots_mm": (n,), "u_h": (n, m), "u_v": (n, m), "reaction_kN": (n,),
+                "std_u_mm": (2, n, m)}
+    for name, shape in expected.items():
+        if arrays[name].shape != shape:
+            raise ValueError(f"field {name} has shape {arrays[name].shape}, expected {shape} "
+                             f"({n} snapshots, {m} points)")
+    meta = doc.get("meta", {})
+    if not isinstance(meta, dict):
+        raise ValueError("field meta must be a JSON object")
+    return Dataset(doc["case"], settings, doc["parameters"], arrays["points"], arrays["snapshots_mm"], arrays["u_h"],
+                   arrays["u_v"], arrays["reaction_kN"], arrays["std_u_mm"], meta)
+
+
+def _array(doc: dict, name: str) -> np.ndarray:
+    """``doc[name]`` as a float array (ValueError naming the field if it is not a numeric array)."""
+    try:
+        return np.array(doc[name], dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"field {name} is not a rectangular array of numbers") from None
 
 
 def default_path(case: str) -> Path:
-    """Where the shipped default data set of ``case`` lives."""
-    return DATA_DIR / f"{case}.json"
+    """Where the default data set of ``case`` lives (shipped, or in ``$FEMUBENCH_DATA_DIR``)."""
+    return data_dir() / f"{case}.json"
 
 
 def cached_path(case: str, settings: DataSettings) -> Path:
-    """Cache file of a non-default data set, keyed by the settings."""
+    """Cache file of a non-default data set, keyed by the settings (in :func:`cache_dir`)."""
     key = hashlib.sha256(json.dumps(asdict(settings), sort_keys=True).encode()).hexdigest()[:12]
-    return DATA_DIR / "cache" / f"{case}__{key}.json"
+    return cache_dir() / f"{case}__{key}.json"
 
 
 def get_data(case: str, settings: DataSettings | None = None, *, progress: bool = False) -> Dataset:
@@ -219,6 +307,6 @@ def get_data(case: str, settings: DataSettings | None = None, *, progress: bool 
         return load(path)
     if progress:
         print(f"computing data for {case} on mesh {settings.mesh} (cached in {path}) ...", flush=True)
-    ds = make_data(case, settings, progress=progress)
+    ds = make_data(case, settings, progress=progress, image_dir=dic_image_dir(path))
     save(ds, path)
     return ds
