@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from bench import store
-from bench.parallel import SINGLE_THREAD_ENV  # thread pinning for every worker process
+from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper  # thread pinning for every worker process
 from bench.suite import RunConfig, Suite, config_hash
 
 log = logging.getLogger("femubench.runner")
@@ -106,7 +106,7 @@ def machine() -> dict[str, Any]:
 def initial_point(case, config: RunConfig):
     """The physical start point x0 of a run: the case's default start, or the
     ``start_index``-th seeded Latin-hypercube start of ``seed``."""
-    from problems.inverse.build import start_point
+    from problems.inverse.starts import start_point
 
     if config.start == "default":
         return start_point(case, kind="default", seed=config.seed)
@@ -114,7 +114,9 @@ def initial_point(case, config: RunConfig):
 
 
 def is_analytic(case_name: str) -> bool:
-    return case_name.startswith("analytic-")
+    from problems.inverse.cases import get_case
+
+    return get_case(case_name).is_analytic
 
 
 def dataset_for(config: RunConfig, *, progress: bool = False):
@@ -217,24 +219,6 @@ def make_record(config: RunConfig, result, *, suite=None, data_hash=None, error=
 
 
 # --- inside a Dask task --------------------------------------------------------------------
-
-class WorkerClientMapper:
-    """``mapper(fn, items)`` that fans ``items`` out to the cluster the calling task runs on.
-
-    Only valid inside a Dask task; the task secedes from the worker's thread pool while it
-    waits, so it never deadlocks a saturated cluster. Falls back to a loop for one item.
-    """
-
-    def __call__(self, fn, items):
-        items = list(items)
-        if len(items) <= 1:
-            return [fn(item) for item in items]
-        from distributed import worker_client
-
-        with worker_client() as client:
-            futures = client.map(fn, items, pure=False)
-            return client.gather(futures)
-
 
 def _dask_task(config: dict, suite: str | None, fan_out: bool, dataset=None) -> dict:
     """The Dask task: one identification (module-level so that it pickles by reference)."""

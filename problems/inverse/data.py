@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from problems.inverse.cases import Case, get_case
+from problems.inverse.case import Case
+from problems.inverse.cases import get_case
 from problems.fe.newton import Loading
 from problems.fe.front_face import measurement_grid
 
