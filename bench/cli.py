@@ -42,8 +42,9 @@ def package_version() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code.
 
-    Bad input (ValueError, FileNotFoundError) gives a one-line message and exit code 2; a closed
-    output pipe (``femubench ... | head``) ends the program quietly with exit code 141.
+    Bad input (ValueError, or an OSError such as a missing file or an output path that is a
+    directory) gives a one-line message and exit code 2; a closed output pipe (``femubench ... |
+    head``) ends the program quietly with exit code 141; Ctrl-C with 130.
     """
     try:
         try:
@@ -53,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         silence_stdout()
         return 141  # 128 + SIGPIPE, like other tools whose reader went away
+    except KeyboardInterrupt:
+        print("femubench: interrupted", file=sys.stderr)
+        return 130
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -64,7 +68,9 @@ def run(argv: list[str] | None = None) -> int:
         return 0
     try:
         return int(args._main(args) or 0)
-    except (ValueError, FileNotFoundError) as exc:  # bad input: a clear message, no traceback
+    except BrokenPipeError:
+        raise
+    except (ValueError, OSError) as exc:  # bad input: a clear message, no traceback
         print(f"femubench {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -31,3 +31,13 @@ def test_a_closed_output_pipe_gives_no_traceback(argv):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) in (0, 141), err  # argparse itself ignores a failed --help write
     assert err == ""
+
+
+def test_an_output_path_that_is_a_directory_is_a_one_line_error(tmp_path, capsys):
+    suite = tmp_path / "s.toml"
+    suite.write_text('[suite]\ncases = ["analytic-linear"]\nmethods = ["lm"]\nbudgets = [10]\n')
+    blocker = tmp_path / "out"
+    blocker.write_text("a file where a folder should be")
+    code = main(["run", str(suite), "--out", str(blocker), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("femubench run: error:") and len(err.strip().splitlines()) == 1
