@@ -1,7 +1,8 @@
 """Compiled (numba) per-point kernels of the extended Drucker-Prager family: the third invariant
 and its derivatives, the yield functions and flow potentials with the derivatives the return
-mapping needs, the apex return of the linear cone, the meridional-plane start, and the Newton
-return mapping with its consistent tangent.
+mapping needs, the apex return of the linear cone, the meridional-plane start, the Newton
+return mapping with its consistent tangent, and the parameter sensitivities of the update
+(direct differentiation of the converged return).
 
 This module is the one implementation of that arithmetic. The dataclasses of
 :mod:`yield_surfaces`, the functions of :mod:`invariants` and the material of
@@ -10,7 +11,8 @@ this file; the equations are documented there and in ``docs/drucker_prager.md``.
 
 Why one file: numba's on-disk cache (``cache=True``) is invalidated only when the file that
 defines a cached function changes, not when a function it calls from *another* file does, so
-kernels spread over several modules could silently keep running stale compiled code.
+kernels spread over several modules could silently keep running stale compiled code (the
+sensitivity kernels call the residual, the potentials and the apex return, hence live here too).
 
 Conventions are those of :mod:`invariants`: Voigt ``[xx, yy, zz, yz, xz, xy]`` with tensor shear
 components for stresses; gradients with respect to the six Voigt components are strain-like
@@ -23,7 +25,9 @@ Parameter vectors (built by the dataclasses, see ``kernel_params``):
 * yield surface ``yp`` (6): ``[code, ...]`` with code LINEAR ``[tan_beta, A, B, d_hat, K]``,
   HYPERBOLIC ``[tan_beta, l0, q_hat, p_hat, 0]``, EXPONENT ``[a, b, q_hat, p_hat, 0]``;
 * flow potential ``gp`` (4): CONE ``[code, tan_psi, A, B]``, HYPERBOLA ``[code, tan_psi, e, 0]``;
-* material ``mp``: see the ``M_*`` indices below.
+* material ``mp``: see the ``M_*`` indices below;
+* sensitivities: the chain-rule matrix ``dtheta`` (TH_SIZE, P) from the physical parameters to
+  the kernel parameters theta, rows indexed by ``TH_*`` (built by :mod:`ddm`).
 """
 from __future__ import annotations
 
@@ -45,6 +49,14 @@ PROPORTIONAL, WORK = 0, 1
 #: its constant (c, or q_hat), the local Newton tolerance and iteration limit
 M_E, M_NU, M_S0, M_H, M_RULE, M_RULE_C, M_TOL, M_MAXIT = range(8)
 M_SIZE = 8
+#: kernel parameters theta (rows of the chain-rule matrix ``dtheta`` (TH_SIZE, P) that maps the
+#: physical parameters to them): E, nu, sigma0, H, the eqps-rule constant of ``mp``, then
+#: ``yp[1:6]`` and ``gp[1:4]``
+TH_E, TH_NU, TH_S0, TH_H, TH_C = range(5)
+TH_Y, TH_G = 5, 10
+TH_SIZE = 13
+# column of d R / d eqps_n in the partials array, after the TH_SIZE parameter columns
+_TH_EQPS_N = TH_SIZE
 
 # Below this q (MPa) the deviator is treated as zero: it only guards 0/0 in terms that vanish
 # with the deviator (the return mapping never iterates that close to an apex). Small enough to be
@@ -894,6 +906,226 @@ def plastic_return(mp, yp, gp, sig_tr, eqps_n, scale):
 
 
 # --------------------------------------------------------------------------------------------
+# Parameter sensitivities of the update (direct differentiation)
+# --------------------------------------------------------------------------------------------
+
+@njit(**_JIT)
+def _potential_partials(gp, s, J2, lam, Rth):
+    """Rth[:6, TH_G:] = (E dlambda) d(dG/dsigma)/d gp[1:]: cone dG/dsigma = t_q dq + t_J dJ3 +
+    tan(psi) m/3 with t_q = A - 2 B J3/q^3, t_J = B/q^2; hyperbola 3/(2R) dJ2 + tan(psi) m/3,
+    R = sqrt(e^2 + q^2)."""
+    for i in range(3):
+        Rth[i, TH_G] = lam / 3.0
+    if int(gp[0]) == CONE:
+        q = math.sqrt(3.0 * J2)
+        qi = _inv(q)
+        gq = (1.5 * qi * s[0], 1.5 * qi * s[1], 1.5 * qi * s[2], 3.0 * qi * s[3], 3.0 * qi * s[4], 3.0 * qi * s[5])
+        gJ = _grad_j3(s, J2)
+        fq = -2.0 * _j3(s) * qi * qi * qi
+        for i in range(6):
+            Rth[i, TH_G + 1] = lam * gq[i]
+            Rth[i, TH_G + 2] = lam * (fq * gq[i] + qi * qi * gJ[i])
+    else:
+        e = gp[2]
+        root = max(math.sqrt(e * e + 3.0 * J2), _Q_TINY)
+        gJ2 = _grad_j2(s)
+        f = -1.5 * lam * e / (root * root * root)
+        for i in range(6):
+            Rth[i, TH_G + 1] = f * gJ2[i]
+
+
+@njit(**_JIT)
+def _yield_partials(yp, s, p, J2, sbar, Rth):
+    """Rth[6, TH_Y:] = dF/d yp[1:] (the reference-test constants q_hat, p_hat and K, which
+    only selects the apex branch, are not differentiated: their columns stay zero)."""
+    code = int(yp[0])
+    if code == LINEAR:  # F = A q + B J3/q^2 - p tan(beta) - d_hat sigma_bar
+        q = math.sqrt(3.0 * J2)
+        qi = _inv(q)
+        Rth[6, TH_Y] = -p
+        Rth[6, TH_Y + 1] = q
+        Rth[6, TH_Y + 2] = _j3(s) * qi * qi
+        Rth[6, TH_Y + 3] = -sbar
+    elif code == HYPERBOLIC:  # F = sqrt(l0^2 + q^2) - p tan(beta) - sqrt(l0^2 + (qh sbar)^2) + ph sbar tan(beta)
+        l0, qh, ph = yp[2], yp[3], yp[4]
+        Rth[6, TH_Y] = -p + ph * sbar
+        Rth[6, TH_Y + 1] = l0 / math.sqrt(l0 * l0 + 3.0 * J2) - l0 / math.sqrt(l0 * l0 + qh * sbar * qh * sbar)
+    else:  # F = a q^b - p - a (qh sbar)^b + ph sbar
+        a, b, qh = yp[1], yp[2], yp[3]
+        q2, ref = 3.0 * J2, qh * sbar
+        qb, rb = q2 ** (0.5 * b), ref ** b
+        Rth[6, TH_Y] = qb - rb
+        Rth[6, TH_Y + 1] = a * (0.5 * qb * math.log(q2) if q2 > 0.0 else 0.0) - a * rb * math.log(ref)
+
+
+@njit(**_JIT)
+def _residual_partials(mp, yp, gp, x, st, eqps_n, Rth):
+    """Partial derivatives of the residual R of :func:`_residual` at x with respect to the
+    kernel parameters theta (Rth[:, :TH_SIZE], see ``TH_*``) and to eqps_n
+    (Rth[:, TH_SIZE]); the trial stress enters only R1, as -E C (handled by the caller)."""
+    E, s0, Hh, c = mp[M_E], mp[M_S0], mp[M_H], mp[M_RULE_C]
+    lam, kap = x[6], x[7]
+    dkap = kap - E * eqps_n
+    sbar = s0 + Hh * kap / E
+    p, s = _deviator(x)
+    J2 = _j2(s)
+    for i in range(8):
+        for j in range(TH_SIZE + 1):
+            Rth[i, j] = 0.0
+    # R1 = E C (sigma - sigma_trial) + lam dG/dsigma: E C depends on nu only
+    d = (x[0] - st[0], x[1] - st[1], x[2] - st[2], x[3] - st[3], x[4] - st[4], x[5] - st[5])
+    Rth[0, TH_NU] = -(d[1] + d[2])
+    Rth[1, TH_NU] = -(d[0] + d[2])
+    Rth[2, TH_NU] = -(d[0] + d[1])
+    for i in range(3, 6):
+        Rth[i, TH_NU] = 2.0 * d[i]
+    _potential_partials(gp, s, J2, lam, Rth)
+    # R2 = F(sigma, sigma_bar), sigma_bar = sigma0 + H kap/E
+    _yield_partials(yp, s, p, J2, sbar, Rth)
+    Fs = -_strength(yp, sbar)[1]
+    sb_E, sb_H = -Hh * kap / (E * E), kap / E
+    Rth[6, TH_E] = Fs * sb_E
+    Rth[6, TH_S0] = Fs
+    Rth[6, TH_H] = Fs * sb_H
+    # R3
+    if int(mp[M_RULE]) == PROPORTIONAL:  # kap - E eqps_n - c lam
+        Rth[7, TH_E] = -eqps_n
+        Rth[7, TH_C] = -lam
+        Rth[7, _TH_EQPS_N] = -E
+        return
+    # (c sbar dkap - lam w)/s0, w = q^2/R - p tan(psi), R = sqrt(e^2 + q^2)
+    tp, e = gp[1], gp[2]
+    root = max(math.sqrt(e * e + 3.0 * J2), _Q_TINY)
+    w = 3.0 * J2 / root - p * tp
+    Rth[7, TH_E] = c * (sb_E * dkap - sbar * eqps_n) / s0
+    Rth[7, TH_S0] = (c * dkap - (c * sbar * dkap - lam * w) / s0) / s0
+    Rth[7, TH_H] = c * sb_H * dkap / s0
+    Rth[7, TH_C] = sbar * dkap / s0
+    Rth[7, TH_G] = lam * p / s0
+    Rth[7, TH_G + 1] = lam * 3.0 * J2 * e / (root * root * root * s0)
+    Rth[7, _TH_EQPS_N] = -c * sbar * E / s0
+
+
+@njit(**_JIT)
+def _smooth_sensitivity(mp, yp, gp, dth, st, eqps_n, sig, eqps, dst_n, i, dstress, dstate, x, R, J, piv, Rth, rhs):
+    """Derivatives of point i's converged closest-point return by the implicit function theorem,
+    ``J dx = -(dR/dtheta dtheta + dR/dsigma_trial dsigma_trial + dR/deqps_n deqps_n)`` with J
+    the local Jacobian at the converged x = [sigma, E dlambda, E eqps]; eqps = x[7]/E.
+
+    dstress[i] holds the trial stress derivative (P, 6) on entry and the stress derivative on
+    return; dstate[i, :, 0] receives d eqps, dst_n[i, :, 0] is d eqps_n. False if J is singular.
+    """
+    E, nu = mp[M_E], mp[M_NU]
+    n_p = dth.shape[1]
+    # x of the converged update; E dlambda from R1 = E C (sigma - sigma_trial) + (E dlambda) g = 0
+    s = _deviator(sig)[1]
+    g = _potential(gp, s, _j2(s), False, 0.0, J)
+    tr = (sig[0] - st[0]) + (sig[1] - st[1]) + (sig[2] - st[2])
+    num, gg = 0.0, 0.0
+    for a in range(6):
+        d = sig[a] - st[a]
+        num += ((1.0 + nu) * d - nu * tr if a < 3 else 2.0 * (1.0 + nu) * d) * g[a]
+        gg += g[a] * g[a]
+        x[a] = sig[a]
+    x[6] = -num / gg
+    x[7] = E * eqps
+    _residual(mp, yp, gp, x, st, eqps_n, R, J)
+    _residual_partials(mp, yp, gp, x, st, eqps_n, Rth)
+    for k in range(n_p):
+        for r in range(8):
+            acc = Rth[r, _TH_EQPS_N] * dst_n[i, k, 0]
+            for j in range(TH_SIZE):
+                acc += Rth[r, j] * dth[j, k]
+            rhs[r, k] = -acc
+        # dR1/dsigma_trial = -E C = -[[1, -nu, -nu], ...; 2 (1 + nu)]
+        t = dstress[i, k, 0] + dstress[i, k, 1] + dstress[i, k, 2]
+        for a in range(6):
+            v = dstress[i, k, a]
+            rhs[a, k] += (1.0 + nu) * v - nu * t if a < 3 else 2.0 * (1.0 + nu) * v
+    if not (_lu8(J, piv) and _lu8_solve(J, piv, rhs)):
+        return False
+    for k in range(n_p):
+        for a in range(6):
+            dstress[i, k, a] = rhs[a, k]
+        dstate[i, k, 0] = (rhs[7, k] - eqps * dth[TH_E, k]) / E
+    return True
+
+
+@njit(**_JIT)
+def _apex_sensitivity(mp, yp, gp, dth, p_tr, eqps_n, dl, dst_n, i, dstress, dstate):
+    """Derivatives of point i's closed-form apex return (:func:`_apex_return`)::
+
+        dlambda = (-p_trial tan(beta) - d_hat sigma_bar(eqps_n)) / (K_b tan(psi) tan(beta) + d_hat c H)
+        p = p_trial + K_b tan(psi) dlambda,   eqps = eqps_n + c dlambda,   sigma = -p m
+
+    dstress[i] holds the trial stress derivative on entry (only its trace, -3 dp_trial, is used)
+    and the stress derivative on return; dstate[i, :, 0] receives d eqps."""
+    E, nu, H, s0, c = mp[M_E], mp[M_NU], mp[M_H], mp[M_S0], mp[M_RULE_C]
+    tb, dh, tp = yp[1], yp[4], gp[1]
+    Kb = E / (3.0 * (1.0 - 2.0 * nu))
+    den = Kb * tp * tb + dh * c * H
+    sbar_n = s0 + H * eqps_n
+    for k in range(dth.shape[1]):
+        dKb = dth[TH_E, k] / (3.0 * (1.0 - 2.0 * nu)) + dth[TH_NU, k] * 2.0 * E / (3.0 * (1.0 - 2.0 * nu) ** 2)
+        dtb, ddh, dtp = dth[TH_Y, k], dth[TH_Y + 3, k], dth[TH_G, k]
+        dc, dH, deqps_n = dth[TH_C, k], dth[TH_H, k], dst_n[i, k, 0]
+        dp_tr = -(dstress[i, k, 0] + dstress[i, k, 1] + dstress[i, k, 2]) / 3.0
+        dnum = -dp_tr * tb - p_tr * dtb - ddh * sbar_n - dh * (dth[TH_S0, k] + dH * eqps_n + H * deqps_n)
+        dden = (dKb * tp + Kb * dtp) * tb + Kb * tp * dtb + (ddh * c + dh * dc) * H + dh * c * dH
+        ddl = (dnum - dl * dden) / den
+        dp = dp_tr + (dKb * tp + Kb * dtp) * dl + Kb * tp * ddl
+        for a in range(3):
+            dstress[i, k, a] = -dp
+            dstress[i, k, a + 3] = 0.0
+        dstate[i, k, 0] = deqps_n + dc * dl + c * ddl
+
+
+@njit(**_JIT)
+def _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress):
+    """dstress[i] (P, 6) = dsigma_n + D ddeps + (dD/dE deps) dE/dp + (dD/dnu deps) dnu/dp: the
+    derivative of point i's elastic trial stress sigma_n + D deps (D from the Lame constants
+    lam, mu, as in :func:`elastic_trial`; dD/dE = D/E)."""
+    E, nu = mp[M_E], mp[M_NU]
+    lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    mu = E / (2.0 * (1.0 + nu))
+    lam_nu = E * (1.0 + 2.0 * nu * nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) ** 2
+    mu_nu = -E / (2.0 * (1.0 + nu) ** 2)
+    d = (de[i, 0], de[i, 1], de[i, 2], de[i, 3], de[i, 4], de[i, 5])
+    tr = d[0] + d[1] + d[2]
+    vE = ((2.0 * mu * d[0] + lam * tr) / E, (2.0 * mu * d[1] + lam * tr) / E, (2.0 * mu * d[2] + lam * tr) / E,
+          mu * d[3] / E, mu * d[4] / E, mu * d[5] / E)
+    vN = (2.0 * mu_nu * d[0] + lam_nu * tr, 2.0 * mu_nu * d[1] + lam_nu * tr, 2.0 * mu_nu * d[2] + lam_nu * tr,
+          mu_nu * d[3], mu_nu * d[4], mu_nu * d[5])
+    for k in range(dth.shape[1]):
+        dE, dnu = dth[TH_E, k], dth[TH_NU, k]
+        t = lam * (dde[i, k, 0] + dde[i, k, 1] + dde[i, k, 2])
+        for a in range(6):
+            Dd = 2.0 * mu * dde[i, k, a] + t if a < 3 else mu * dde[i, k, a]
+            dstress[i, k, a] = dsig_n[i, k, a] + Dd + dE * vE[a] + dnu * vN[a]
+
+
+@njit(**_JIT)
+def _plastic_strain_sensitivity(mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate):
+    """dstate[i, :, 1:] = derivative of point i's plastic strain eps_pl_n + deps - C (sigma - sigma_n)
+    as :func:`merge_update` forms it; with C = S/E, S = [[1, -nu, -nu], ...; 2 (1 + nu)]:
+    ``deps_pl_n + ddeps - (S (dsigma - dsigma_n) + dnu dS/dnu (sigma - sigma_n) - dE C (sigma - sigma_n)) / E``."""
+    E, nu = mp[M_E], mp[M_NU]
+    d = (stress[i, 0] - sig_n[i, 0], stress[i, 1] - sig_n[i, 1], stress[i, 2] - sig_n[i, 2],
+         stress[i, 3] - sig_n[i, 3], stress[i, 4] - sig_n[i, 4], stress[i, 5] - sig_n[i, 5])
+    td = d[0] + d[1] + d[2]
+    Sd = ((1.0 + nu) * d[0] - nu * td, (1.0 + nu) * d[1] - nu * td, (1.0 + nu) * d[2] - nu * td,
+          2.0 * (1.0 + nu) * d[3], 2.0 * (1.0 + nu) * d[4], 2.0 * (1.0 + nu) * d[5])
+    dSd = (d[0] - td, d[1] - td, d[2] - td, 2.0 * d[3], 2.0 * d[4], 2.0 * d[5])  # dS/dnu (sigma - sigma_n)
+    for k in range(dth.shape[1]):
+        dE, dnu = dth[TH_E, k], dth[TH_NU, k]
+        t = (dstress[i, k, 0] - dsig_n[i, k, 0]) + (dstress[i, k, 1] - dsig_n[i, k, 1]) + (dstress[i, k, 2] - dsig_n[i, k, 2])
+        for a in range(6):
+            dd = dstress[i, k, a] - dsig_n[i, k, a]
+            Sdd = (1.0 + nu) * dd - nu * t if a < 3 else 2.0 * (1.0 + nu) * dd
+            dstate[i, k, a + 1] = dst_n[i, k, a + 1] + dde[i, k, a] - (Sdd + dnu * dSd[a] - dE * Sd[a] / E) / E
+
+
+# --------------------------------------------------------------------------------------------
 # Vectorised entry points (arguments: C-contiguous float64 arrays)
 # --------------------------------------------------------------------------------------------
 
@@ -958,6 +1190,61 @@ def merge_update(D, E, nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps, r_tan
         state[i, 3] += de[i, 2] - (d2 - nu * (d0 + d1)) / E
         for a in range(3, 6):
             state[i, a + 1] += de[i, a] - 2.0 * (1.0 + nu) * (stress[i, a] - sig_n[i, a]) / E
+
+
+@njit(**_JIT)
+def update_sensitivities(mp, yp, gp, dth, de, sig_n, st_n, sig_tr, plastic, stress, state, ok, dsig_n, dst_n, dde):
+    """Parameter derivatives of one update of n points (direct differentiation).
+
+    Inputs: the kernel vectors; dtheta (TH_SIZE, P) = d theta / d parameters; the update's
+    strain increments (n, 6), old stresses (n, 6) and states (n, n_state), the trial stresses
+    (n, 6) and plastic flags (n,) of :func:`elastic_trial`; the update's stress, state and ok;
+    the total derivatives of the old stress (n, P, 6), old state (n, P, n_state) and strain
+    increment (n, P, 6). Returns d stress (n, P, 6) and d state (n, P, n_state): elastic
+    points carry the trial derivative and the old state's; returned points are differentiated
+    through the converged local residual (or the apex's closed form, recognised by the same
+    test as :func:`plastic_return`), with the plastic strain as :func:`merge_update` forms it;
+    failed points (ok False, or a singular local Jacobian) get NaN.
+    """
+    n, n_p, n_st = de.shape[0], dth.shape[1], st_n.shape[1]
+    dstress = np.empty((n, n_p, 6))
+    dstate = np.empty((n, n_p, n_st))
+    cone = int(yp[0]) == LINEAR
+    x = np.empty(8)
+    R = np.empty(8)
+    J = np.empty((8, 8))
+    piv = np.empty(8, np.int64)
+    Rth = np.empty((8, TH_SIZE + 1))
+    rhs = np.empty((8, n_p))
+    for i in range(n):
+        _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress)
+        good = not plastic[i] or ok[i]
+        if plastic[i] and good:
+            st = (sig_tr[i, 0], sig_tr[i, 1], sig_tr[i, 2], sig_tr[i, 3], sig_tr[i, 4], sig_tr[i, 5])
+            en = st_n[i, 0]
+            is_apex = False
+            if cone:
+                p_tr, s_tr = _deviator(st)
+                is_apex, _, dl, _ = _apex_return(mp, yp, gp, p_tr, s_tr, _j2(s_tr), en)
+                if is_apex:
+                    _apex_sensitivity(mp, yp, gp, dth, p_tr, en, dl, dst_n, i, dstress, dstate)
+            if not is_apex:
+                sig = (stress[i, 0], stress[i, 1], stress[i, 2], stress[i, 3], stress[i, 4], stress[i, 5])
+                good = _smooth_sensitivity(mp, yp, gp, dth, st, en, sig, state[i, 0], dst_n, i, dstress, dstate,
+                                           x, R, J, piv, Rth, rhs)
+            if good:
+                _plastic_strain_sensitivity(mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate)
+        elif good:  # elastic: the old state
+            for k in range(n_p):
+                for b in range(n_st):
+                    dstate[i, k, b] = dst_n[i, k, b]
+        if not good:
+            for k in range(n_p):
+                for a in range(6):
+                    dstress[i, k, a] = np.nan
+                for b in range(n_st):
+                    dstate[i, k, b] = np.nan
+    return dstress, dstate
 
 
 @njit(**_JIT)

@@ -34,6 +34,7 @@ import numpy as np
 
 from problems.materials import _kernels as _K
 from problems.materials.base import MaterialUpdate, isotropic_stiffness
+from problems.materials.ddm import kernel_parameter_jacobian
 from problems.materials.hardening import (
     HARDENINGS, LinearHardening, ProportionalEqps, WorkEqps, linear_eqps_constant, reference_test,
 )
@@ -283,11 +284,8 @@ class DruckerPrager:
         de = np.ascontiguousarray(strain_increment, dtype=float)
         sig_n = np.ascontiguousarray(stress_old, dtype=float)
         st_n = np.ascontiguousarray(state_old, dtype=float)
-        lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
         eqps_n = np.ascontiguousarray(st_n[:, 0])
-        sig_tr, scale, plastic = _K.elastic_trial(lam, self.shear_modulus, self.law.sigma0, self.law.H,
-                                                  self.yield_tol, self.yield_function.kernel_params,
-                                                  de, sig_n, eqps_n)
+        sig_tr, scale, plastic = self._elastic_trial(de, sig_n, eqps_n)
         idx = np.flatnonzero(plastic)
         if idx.size:
             res = self._plastic_return(sig_tr[idx], eqps_n[idx], scale[idx])
@@ -300,6 +298,51 @@ class DruckerPrager:
         _K.merge_update(self.stiffness, self.E, self.nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps,
                         r_tangent, r_ok, out.stress, out.tangent, out.state, out.ok)
         return out
+
+    # ---- parameter sensitivities (direct differentiation) -------------------------------------
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The differentiable parameters in the column order of :meth:`sensitivity`:
+        ``FORM_PARAMETERS[form] + ("nu",)`` (the eccentricity is a fixed constant)."""
+        return FORM_PARAMETERS[self.form] + ("nu",)
+
+    def sensitivity(self, strain_increment, stress_old, state_old, update: MaterialUpdate, dstress_old,
+                    dstate_old, dstrain_increment) -> tuple[np.ndarray, np.ndarray]:
+        """Exact derivatives of one converged update with respect to the parameters.
+
+        ``update`` is what :meth:`update` returned for this (strain_increment (n, 6),
+        stress_old (n, 6), state_old (n, 7)); dstress_old (n, P, 6), dstate_old (n, P, 7) and
+        dstrain_increment (n, P, 6) are the total derivatives of the inputs with respect to the
+        P = len(parameter_names) parameters, per parameter unit (MPa, deg or -): stress
+        derivatives in MPa, state and strain derivatives in 1 per unit. Returns
+        (dstress (n, P, 6), dstate (n, P, 7)) of the update's stress and state:
+
+        * elastic points: the trial stress, ``dstress_old + D ddeps + dD/dp deps``, old state;
+        * plastic points: the implicit function theorem on the converged local residual (its
+          Jacobian J and the residual's partial derivatives with respect to the trial stress,
+          eqps_n and the parameters), or the closed-form apex return of the linear form; the
+          plastic strain as formed by the update, ``eps_pl_n + deps - C (sigma - sigma_n)``;
+        * points with ``update.ok`` False: NaN (the update kept a trial state that is no
+          solution; the FE solver cuts such increments).
+
+        In terms of the consistent tangent T of the update this is
+        ``dstress = T ddeps + dsigma/dsigma_n dstress_old + dsigma/dstate_n dstate_old + dsigma/dp``.
+        """
+        de, sig_n, st_n, dsig_n, dst_n, dde = (np.ascontiguousarray(a, dtype=float) for a in (
+            strain_increment, stress_old, state_old, dstress_old, dstate_old, dstrain_increment))
+        sig_tr, _, plastic = self._elastic_trial(de, sig_n, np.ascontiguousarray(st_n[:, 0]))
+        return _K.update_sensitivities(
+            self._kernel_params, self.yield_function.kernel_params, self.potential.kernel_params,
+            kernel_parameter_jacobian(self), de, sig_n, st_n, sig_tr, plastic, np.ascontiguousarray(update.stress),
+            np.ascontiguousarray(update.state), np.ascontiguousarray(update.ok), dsig_n, dst_n, dde)
+
+    def _elastic_trial(self, de, sig_n, eqps_n):
+        """Elastic predictor (:func:`_kernels.elastic_trial`) of C-contiguous float arrays de,
+        sig_n (n, 6) and eqps_n (n,): trial stress (n, 6) MPa, residual scale (n,) MPa and the
+        plastic flags (n,)."""
+        lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+        return _K.elastic_trial(lam, self.shear_modulus, self.law.sigma0, self.law.H, self.yield_tol,
+                                self.yield_function.kernel_params, de, sig_n, eqps_n)
 
     # ---- plastic correction -------------------------------------------------------------------
     @property

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from problems.materials.base import MaterialUpdate, isotropic_stiffness
+from problems.materials.base import MaterialUpdate, isotropic_stiffness, trial_stress_sensitivity
 
 
 @dataclass(frozen=True)
@@ -27,6 +27,11 @@ class LinearElastic:
             raise ValueError(f"nu = {self.nu!r} is out of range: -1 < nu < 0.5")
 
     @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """The differentiable parameters, in the column order of :meth:`sensitivity`."""
+        return ("E", "nu")
+
+    @property
     def stiffness(self) -> np.ndarray:
         """Elastic stiffness (6, 6), MPa."""
         return isotropic_stiffness(self.E, self.nu)
@@ -39,3 +44,11 @@ class LinearElastic:
         stress = stress_old + strain_increment @ D.T
         n = strain_increment.shape[0]
         return MaterialUpdate(stress, np.broadcast_to(D, (n, 6, 6)), state_old, np.ones(n, bool))
+
+    def sensitivity(self, strain_increment, stress_old, state_old, update, dstress_old, dstate_old,
+                    dstrain_increment) -> tuple[np.ndarray, np.ndarray]:
+        """Derivatives with respect to (E, nu) of one update (see ``DruckerPrager.sensitivity``):
+        ``dstress = dstress_old + D ddeps + dD/dp deps`` (n, 2, 6) in MPa per MPa and per unit
+        of nu, and the (empty) state's (n, 2, 0)."""
+        dstress = trial_stress_sensitivity(self.E, self.nu, 0, 1, strain_increment, dstress_old, dstrain_increment)
+        return dstress, np.array(dstate_old, dtype=float)
