@@ -3,7 +3,7 @@
 Posterior ``p(z | data) ~ exp(-cost(z) / 2)`` (Gaussian likelihood of the whitened residuals) with
 a uniform prior on the box; points outside the box are rejected without a forward evaluation;
 failed and infeasible points have ``log p = -inf``. The sampler is vectorised: each half-ensemble
-move is one :meth:`Objective.evaluate_many` batch.
+move is one :meth:`Evaluator.evaluate_many` batch.
 
 Budget: a step costs at most ``n_walkers`` evaluations; the sampler stops before a step that might
 not fit (``n_steps=None``: as many steps as the budget allows). Walkers start in a small Gaussian
@@ -15,15 +15,24 @@ Reported in ``extra``: posterior ``mean``, ``median``, ``std``, ``q2.5``/``q97.5
 parameter (physical, after discarding ``burn_fraction`` of the steps), ``map`` (best sample) and
 its cost, ``acceptance_fraction``, ``autocorr_time`` (integrated, in steps), ``n_steps``, ``n_walkers``,
 ``warnings`` (e.g. a chain shorter than 50 autocorrelation times), and the chain itself (physical,
-``chain[step][walker][param]`` and ``log_prob[step][walker]``), or, with ``chain_path``, an ``.npz``
-file holding them. The RunResult's ``x`` is the best point evaluated (at least as good as the MAP
-sample). Status: ``"converged"`` when the kept chain is at least 50 autocorrelation times long,
-else ``"budget"`` or ``"max_iterations"``.
+``chain[step][walker][param]`` and ``log_prob[step][walker]``), or, with ``chain_path``, the path
+of the ``.npz`` file holding them (see below). The RunResult's ``x`` is the best point evaluated
+(at least as good as the MAP sample). Status: ``"converged"`` when the kept chain is at least 50
+autocorrelation times long, else ``"budget"`` or ``"max_iterations"``.
+
+Structure: :func:`run_mcmc` is a thin loop over :func:`ensemble_steps` (emcee's
+``EnsembleSampler.sample()`` generator, iterated as emcee's own ``run_mcmc`` does, in chunks the
+budget surely allows), recording the best walker of each step. The chain lives in an emcee backend:
+the in-memory :class:`emcee.backends.Backend`, or, with ``chain_path``,
+:class:`solvers.npz_backend.NpzBackend`, which persists it to that file while sampling (chain in
+z = x / reference, with ``names`` and ``scale`` = reference: x = chain x scale).
+:func:`chain_summary` turns a backend into the numbers of ``extra``.
 """
 from __future__ import annotations
 
 import math
 import warnings
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -37,7 +46,7 @@ MCMC_OPTIONS = {
     "burn_fraction": (0.3, "fraction of the steps discarded as burn-in"),
     "moves": ("de-mix", "emcee moves: de-mix (80 % DE + 20 % DE-snooker) | stretch | de | de-snooker | walk"),
     "keep_chain": (True, "store the chain in extra (ignored when chain_path is given)"),
-    "chain_path": (None, "write chain and log_prob to this .npz file instead of extra"),
+    "chain_path": (None, "keep the chain in this .npz file (solvers.npz_backend.NpzBackend) instead of extra"),
     "min_tau_multiple": (50.0, "warn when the kept chain is shorter than this many autocorrelation times"),
 }
 
@@ -54,61 +63,62 @@ def _moves(name: str):
     return table[name]()
 
 
-@register("mcmc", library="emcee", family="sampling", options=MCMC_OPTIONS, stochastic=True,
-          description="posterior sampling (emcee ensemble sampler), Gaussian likelihood, uniform prior on the box")
-def run_mcmc(r: Run) -> Outcome:
-    import emcee
-
-    obj, o = r.objective, r.options
-    n = r.lower.size
-    nw = int(o["n_walkers"] or max(16, 4 * n))
-    nw += nw % 2
-    lo, hi = r.lower, r.upper
+def initial_ensemble(r: Run, n_walkers: int) -> np.ndarray:
+    """Walker start positions (n_walkers, n) in z: a ball about ``r.z0`` reflected into the box, or LHS."""
+    o, lo, hi = r.options, r.lower, r.upper
     rng = r.rng(1)
     if o["init"] == "ball":
-        p0 = r.z0 + o["ball_size"] * rng.standard_normal((nw, n))
+        p0 = r.z0 + o["ball_size"] * rng.standard_normal((n_walkers, lo.size))
         p0 = np.where(p0 < lo, 2 * lo - p0, p0)  # reflect into the box
-        p0 = np.clip(np.where(p0 > hi, 2 * hi - p0, p0), lo, hi)
-    elif o["init"] == "lhs":
-        p0 = lhs(nw, lo, hi, rng)
-    else:
-        raise ValueError(f"mcmc: init {o['init']!r} is unknown; allowed: ball, lhs")
+        return np.clip(np.where(p0 > hi, 2 * hi - p0, p0), lo, hi)
+    if o["init"] == "lhs":
+        return lhs(n_walkers, lo, hi, rng)
+    raise ValueError(f"mcmc: init {o['init']!r} is unknown; allowed: ball, lhs")
+
+
+def log_posterior(objective, lower, upper) -> Callable[[np.ndarray], np.ndarray]:
+    """Vectorised ``log p(Z) = -cost / 2`` inside the box (one evaluation batch), ``-inf`` outside
+    the box (not evaluated) and at failed or infeasible points."""
 
     def log_prob(Z):
         Z = np.atleast_2d(Z)
         lp = np.full(len(Z), -np.inf)
-        inside = np.all((Z >= lo) & (Z <= hi), axis=1)
+        inside = np.all((Z >= lower) & (Z <= upper), axis=1)
         if inside.any():
-            evs = obj.evaluate_many(Z[inside])
+            evs = objective.evaluate_many(Z[inside])
             lp[inside] = [-0.5 * ev.cost if ev.usable else -np.inf for ev in evs]
         return lp
 
-    sampler = emcee.EnsembleSampler(nw, n, log_prob, vectorize=True, moves=_moves(o["moves"]))
-    sampler.random_state = np.random.RandomState(r.seed % 2**32).get_state()
-    if obj.remaining < nw:
-        return Outcome("budget", f"budget below the {nw} evaluations of the initial ensemble", 0)
-    planned = int(o["n_steps"]) if o["n_steps"] else math.inf
-    state, steps, stopped_by_budget = p0, 0, False
-    while steps < planned:
-        # every step costs at most nw evaluations (+ nw for the initial ensemble): chunks that surely fit
-        chunk = min(planned - steps, (obj.remaining - (nw if steps == 0 else 0)) // nw)
-        if chunk < 1:
-            stopped_by_budget = True
-            break
-        for state in sampler.sample(state, iterations=int(chunk), skip_initial_state_check=True):
-            steps += 1
-            k = int(np.argmax(state.log_prob))
-            r.record(state.coords[k], -2.0 * state.log_prob[k] if np.isfinite(state.log_prob[k]) else None)
-    if steps == 0:
-        return Outcome("budget", "budget too small for one step", 0)
+    return log_prob
 
-    chain_z = sampler.get_chain()  # (steps, walkers, n)
-    logp = sampler.get_log_prob()
-    burn = min(int(o["burn_fraction"] * steps), steps - 1)
-    kept = chain_z[burn:]
-    flat = obj.to_physical(kept.reshape(-1, n))
+
+def ensemble_steps(sampler, p0, remaining: Callable[[], float], max_steps: float = math.inf) -> Iterator:
+    """Iterate emcee's ``sampler.sample()`` generator from ``p0`` and yield the ensemble state after
+    each step, for at most ``max_steps`` steps and only while the budget surely allows them: a step
+    costs at most one evaluation per walker, the first one also the initial ensemble's.
+    ``remaining()`` is the number of evaluations left."""
+    nw = sampler.nwalkers
+    state, done = p0, 0
+    while done < max_steps:
+        chunk = min(max_steps - done, (remaining() - (nw if done == 0 else 0)) // nw)
+        if chunk < 1:
+            return
+        for state in sampler.sample(state, iterations=int(chunk), skip_initial_state_check=True):
+            done += 1
+            yield state
+
+
+def chain_summary(backend, names, to_physical, burn_fraction: float, min_tau_multiple: float) -> dict:
+    """Posterior numbers of ``extra`` from an emcee backend (chain in z; ``to_physical`` maps z to x):
+    burn-in, mean/median/std/percentiles of the kept chain, MAP sample and cost, acceptance,
+    integrated autocorrelation times (steps) and the short-chain warning."""
     from emcee.autocorr import integrated_time
 
+    steps, n = backend.iteration, len(names)
+    chain_z, logp = backend.get_chain(), backend.get_log_prob()
+    burn = min(int(burn_fraction * steps), steps - 1)
+    kept = chain_z[burn:]
+    flat = to_physical(kept.reshape(-1, n))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tau = integrated_time(kept, tol=0) if kept.shape[0] > 1 else np.full(n, np.inf)
@@ -116,34 +126,69 @@ def run_mcmc(r: Run) -> Outcome:
     tau_max = float(np.max(tau))
     k = np.unravel_index(np.argmax(logp), logp.shape)
     extra = {
-        "n_walkers": nw, "n_steps": steps, "burn": burn,
-        "mean": dict(zip(obj.names, flat.mean(axis=0))),
-        "median": dict(zip(obj.names, np.median(flat, axis=0))),
-        "std": dict(zip(obj.names, flat.std(axis=0, ddof=1) if len(flat) > 1 else np.zeros(n))),
-        "q2.5": dict(zip(obj.names, np.percentile(flat, 2.5, axis=0))),
-        "q97.5": dict(zip(obj.names, np.percentile(flat, 97.5, axis=0))),
-        "map": dict(zip(obj.names, obj.to_physical(chain_z[k]))),
+        "n_walkers": backend.nwalkers, "n_steps": steps, "burn": burn,
+        "mean": dict(zip(names, flat.mean(axis=0))),
+        "median": dict(zip(names, np.median(flat, axis=0))),
+        "std": dict(zip(names, flat.std(axis=0, ddof=1) if len(flat) > 1 else np.zeros(n))),
+        "q2.5": dict(zip(names, np.percentile(flat, 2.5, axis=0))),
+        "q97.5": dict(zip(names, np.percentile(flat, 97.5, axis=0))),
+        "map": dict(zip(names, to_physical(chain_z[k]))),
         "map_cost": float(-2.0 * logp[k]) if np.isfinite(logp[k]) else math.inf,
-        "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
-        "autocorr_time": dict(zip(obj.names, tau)),
+        "acceptance_fraction": float(np.mean(backend.accepted / steps)),
+        "autocorr_time": dict(zip(names, tau)),
+        "tau_max": tau_max,
         "warnings": [],
     }
-    long_enough = (steps - burn) >= o["min_tau_multiple"] * tau_max
-    if not long_enough:
-        msg = (f"chain of {steps - burn} kept steps is shorter than {o['min_tau_multiple']:g} "
-               f"autocorrelation times (tau = {tau_max:.3g} steps): the estimates are unreliable")
-        extra["warnings"].append(msg)
-        warnings.warn(f"mcmc: {msg}", RuntimeWarning, stacklevel=2)
-    chain_x = obj.to_physical(chain_z)
+    if (steps - burn) < min_tau_multiple * tau_max:
+        extra["warnings"].append(
+            f"chain of {steps - burn} kept steps is shorter than {min_tau_multiple:g} "
+            f"autocorrelation times (tau = {tau_max:.3g} steps): the estimates are unreliable")
+    return extra
+
+
+@register("mcmc", library="emcee", family="sampling", options=MCMC_OPTIONS, stochastic=True,
+          description="posterior sampling (emcee ensemble sampler), Gaussian likelihood, uniform prior on the box")
+def run_mcmc(r: Run) -> Outcome:
+    import emcee
+
+    from solvers.npz_backend import NpzBackend
+
+    obj, o = r.objective, r.options
+    n = r.lower.size
+    nw = int(o["n_walkers"] or max(16, 4 * n))
+    nw += nw % 2
+    p0 = initial_ensemble(r, nw)
+    if obj.remaining < nw:
+        return Outcome("budget", f"budget below the {nw} evaluations of the initial ensemble", 0)
     if o["chain_path"]:
-        np.savez(o["chain_path"], chain=chain_x, log_prob=logp, names=np.array(obj.names))
-        extra["chain_path"] = str(o["chain_path"])
+        backend = NpzBackend(o["chain_path"], metadata={"names": np.array(obj.names),
+                                                        "scale": obj.to_physical(np.ones(n))})
+    else:
+        backend = emcee.backends.Backend()
+    sampler = emcee.EnsembleSampler(nw, n, log_posterior(obj, r.lower, r.upper), vectorize=True,
+                                    moves=_moves(o["moves"]), backend=backend)
+    sampler.random_state = np.random.RandomState(r.seed % 2**32).get_state()
+    planned = int(o["n_steps"]) if o["n_steps"] else math.inf
+    for state in ensemble_steps(sampler, p0, lambda: obj.remaining, planned):
+        k = int(np.argmax(state.log_prob))
+        r.record(state.coords[k], -2.0 * state.log_prob[k] if np.isfinite(state.log_prob[k]) else None)
+    steps = backend.iteration
+    if steps == 0:
+        return Outcome("budget", "budget too small for one step", 0)
+
+    extra = chain_summary(backend, obj.names, obj.to_physical, o["burn_fraction"], o["min_tau_multiple"])
+    tau_max = extra.pop("tau_max")
+    for msg in extra["warnings"]:
+        warnings.warn(f"mcmc: {msg}", RuntimeWarning, stacklevel=2)
+    if o["chain_path"]:
+        extra["chain_path"] = str(backend.flush())
     elif o["keep_chain"]:
-        extra["chain"] = chain_x
+        logp = backend.get_log_prob()
+        extra["chain"] = obj.to_physical(backend.get_chain())
         extra["log_prob"] = np.where(np.isfinite(logp), logp, -np.inf)
-    if long_enough:
+    if not extra["warnings"]:
         status = "converged"
     else:
-        status = "budget" if stopped_by_budget else "max_iterations"
+        status = "budget" if steps < planned else "max_iterations"
     message = f"{steps} steps x {nw} walkers, acceptance {extra['acceptance_fraction']:.2f}, tau_max {tau_max:.3g}"
     return Outcome(status, message, steps, extra)

@@ -1,6 +1,7 @@
-"""The femubench -> OpenSees DruckerPrager parameter mapping of bench/crosscheck/opensees_dp.py.
+"""The femubench -> OpenSees DruckerPrager parameter mapping of bench/crosscheck/mapping.py, and
+the `femubench crosscheck` command without openseespy.
 
-Pure checks: nothing here needs openseespy (the cross-check script itself does).
+Pure checks: nothing here needs openseespy (the cross-check run itself does).
 """
 import math
 import subprocess
@@ -9,10 +10,11 @@ import sys
 import numpy as np
 import pytest
 
-from bench.crosscheck.opensees_dp import (
-    REFERENCE, dp_return, eqps_from_alpha, material_point_uniaxial, opensees_flow_direction,
-    opensees_parameters, opensees_yield_value, tension_cutoff_I1, uniaxial_closed_form,
+from bench.crosscheck.mapping import (
+    REFERENCE, dp_return, eqps_from_alpha, opensees_flow_direction, opensees_parameters, opensees_yield_value,
+    tension_cutoff_I1,
 )
+from bench.crosscheck.reference import material_point_uniaxial, uniaxial_closed_form
 from problems.materials.drucker_prager import make_material
 
 P = {k: REFERENCE[k] for k in ("E", "nu", "beta", "psi", "sigma0", "H")}
@@ -101,6 +103,48 @@ def test_rederived_opensees_return_and_its_two_tangents():
     assert np.allclose(dp_return(eps, osp)[0], upd.stress[0], rtol=1e-9, atol=1e-9)
 
 
-def test_importing_the_script_does_not_import_openseespy():
-    code = "import sys, bench.crosscheck.opensees_dp; assert 'openseespy' not in sys.modules"
+def test_importing_the_crosscheck_does_not_import_openseespy():
+    modules = ("mapping", "reference", "loader", "opensees_box", "single_element", "cube", "tangent", "report",
+               "study", "figures")
+    code = ("import sys, bench.commands.crosscheck; "
+            + "; ".join(f"import bench.crosscheck.{m}" for m in modules)
+            + "; assert 'openseespy' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_command_without_openseespy_exits_2_with_the_install_hint(monkeypatch, capsys, tmp_path):
+    from bench.cli import main
+    from bench.crosscheck import loader
+
+    monkeypatch.setattr(loader, "installed", lambda: False)
+    monkeypatch.setattr(loader, "_OPS", None)
+    assert main(["crosscheck", "--skip-cube", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "femubench[crosscheck]" in err and "pip install" in err
+    assert not (tmp_path / "opensees_dp.json").exists()
+
+
+def test_render_redraws_the_figures_from_the_report(tmp_path, capsys):
+    """--render needs only opensees_dp.json (no openseespy): a report with one single-element run and
+    one cube whose first OpenSees attempt converged."""
+    from bench.cli import main
+
+    strain = np.linspace(0.0, 0.01, 7)[1:]
+    s, lat = uniaxial_closed_form(strain, **P)
+    curve = {"stress": s.tolist(), "lateral": lat.tolist()}
+    attempt = {"strategy": "Newton", "converged": True, "snapshots_mm": [0.75, 1.5], "reaction_kN": [500.0, 700.0]}
+    report = {"single_element": [{"psi": 35.0, "strain": strain.tolist(), "closed_form": curve, "femubench": curve,
+                                  "material_point": curve, "opensees": {"bbarBrick": curve, "stdBrick": curve}}],
+              "cube": [{"psi": 35.0, "femubench": {"snapshots_mm": [0.75, 1.5], "reaction_kN": [510.0, 705.0]},
+                        "opensees": [attempt],
+                        "plot": {"strategy": "Newton", "at_mm": 1.5, "step": 2, "z_mm": [5.0, 75.0, 145.0],
+                                 "u_h_femubench": [0.01, 0.03, 0.01], "u_h_opensees": [0.01, 0.03, 0.01],
+                                 "residuals_opensees": [1.0, 1e-2, 1e-5, 1e-9],
+                                 "residuals_femubench": [1.0, 1e-4, 1e-10]}}]}
+    import json
+
+    (tmp_path / "opensees_dp.json").write_text(json.dumps(report))
+    assert main(["crosscheck", "--render", "--out", str(tmp_path)]) == 0
+    for name in ("single_element.png", "cube.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert main(["crosscheck", "--render", "--out", str(tmp_path / "missing")]) == 2

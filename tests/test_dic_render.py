@@ -111,8 +111,12 @@ def test_render_and_correlate_reproduces_known_field_within_stated_uncertainty(t
     assert 0.7 < np.sqrt(np.mean(z**2)) < 1.4, np.sqrt(np.mean(z**2))
     assert np.max(np.abs(z)) < 4.5
     assert np.all(m.u_v[1] < 0)  # compression: the face moves down
-    # images, setup and figure written; setup regenerates the same configuration
-    assert len(m.image_paths) == 3 and m.figure_path and (tmp_path / "dic_subsets.png").stat().st_size > 0
+    # images, setup and the subset figure's panels written (drawn on the bench side); setup regenerates
+    # the same configuration
+    assert len(m.image_paths) == 3 and m.subsets_path and (tmp_path / "dic_subsets.npz").stat().st_size > 0
+    from bench.dic_figures import render_subsets
+
+    assert render_subsets(tmp_path) == tmp_path / "dic_subsets.png" and (tmp_path / "dic_subsets.png").stat().st_size > 0
     setup = json.loads((tmp_path / "dic_setup.json").read_text())
     assert setup["seed"] == 7 and CameraConfig(**{**setup["camera"], "pixels": tuple(setup["camera"]["pixels"]),
                                                    "face_mm": tuple(setup["camera"]["face_mm"])}) == cam

@@ -125,9 +125,35 @@ def test_gsa_cli_on_an_analytic_case_and_fe_dry_run(tmp_path, capsys):
     assert doc["cost"]["fe_evaluations"] == 64 * 6 and len(doc["indices"]) == 4
     assert main(["gsa", "analytic-smooth", "--method", "morris", "--samples", "8", "--quiet", "--out", str(out)]) == 0
     assert (out / "gsa_morris.png").stat().st_size > 0 and (out / "samples_morris.csv").exists()
+    for png in ("gsa_morris.png", "gsa_sobol.png"):
+        (out / png).unlink()
+    assert main(["gsa", "analytic-smooth", "--method", "morris", "--render", "--out", str(out)]) == 0
+    assert (out / "gsa_morris.png").exists() and not (out / "gsa_sobol.png").exists()
+    assert main(["gsa", "analytic-smooth", "--render", "--out", str(tmp_path / "nothing")]) == 2
     # FE case, dry run: the planned cost and the automatically shrunk feasible box, no FE run
     assert main(["gsa", "exponent-compression", "--samples", "16", "--dry-run", "--data", "synthetic",
                  "--mesh", "2,2,4", "--workers", "1", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "128 evaluations planned" in text and "box scaled by" in text
     assert main(["gsa", "analytic-smooth", "--box-scale", "2", "--out", str(out)]) == 2
+
+
+def test_morris_labels_do_not_overlap():
+    """Labels of clustered points are pushed apart (bench.plotting.place_labels)."""
+    from bench.plotting import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(4.2, 3.8))
+    xs, ys = np.array([1.0, 1.02, 1.04, 1.0, 5.0]), np.array([1.0, 1.01, 0.99, 1.03, 5.0])
+    ax.plot(xs, ys, "o")
+    ax.set_xlim(0, 6)
+    ax.set_ylim(0, 6)
+    from bench.plotting import place_labels
+
+    anns = place_labels(ax, xs, ys, [r"$\sigma_0$", "$H$", "$E$", r"$\psi$", "$b$"])
+    fig.canvas.draw()
+    from matplotlib.text import Text
+
+    boxes = [Text.get_window_extent(a) for a in anns]  # the text, without its leader line
+    assert not any(boxes[i].overlaps(boxes[j]) for i in range(len(boxes)) for j in range(i))
+    plt.close(fig)

@@ -154,5 +154,23 @@ def test_identifiability_cli_on_analytic_cases(tmp_path, capsys):
     for name in ("correlation.png", "correlation.csv", "fisher_eigen.csv", "identifiability.md"):
         assert (out / "analytic-smooth" / name).stat().st_size > 0
     assert (out / "summary.md").exists() and (out / "std_percent.png").exists()
+    for png in (out / "std_percent.png", out / "analytic-smooth" / "correlation.png"):
+        png.unlink()
+    assert main(["identifiability", "analytic-smooth", "analytic-linear", "--render", "--out", str(out)]) == 0
+    assert (out / "std_percent.png").exists() and (out / "analytic-smooth" / "correlation.png").exists()
     assert main(["identifiability", "analytic-smooth", "--x", "E=1e9", "--out", str(out)]) == 2
     assert main(["identifiability", "analytic-smooth", "analytic-linear", "--x", "E=3e4"]) == 2
+
+
+def test_default_output_goes_under_the_results_root_not_the_current_directory(tmp_path, monkeypatch):
+    from bench.cli import main
+
+    root, cwd = tmp_path / "root", tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    monkeypatch.setenv("FEMUBENCH_RESULTS_DIR", str(root))
+    assert main(["identifiability", "analytic-linear", "--no-figures"]) == 0
+    assert (root / "studies" / "identifiability" / "analytic-linear" / "identifiability.json").exists()
+    assert not any(cwd.iterdir())
+    assert main(["identifiability", "analytic-linear", "--render"]) == 0
+    assert (root / "studies" / "identifiability" / "analytic-linear" / "correlation.png").exists()

@@ -156,6 +156,9 @@ def test_sensitivity_cli_on_a_tiny_fe_mesh(tmp_path, capsys):
     assert len(list(csv.DictReader((out / "sensitivity_snapshots.csv").open()))) == 6 * 10
     for name in ("sensitivity.png", "sensitivity_snapshots.png", "sensitivity.md", "sensitivity.json"):
         assert (out / name).stat().st_size > 0
+    (out / "sensitivity.png").unlink()
+    assert main(["sensitivity", "exponent-compression", "--render", "--out", str(out)]) == 0
+    assert (out / "sensitivity.png").stat().st_size > 0
     assert main(["sensitivity", "exponent-compression", "--delta", "0", "--out", str(out)]) == 2
     assert main(["sensitivity", "analytic-smooth", "--out", str(out)]) == 2
     assert main(["sensitivity", "no-such-case", "--out", str(out)]) == 2

@@ -67,6 +67,20 @@ def test_uncertainty_cli_on_the_analytic_linear_case(tmp_path, capsys):
     assert all(r["verdict"] == "agree" for r in doc["table"])
     for name in ("uncertainty.csv", "uncertainty.md", "corner.png", "chain.npz"):
         assert (out / name).stat().st_size > 0
+    # the chain is an emcee backend persisted to chain.npz (z = x / reference, with its scale)
+    from solvers.npz_backend import NpzBackend
+
+    backend = NpzBackend.load(out / "chain.npz")
+    mcmc = doc["mcmc"]
+    assert backend.iteration == mcmc["n_steps"] and backend.shape == (16, 3)
+    assert list(backend.metadata["names"]) == doc["names"]
+    kept = backend.get_chain(discard=mcmc["burn"], flat=True) * backend.metadata["scale"]
+    assert np.allclose(kept.mean(axis=0), [mcmc["mean"][n] for n in doc["names"]])
+    assert 0 < np.mean(backend.accepted / backend.iteration) == pytest.approx(mcmc["acceptance_fraction"])
+    # figures are re-drawn from the folder alone
+    (out / "corner.png").unlink()
+    assert main(["uncertainty", "analytic-linear", "--render", "--out", str(out)]) == 0
+    assert (out / "corner.png").stat().st_size > 0
     assert main(["uncertainty", "analytic-linear", "--x", "p=9", "--out", str(out)]) == 2
     assert main(["uncertainty", "analytic-linear", "--x", "zz=1", "--out", str(out)]) == 2
     assert "unknown" in capsys.readouterr().err

@@ -102,10 +102,11 @@ def main(args: argparse.Namespace) -> int:
             write_csv(out, res)
             tqdm.write(f"  -> {out}")
     if args.figure and res is not None and np.any(res.converged):
-        from problems.dic.figures import plot_subsets
+        from bench.dic_figures import subsets_figure
+        from problems.dic.subsets import subset_figure_data
 
         conv = np.flatnonzero(res.converged)
         pick = conv[np.linspace(0, len(conv) - 1, min(4, len(conv))).round().astype(int)]
-        plot_subsets(ref, images[-1], res, pick, args.figure, cfg.subset, cfg.order)
+        subsets_figure(subset_figure_data(ref, images[-1], res, pick, cfg.subset, cfg.order), args.figure)
         tqdm.write(f"figure -> {args.figure}")
     return 0

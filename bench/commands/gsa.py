@@ -20,24 +20,34 @@ def add_arguments(p) -> None:
                    help="shrink the case's box about the reference by S in (0, 1]; auto (default): 1, or the largest "
                         "S whose sample points are all feasible")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", metavar="DIR", help="output directory (default results/studies/gsa/<case>)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output directory (default results/studies/gsa/<case> in the results root, "
+                        "see docs/sensitivity.md)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None, metavar="N",
                        help="local Dask worker processes (default: one per core); 1 runs in-process")
     where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
     p.add_argument("--dry-run", action="store_true", help="print the planned evaluations and the box, run nothing")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--no-figures", action="store_true")
+    figures = p.add_mutually_exclusive_group()
+    figures.add_argument("--no-figures", action="store_true", help="write CSV/markdown/JSON only")
+    figures.add_argument("--render", action="store_true",
+                         help="compute nothing: re-draw gsa_<method>.png from the output folder of an earlier run")
 
 
 def main(args) -> int:
     import os
 
     from bench.parallel import mapper
-    from bench.studies.global_sensitivity import run_gsa
+    from bench.studies import existing_dir
+    from bench.studies.global_sensitivity import render_gsa, run_gsa
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
+    if args.render:
+        for path in render_gsa(existing_dir(NAME, case.name, args.out), (args.method,)):
+            print(f"wrote {path}")
+        return 0
     samples = args.samples or (32 if args.method == "sobol" else 10)
     if samples < 2:
         raise ValueError(f"--samples {samples} is out of range: need at least 2")
@@ -52,7 +62,7 @@ def main(args) -> int:
         scale = "auto"
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    workers = 1 if case.name.startswith("analytic-") else (args.workers or os.cpu_count() or 1)
+    workers = 1 if case.is_analytic else (args.workers or os.cpu_count() or 1)
 
     def confirm(planned, box, s, n_bad):
         extra = f"; box scaled by {s:g} ({n_bad} sample points infeasible in the full box)" if s < 1 else ""
@@ -62,14 +72,16 @@ def main(args) -> int:
                 print(f"  {n:>8} [{lo:.6g}, {hi:.6g}]")
         return not args.dry_run
 
-    with mapper(1 if case.name.startswith("analytic-") else args.workers, args.scheduler) as m:
+    with mapper(1 if case.is_analytic else args.workers, args.scheduler) as m:
         res = run_gsa(case.name, method=args.method, samples=samples, mesh=args.mesh, data=args.data, box_scale=scale,
                       seed=args.seed, mapper=m, workers=workers, out=args.out, progress=not args.quiet,
-                      figures=not args.no_figures, confirm=confirm)
-    if res.get("aborted"):
+                      confirm=confirm)
+    if res is None:  # dry run
         return 0
-    r, c = res["result"], res["cost"]
-    print(f"data: {res['data']}")
+    if not args.no_figures:
+        res.paths += render_gsa(res.dir, (args.method,))
+    r, c = res.result, res.cost
+    print(f"data: {res.data}")
     for w in r.warnings:
         print(f"warning: {w}")
     if args.method == "sobol":
@@ -84,5 +96,5 @@ def main(args) -> int:
                   f"{row['sigma']:10.4g}")
     print(f"cost: {c['fe_evaluations']} forward evaluations ({c['failed']} failed, {c['infeasible']} infeasible), "
           f"{c['evaluation_wall_s']:.1f} s evaluating with {c['workers']} worker(s), {c['total_wall_s']:.1f} s total")
-    print(f"wrote {res['paths'][0].parent}")
+    print(f"wrote {res.dir}")
     return 0

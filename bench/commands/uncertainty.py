@@ -20,12 +20,17 @@ def add_arguments(p) -> None:
                    help="at most K Gauss-Newton steps polishing the start to the mode before Laplace and MCMC "
                         "(default 10; 0: none)")
     p.add_argument("--walkers", type=int, default=None, metavar="W", help="MCMC walkers (default max(16, 4 n))")
-    p.add_argument("--out", metavar="DIR", help="output directory (default results/studies/uncertainty/<case>)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output directory (default results/studies/uncertainty/<case> in the results root, "
+                        "see docs/sensitivity.md)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None, metavar="N",
                        help="local Dask worker processes (default: one per core); 1 runs in-process")
     where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
-    p.add_argument("--no-figures", action="store_true")
+    figures = p.add_mutually_exclusive_group()
+    figures.add_argument("--no-figures", action="store_true", help="write the tables, JSON and chain only")
+    figures.add_argument("--render", action="store_true",
+                         help="compute nothing: re-draw corner.png from the output folder of an earlier run")
 
 
 def main(args) -> int:
@@ -33,36 +38,42 @@ def main(args) -> int:
     import warnings
 
     from bench.parallel import mapper
-    from bench.studies import parse_assignments
-    from bench.studies.uncertainty import run_uncertainty
+    from bench.studies import existing_dir, parse_assignments
+    from bench.studies.uncertainty import render_uncertainty, run_uncertainty
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
+    if args.render:
+        for path in render_uncertainty(existing_dir(NAME, case.name, args.out)):
+            print(f"wrote {path}")
+        return 0
     x = parse_assignments(args.x, case.names)
     if args.budget < 1:
         raise ValueError(f"--budget {args.budget} is out of range: must be >= 1")
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    analytic = case.name.startswith("analytic-")
+    analytic = case.is_analytic
     workers = 1 if analytic else (args.workers or os.cpu_count() or 1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # the short-chain warning is reported below
         with mapper(1 if analytic else args.workers, args.scheduler) as m:
             res = run_uncertainty(case.name, mesh=args.mesh, data=args.data, budget=args.budget, seed=args.seed, x=x,
                                   refine=args.refine, n_walkers=args.walkers, mapper=m, out=args.out,
-                                  figures=not args.no_figures, workers=workers)
+                                  workers=workers)
+    if not args.no_figures:
+        res.paths += render_uncertainty(res.dir)
     print(f"{'parameter':>10} {'MCMC mean':>12} {'MCMC sd':>10} {'Laplace mean':>12} {'Laplace sd':>10}  verdict")
-    for r in res["rows"]:
+    for r in res.rows:
         print(f"{r['parameter']:>10} {r['mcmc_mean']:12.6g} {r['mcmc_std']:10.3g} {r['laplace_mean']:12.6g} "
               f"{r['laplace_std']:10.3g}  {r['verdict']}")
-    print(res["overall"])
-    for w in res["mcmc_warnings"]:
+    print(res.overall)
+    for w in res.mcmc_warnings:
         print(f"MCMC warning: {w}")
-    for w in res["notes"]:
+    for w in res.notes:
         print(f"note: {w}")
-    c = res["cost"]
+    c = res.cost
     print(f"cost: Laplace {c['laplace_evaluations']} evaluations ({c['laplace_wall_s']:.1f} s), MCMC "
           f"{c['mcmc_evaluations']} evaluations ({c['mcmc_wall_s']:.1f} s), total {c['total_wall_s']:.1f} s "
           f"with {c['workers']} worker(s)")
-    print(f"wrote {res['paths'][0].parent}")
+    print(f"wrote {res.dir}")
     return 0

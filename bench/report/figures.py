@@ -12,7 +12,8 @@
   ``max_i |x_i/x_i^REF - 1| <= 10 %, 1 %, 0.1 %``. One (run, target) pair counts once, at the
   first evaluation count where the target is met; pairs never met keep the curve below 1.
 
-Every line differs by line style *and* marker (greys only), so the figures survive printing.
+Every line differs by line style *and* marker (greys only), so the figures survive printing; style,
+labels and saving: :mod:`bench.plotting`.
 """
 from __future__ import annotations
 
@@ -23,46 +24,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.report.tables import PARAM_TEX, case_order, identified, method_order
+from bench.plotting import (
+    DOUBLE, REFERENCE_LINE, SINGLE, integer_axis, line_style, log_axis, normalised_label, pyplot, save,
+)
+from bench.report.tables import case_order, identified, method_order
 
-LINESTYLES = ("-", "--", ":", "-.")
-MARKERS = ("o", "s", "^", "v", "D", "x", "+", "*", "<", ">", "p", "h")
-GREYS = ("0.0", "0.45", "0.7")
 COST_KS = (1, 2, 3, 4, 6, 8)
 ERR_TARGETS = (10.0, 1.0, 0.1)
 COST_LABEL = "cost $J$ (-)"
-DPI = 150
-
-
-def style(i: int) -> dict:
-    """The i-th black-and-white line style (line style x marker x grey)."""
-    return {"linestyle": LINESTYLES[i % len(LINESTYLES)], "marker": MARKERS[i % len(MARKERS)],
-            "color": GREYS[(i // len(MARKERS)) % len(GREYS)]}
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.color": "0.85", "grid.linewidth": 0.5,
-                         "legend.fontsize": 7, "legend.frameon": False, "lines.linewidth": 1.2,
-                         "lines.markersize": 4, "svg.hashsalt": "femubench", "pdf.compression": 6})
-    return plt
 
 
 def _save(fig, path: Path, pdf: bool) -> list[Path]:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    out = [path.with_suffix(".png")]
-    fig.savefig(out[0], dpi=DPI, bbox_inches="tight", metadata={"Software": None})
-    if pdf:
-        out.append(path.with_suffix(".pdf"))
-        fig.savefig(out[1], bbox_inches="tight", metadata={"Creator": None, "Producer": None, "CreationDate": None})
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return out
+    png = save(fig, path.with_suffix(".png"), pdf=pdf)
+    return [png] + ([png.with_suffix(".pdf")] if pdf else [])
 
 
 def safe(name: str) -> str:
@@ -83,23 +57,19 @@ def representative(runs: pd.DataFrame) -> pd.Series | None:
     return ok.iloc[(len(ok) - 1) // 2]
 
 
-def _param_label(p: str) -> str:
-    sym = PARAM_TEX[p].strip("$") if p in PARAM_TEX else rf"\mathrm{{{p}}}".replace("_", r"\_")
-    return rf"${sym}/{sym}^{{\mathrm{{REF}}}}$"
-
-
 def history_figure(run: pd.Series, hist: pd.DataFrame, params: list[str], path: Path, *,
                    n_runs: int = 1, pdf: bool = False) -> list[Path]:
     """(a) x_i/x_i^REF and (b) cost against iteration for one run."""
-    plt = _plt()
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9.0, 3.4), constrained_layout=True)
+    plt = pyplot()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(DOUBLE[0], 3.4), constrained_layout=True)
     active = [p for p in params if f"xn.{p}" in hist and hist[f"xn.{p}"].notna().any()]
     it = hist["iteration"].to_numpy()
     for i, p in enumerate(active):
         y = hist[f"xn.{p}"].to_numpy()
-        ax1.plot(it, y, label=_param_label(p), markevery=_markevery(len(it)), **style(i))
-    ax1.axhline(1.0, color="0.3", linewidth=0.8, linestyle=(0, (1, 1)))
+        ax1.plot(it, y, label=normalised_label(p), markevery=_markevery(len(it)), **line_style(i))
+    ax1.axhline(1.0, **REFERENCE_LINE)
     ax1.set_xlabel("iteration (-)")
+    integer_axis(ax1, "x")
     ax1.set_ylabel(r"normalised parameter $x_i/x_i^{\mathrm{REF}}$ (-)")
     ax1.set_title("(a) parameters", loc="left")
     if active:
@@ -111,8 +81,9 @@ def history_figure(run: pd.Series, hist: pd.DataFrame, params: list[str], path: 
                  markersize=3, label="cost of iterate")
     if np.any(np.isfinite(best) & (best > 0)):
         ax2.plot(it, np.where(best > 0, best, np.nan), color="0.0", linestyle="-", label="best cost so far")
-        ax2.set_yscale("log")
+        log_axis(ax2, "y")
     ax2.set_xlabel("iteration (-)")
+    integer_axis(ax2, "x")
     ax2.set_ylabel(COST_LABEL)
     ax2.set_title("(b) cost", loc="left")
     ax2.legend()
@@ -138,8 +109,8 @@ def _best_curve(h: pd.DataFrame, final: pd.Series | None = None) -> tuple[np.nda
 def convergence_figure(case: str, runs: pd.DataFrame, history: pd.DataFrame, path: Path, *,
                        methods: list[str], pdf: bool = False) -> list[Path]:
     """Best cost so far against forward evaluations, median over the runs of each method."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.2, 3.6), constrained_layout=True)
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=SINGLE, constrained_layout=True)
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
     emax = max(2.0, float(runs["n_evals"].max()), float(history["n_evals"].max()) if len(history) else 0.0)
     grid = np.unique(np.round(np.geomspace(1.0, emax, 80)))
@@ -160,10 +131,10 @@ def convergence_figure(case: str, runs: pd.DataFrame, history: pd.DataFrame, pat
             med = np.nanmedian(arr, axis=0)
         med = np.where(med > 0, med, np.nan)
         if np.isfinite(med).any():
-            ax.plot(grid, med, label=f"{m} ({len(curves)})", markevery=_markevery(len(grid)), **style(i))
-    ax.set_xscale("log")
+            ax.plot(grid, med, label=f"{m} ({len(curves)})", markevery=_markevery(len(grid)), **line_style(i))
+    log_axis(ax, "x")
     if any(line.get_ydata().size for line in ax.get_lines()):
-        ax.set_yscale("log")
+        log_axis(ax, "y")
     ax.set_xlabel("forward evaluations (-)")
     ax.set_ylabel("best " + COST_LABEL)
     ax.set_title(f"{case}: best cost, median over runs", fontsize=9)
@@ -233,22 +204,22 @@ def _ecdf(ax, hits: list[float], xmax: float, **kw) -> None:
 def ecdf_figure(title: str, runs: pd.DataFrame, history: pd.DataFrame, path: Path, *, methods: list[str],
                 pdf: bool = False) -> list[Path]:
     """Runtime ECDFs: (a) cost targets, (b) parameter-error targets, one line per method."""
-    plt = _plt()
+    plt = pyplot()
     rt = runtimes(runs, history)
     xmax = max(2.0, float(runs["budget"].max()), float(runs["n_evals"].max()))
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9.0, 3.6), sharey=True, constrained_layout=True)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=DOUBLE, sharey=True, constrained_layout=True)
     for i, m in enumerate(methods):
         if m not in rt:
             continue
-        _ecdf(ax1, rt[m]["cost"], xmax, label=m, **style(i))
-        _ecdf(ax2, rt[m]["err"], xmax, label=m, **style(i))
+        _ecdf(ax1, rt[m]["cost"], xmax, label=m, **line_style(i))
+        _ecdf(ax2, rt[m]["err"], xmax, label=m, **line_style(i))
     ks = ", ".join(str(k) for k in COST_KS)
     ax1.set_title(rf"(a) $J - J_\mathrm{{best}} \leq 10^{{-k}}(J_\mathrm{{init}} - J_\mathrm{{best}})$, k = {ks}",
                   loc="left", fontsize=8)
     ax2.set_title("(b) max$_i$ |x$_i$/x$_i^\\mathrm{REF}$ − 1| ≤ " + ", ".join(f"{t:g}" for t in ERR_TARGETS) + " %",
                   loc="left", fontsize=8)
     for ax in (ax1, ax2):
-        ax.set_xscale("log")
+        log_axis(ax, "x")
         ax.set_xlim(1.0, xmax * 1.05)
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("forward evaluations (-)")

@@ -20,12 +20,10 @@ import numpy as np
 import pandas as pd
 
 from bench.store import PARAMETER_ORDER, parameter_order
+from problems.inverse.cases import LABELS
 
 DASH = "–"  # en dash: inactive parameter
 
-#: Pretty parameter names for the tables (LaTeX, then Markdown/plain).
-PARAM_TEX = {"E": r"$E$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$", "sigma0": r"$\sigma_0$",
-             "H": r"$H$", "pt0": r"$p_{t0}$", "a": r"$a$", "b": r"$b$"}
 
 
 def case_order(cases) -> list[str]:
@@ -252,5 +250,5 @@ def write_table(stem: Path, formats, *, display: pd.DataFrame, raw: pd.DataFrame
 def tex_param_index(t: pd.DataFrame) -> pd.DataFrame:
     """Table 1 with LaTeX parameter symbols as index (unescaped)."""
     t = t.copy()
-    t.index = [PARAM_TEX.get(p, tex_escape(p)) for p in t.index]
+    t.index = [LABELS.get(p, tex_escape(p)) for p in t.index]
     return t

@@ -1,10 +1,16 @@
 """Sensitivity, identifiability, global-sensitivity and uncertainty studies (orchestration and I/O).
 
 The mathematics lives in :mod:`problems.analysis.sensitivity`, :mod:`problems.analysis.identifiability` and
-:mod:`problems.analysis.global_sensitivity`; this package builds the objectives, runs the forward
-evaluations through :func:`bench.parallel.mapper` (the suites' evaluator), and writes CSV,
-markdown, JSON and figures (:mod:`bench.studies.figures`). Default output directory:
-``results/studies/<command>/<case>/``.
+:mod:`problems.analysis.global_sensitivity`. Each study is two steps, as the suites and their reports:
+
+* ``run_<study>(...)`` builds the objective, runs the forward evaluations through
+  :func:`bench.parallel.mapper` (the suites' evaluator), writes the raw results (CSV, JSON,
+  markdown tables, the MCMC chain) into one output folder and returns a dataclass;
+* ``render_<study>(folder)`` reads only that folder and draws the figures
+  (:mod:`bench.studies.figures`), so figures can be re-drawn without re-running anything.
+
+Output folder: ``--out DIR``, else ``<results root>/studies/<study>/<case>/`` with the results
+root of :mod:`bench.paths` (the checkout's ``results/`` or ``$FEMUBENCH_RESULTS_DIR``).
 """
 from __future__ import annotations
 
@@ -16,7 +22,6 @@ from typing import Iterable
 
 import numpy as np
 
-RESULTS = Path("results") / "studies"
 
 DATA_CHOICES = "auto | shipped | synthetic | PATH"
 DATA_HELP = ("data the objective is compared with: shipped (the case's pseudo-experimental data from the "
@@ -25,10 +30,25 @@ DATA_HELP = ("data the objective is compared with: shipped (the case's pseudo-ex
              "(shipped if already on disk, else synthetic). Default: auto")
 
 
+def default_output_dir(command: str, case: str) -> Path:
+    """``<results root>/studies/<command>/<case>`` (not created; see :mod:`bench.paths`)."""
+    from bench.paths import results_root
+
+    return results_root() / "studies" / command / case
+
+
 def output_dir(command: str, case: str, out: str | Path | None = None) -> Path:
-    """``out`` or ``results/studies/<command>/<case>``, created."""
-    path = Path(out) if out else RESULTS / command / case
+    """``out`` or :func:`default_output_dir`, created."""
+    path = Path(out) if out else default_output_dir(command, case)
     path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def existing_dir(command: str, case: str, out: str | Path | None = None) -> Path:
+    """The output folder a previous run wrote (``out`` or the default); FileNotFoundError if absent."""
+    path = Path(out) if out else default_output_dir(command, case)
+    if not path.is_dir():
+        raise FileNotFoundError(f"no results of `femubench {command}` in {path}: run the study first")
     return path
 
 
@@ -55,7 +75,7 @@ def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto",
     from problems.inverse.build import build_objective
 
     case = get_case(case_name)
-    if case.name.startswith("analytic-"):
+    if case.is_analytic:
         return build_objective(case, mapper=mapper), "analytic synthetic data (noise-free, at the reference)"
     from problems.inverse.data import default_path, get_data, make_data
 
@@ -125,6 +145,19 @@ def write_json(path: Path, doc: dict) -> Path:
     path = Path(path)
     path.write_text(json.dumps(_plain(doc), indent=1) + "\n")
     return path
+
+
+def read_json(path: Path) -> dict:
+    """A JSON file written by :func:`write_json` (non-finite floats were written as strings)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} does not exist: run the study first")
+    return json.loads(path.read_text())
+
+
+def as_float(value) -> float:
+    """A number read back from :func:`write_json` (``"nan"``, ``"inf"`` strings included); None -> nan."""
+    return math.nan if value is None else float(value)
 
 
 def markdown_table(rows: list[dict], formats: dict[str, str] | None = None) -> str:

@@ -1,12 +1,34 @@
-"""Global sensitivity study of one case: Sobol (Saltelli) or Morris over the (scaled) parameter box."""
+"""Global sensitivity study of one case: Sobol (Saltelli) or Morris over the (scaled) parameter box.
+
+:func:`run_gsa` samples, evaluates, analyses and writes ``gsa_<method>.csv/md/json`` and
+``samples_<method>.csv``; :func:`render_gsa` draws ``gsa_<method>.png`` from ``gsa_<method>.json`` alone.
+"""
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from bench.studies import markdown_table, output_dir, study_objective, write_csv, write_json
+from bench.studies import as_float, markdown_table, output_dir, read_json, study_objective, write_csv, write_json
+
+METHODS = ("sobol", "morris")
+
+
+@dataclass
+class GSARun:
+    """What :func:`run_gsa` computed and wrote."""
+
+    result: object           # problems.analysis.global_sensitivity.SobolResult or MorrisResult
+    cost: dict               # evaluations, failures, wall times (s), workers
+    box_scale: float         # scale of the case's box about the reference (-)
+    data: str                # description of the data of the cost
+    X: np.ndarray            # sample points (physical units), (evaluations, parameters)
+    Y: np.ndarray            # outputs at the sample points, (evaluations, outputs)
+    dir: Path
+    paths: list[Path] = field(default_factory=list)
 
 
 def planned_evaluations(method: str, samples: int, n_params: int) -> int:
@@ -49,9 +71,10 @@ def _chunked(f, X, chunk: int, progress: bool, desc: str) -> np.ndarray:
 
 def run_gsa(case_name: str, *, method: str = "sobol", samples: int = 32, mesh: str = "coarse", data: str = "auto",
             box_scale: str | float = "auto", seed: int = 0, mapper=None, workers: int = 1, out=None,
-            progress: bool = True, figures: bool = True, confirm=None) -> dict:
-    """Sample, evaluate (through ``mapper``), analyse and write ``gsa_<method>.csv/md/json/png`` and the
-    samples (``samples_<method>.csv``). ``confirm(planned_evals, box)`` may veto (return False)."""
+            progress: bool = True, confirm=None) -> GSARun | None:
+    """Sample, evaluate (through ``mapper``), analyse and write ``gsa_<method>.csv/md/json`` and the
+    samples (``samples_<method>.csv``). ``confirm(planned_evals, box, scale, n_infeasible)`` may veto
+    (return False): then nothing is evaluated or written and the result is None."""
     from problems.inverse.cases import get_case
     from problems.analysis.global_sensitivity import (
         FE_OUTPUT_LABELS, FESummaries, feasible_scale, morris_analyze, morris_sample, scaled_box, sobol_analyze,
@@ -80,8 +103,8 @@ def run_gsa(case_name: str, *, method: str = "sobol", samples: int = 32, mesh: s
     X = lower + U * (upper - lower)
     planned = len(X)
     if confirm is not None and confirm(planned, (lower, upper), scale, n_infeasible_full) is False:
-        return {"aborted": True, "planned": planned}
-    fe = not case.name.startswith("analytic-")
+        return None
+    fe = not case.is_analytic
     if fe:
         model = obj.model
         f = FESummaries(obj, model.loading.snapshots, len(model.points), mapper=mapper)
@@ -130,11 +153,43 @@ def run_gsa(case_name: str, *, method: str = "sobol", samples: int = 32, mesh: s
     paths.append(out_dir / f"{stem}.md")
     paths.append(write_json(out_dir / f"{stem}.json", {"case": case.name, "mesh": mesh, "method": method, "data": text,
                                                        "settings": settings, "box_scale": scale, "box": box_rows,
+                                                       "names": list(names), "outputs": list(f.outputs),
+                                                       "output_labels": {o: labels.get(o, o) for o in f.outputs},
                                                        "indices": res.rows(), "cost": cost, "warnings": res.warnings}))
-    if figures:
-        from bench.studies.figures import morris_plot, sobol_bars
+    return GSARun(res, cost, scale, text, X, Y, Path(out_dir), paths)
 
-        title = f"{case.name}, mesh {mesh}, {f.n_evals} evaluations"
-        plot = sobol_bars if method == "sobol" else morris_plot
-        paths.append(plot(res, out_dir / f"{stem}.png", labels, title))
-    return {"result": res, "paths": paths, "cost": cost, "box_scale": scale, "data": text, "X": X, "Y": Y}
+
+def render_gsa(folder, methods=METHODS) -> list[Path]:
+    """Draw ``gsa_<method>.png`` from each ``gsa_<method>.json`` of ``folder`` (of ``methods``)."""
+    from bench.studies.figures import morris_plot, sobol_bars
+
+    d = Path(folder)
+    found = [m for m in methods if (d / f"gsa_{m}.json").is_file()]
+    if not found:
+        raise FileNotFoundError(f"no gsa_{{{','.join(methods)}}}.json in {d}: run the study first")
+    paths = []
+    for method in found:
+        doc = read_json(d / f"gsa_{method}.json")
+        rows = doc["indices"]
+        names = doc.get("names") or list(dict.fromkeys(r["parameter"] for r in rows))
+        outputs = doc.get("outputs") or list(dict.fromkeys(r["output"] for r in rows))
+
+        def table(key):
+            t = np.full((len(outputs), len(names)), np.nan)
+            for r in rows:
+                t[outputs.index(r["output"]), names.index(r["parameter"])] = as_float(r[key])
+            return t
+
+        labels = doc.get("output_labels")
+        if labels is None:  # written before the labels were stored
+            from problems.analysis.global_sensitivity import FE_OUTPUT_LABELS as labels
+        title = f"{doc['case']}, mesh {doc['mesh']}, {doc['cost']['fe_evaluations']} evaluations"
+        path = d / f"gsa_{method}.png"
+        if method == "sobol":
+            conf = float(doc["settings"].get("conf_level", 0.95))
+            paths.append(sobol_bars(names, outputs, table("S1"), table("S1_conf"), table("ST"), table("ST_conf"), conf,
+                                    path, labels, title))
+        else:
+            paths.append(morris_plot(names, outputs, table("mu_star"), table("mu_star_conf"), table("sigma"), path,
+                                     labels, title))
+    return paths

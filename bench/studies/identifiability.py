@@ -1,12 +1,30 @@
-"""Identifiability study: Fisher information and Laplace covariance per case; tables and heat maps."""
+"""Identifiability study: Fisher information and Laplace covariance per case.
+
+:func:`run_identifiability` writes, per case, ``identifiability.csv/md/json``, ``correlation.csv`` and
+``fisher_eigen.csv`` and, for several cases, ``summary.md/csv/json``; :func:`render_identifiability`
+draws ``correlation.png`` (per case) and ``std_percent.png`` (summary) from those files alone.
+"""
 from __future__ import annotations
 
+import csv
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from bench.studies import markdown_table, output_dir, study_objective, write_csv, write_json
+from bench.studies import as_float, markdown_table, output_dir, read_json, study_objective, write_csv, write_json
+
+
+@dataclass
+class IdentifiabilityRun:
+    """What :func:`run_identifiability` computed and wrote."""
+
+    results: dict                                    # case -> problems.analysis.identifiability.Identifiability
+    summary: list[dict]                              # one row per case (condition, rank, sd %, cost)
+    dirs: dict[str, Path]                            # case -> its output folder
+    summary_dir: Path | None = None                  # folder of summary.md/csv/json (several cases only)
+    paths: list[Path] = field(default_factory=list)
 
 
 def case_identifiability(case_name: str, *, mesh: str = "coarse", data: str = "auto", x: dict | None = None,
@@ -23,7 +41,8 @@ def case_identifiability(case_name: str, *, mesh: str = "coarse", data: str = "a
     return identifiability(obj, z, scheme=scheme, rel_step=rel_step), obj, text
 
 
-def write_case(ident, case_name: str, d, *, mesh: str, data_text: str, wall_s: float, figures: bool = True) -> list:
+def write_case(ident, case_name: str, d, *, mesh: str, data_text: str, wall_s: float) -> list:
+    """Write the tables and ``identifiability.json`` of one case into ``d``."""
     names = ident.names
     paths = [write_csv(d / "identifiability.csv", ident.rows())]
     rho = ident.correlation
@@ -53,21 +72,17 @@ def write_case(ident, case_name: str, d, *, mesh: str, data_text: str, wall_s: f
         "case": case_name, "mesh": mesh, "data": data_text, "x": dict(zip(names, ident.x)), **ident.summary(),
         "std": dict(zip(names, ident.std_x)), "correlation": rho, "fisher_z": ident.fisher_z,
         "cov_x": ident.cov_x, "wall_s": wall_s}))
-    if figures:
-        from bench.studies.figures import correlation_heatmap
-
-        paths.append(correlation_heatmap(ident, d / "correlation.png",
-                                         f"{case_name}: Laplace correlation, cond = {ident.condition:.3g}"))
     return paths
 
 
 def run_identifiability(cases: list[str], *, mesh: str = "coarse", data: str = "auto", x: dict | None = None,
                         scheme: str = "forward", rel_step: float = 1e-6, mapper=None, out=None,
-                        figures: bool = True, progress: bool = True) -> dict:
-    """One directory per case plus, for several cases, a summary (``summary.csv/md``, ``std_percent.png``)."""
+                        progress: bool = True) -> IdentifiabilityRun:
+    """One folder per case (``out`` itself for one case, ``out/<case>`` for several) plus, for
+    several cases, a summary folder (``out``, or the default ``.../identifiability/summary``)."""
     from tqdm import tqdm
 
-    results, paths, summary = {}, [], []
+    run = IdentifiabilityRun({}, [], {})
     t_all = time.perf_counter()
     for name in tqdm(cases, desc="identifiability", disable=not progress or len(cases) < 2):
         t0 = time.perf_counter()
@@ -75,33 +90,56 @@ def run_identifiability(cases: list[str], *, mesh: str = "coarse", data: str = "
                                                 mapper=mapper)
         wall = time.perf_counter() - t0
         d = output_dir("identifiability", name, out if out is None or len(cases) == 1 else Path(out) / name)
-        paths += write_case(ident, name, d, mesh=mesh, data_text=text, wall_s=wall, figures=figures)
-        results[name] = ident
-        summary.append({"case": name, "condition": ident.condition, "rank": ident.rank,
-                        "lambda_min": float(ident.eigenvalues[-1]), "lambda_max": float(ident.eigenvalues[0]),
-                        **{f"sd% {n}": float(s) for n, s in zip(ident.names, ident.std_percent)},
-                        "n_evals": ident.n_evals, "wall_s": wall})
+        run.paths += write_case(ident, name, d, mesh=mesh, data_text=text, wall_s=wall)
+        run.results[name], run.dirs[name] = ident, d
+        run.summary.append({"case": name, "condition": ident.condition, "rank": ident.rank,
+                            "lambda_min": float(ident.eigenvalues[-1]), "lambda_max": float(ident.eigenvalues[0]),
+                            **{f"sd% {n}": float(s) for n, s in zip(ident.names, ident.std_percent)},
+                            "n_evals": ident.n_evals, "wall_s": wall})
     if len(cases) > 1:
-        root = Path(out) if out else output_dir("identifiability", "summary")
-        root.mkdir(parents=True, exist_ok=True)
+        run.summary_dir = root = output_dir("identifiability", "summary", out)
         compact = [{"case": r["case"], "condition": r["condition"], "rank": r["rank"],
                     "std % (param: value)": ", ".join(f"{k[4:]}: {v:.3g}" for k, v in r.items() if k.startswith("sd% ")),
-                    "n_evals": r["n_evals"], "wall_s": r["wall_s"]} for r in summary]
+                    "n_evals": r["n_evals"], "wall_s": r["wall_s"]} for r in run.summary]
         (root / "summary.md").write_text(
             f"# Identifiability summary (mesh {mesh})\n\nCondition number of J^T J in z = x / reference and "
             "Laplace standard deviations in % of the reference.\n\n"
             + markdown_table(compact, {"condition": ".3g", "wall_s": ".1f"})
             + f"\nTotal wall time {time.perf_counter() - t_all:.1f} s.\n")
-        paths.append(root / "summary.md")
+        run.paths.append(root / "summary.md")
         with (root / "summary.csv").open("w") as fh:  # ragged columns across forms: long format
             fh.write("case,parameter,std_percent,condition\n")
-            for name, ident in results.items():
+            for name, ident in run.results.items():
                 for n, s in zip(ident.names, ident.std_percent):
                     fh.write(f"{name},{n},{s:.6g},{ident.condition:.6g}\n")
-        paths.append(root / "summary.csv")
-        if figures:
-            from bench.studies.figures import std_percent_bars
+        run.paths.append(root / "summary.csv")
+        run.paths.append(write_json(root / "summary.json", {"mesh": mesh, "data": data, "cases": run.summary,
+                                                            "dirs": {k: str(v) for k, v in run.dirs.items()}}))
+    return run
 
-            paths.append(std_percent_bars({k: dict(zip(v.names, v.std_percent)) for k, v in results.items()},
-                                          root / "std_percent.png", f"Laplace standard deviations, mesh {mesh}"))
-    return {"results": results, "summary": summary, "paths": paths}
+
+def render_identifiability(folder) -> list[Path]:
+    """Draw ``correlation.png`` from ``folder/identifiability.json`` (one case's folder)."""
+    from bench.studies.figures import correlation_heatmap
+
+    d = Path(folder)
+    doc = read_json(d / "identifiability.json")
+    rho = [[as_float(v) for v in r] for r in doc["correlation"]]
+    return [correlation_heatmap(doc["names"], rho, d / "correlation.png",
+                                f"{doc['case']}: Laplace correlation, cond = {as_float(doc['condition']):.3g}")]
+
+
+def render_summary(folder) -> list[Path]:
+    """Draw ``std_percent.png`` from ``folder/summary.csv`` (and the mesh from ``summary.json``)."""
+    from bench.studies.figures import std_percent_bars
+
+    d = Path(folder)
+    if not (d / "summary.csv").is_file():
+        raise FileNotFoundError(f"{d / 'summary.csv'} does not exist: run the study on several cases first")
+    table: dict[str, dict[str, float]] = {}
+    with (d / "summary.csv").open() as fh:
+        for r in csv.DictReader(fh):
+            table.setdefault(r["case"], {})[r["parameter"]] = float(r["std_percent"])
+    mesh = read_json(d / "summary.json").get("mesh") if (d / "summary.json").is_file() else None
+    title = "Laplace standard deviations" + (f", mesh {mesh}" if mesh else "")
+    return [std_percent_bars(table, d / "std_percent.png", title)]

@@ -14,15 +14,23 @@ Steps (all evaluations through the objective, counted):
    ``0.5`` posterior (MCMC) standard deviations and the sd ratio Laplace/MCMC lies in
    ``[0.67, 1.5]``; otherwise what disagrees. An MCMC chain shorter than the solver's
    autocorrelation criterion is flagged: its numbers are then unreliable, not the Laplace ones.
+
+:func:`run_uncertainty` writes ``uncertainty.csv/md/json`` and the chain, ``chain.npz`` (an emcee
+backend, :class:`solvers.npz_backend.NpzBackend`, filled while sampling); :func:`render_uncertainty`
+draws ``corner.png`` from ``uncertainty.json`` and ``chain.npz`` alone.
 """
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from bench.studies import markdown_table, output_dir, study_objective, write_csv, write_json
+from bench.studies import as_float, markdown_table, output_dir, read_json, study_objective, write_csv, write_json
+
+CHAIN_FILE = "chain.npz"
 
 MEAN_TOL = 0.5          # |mean_L - mean_MCMC| / sd_MCMC below this: means agree
 SD_RATIO = (0.67, 1.5)  # sd_L / sd_MCMC inside this: spreads agree
@@ -63,10 +71,30 @@ def compare(names, mcmc: dict, laplace_mean, laplace_sd) -> list[dict]:
     return rows
 
 
+@dataclass
+class UncertaintyRun:
+    """What :func:`run_uncertainty` computed and wrote."""
+
+    rows: list[dict]              # per parameter: MCMC and Laplace mean, sd, 95 % interval, verdict
+    overall: str                  # one-line verdict
+    laplace: object               # problems.analysis.identifiability.Identifiability at the mode
+    run: object                   # the mcmc solver's RunResult
+    x_map: np.ndarray             # the polished mode (physical units)
+    cost: dict                    # evaluations and wall times (s) of both phases
+    chi2_per_dof: float           # cost / (m - n) at the mode
+    mcmc_warnings: list[str]
+    notes: list[str]
+    dir: Path
+    paths: list[Path] = field(default_factory=list)
+
+
 def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto", budget: int = 2000, seed: int = 0,
                     x: dict | None = None, refine: int = 10, n_walkers: int | None = None, mapper=None, out=None,
-                    figures: bool = True, workers: int = 1, scheme: str = "forward") -> dict:
+                    workers: int = 1, scheme: str = "forward") -> UncertaintyRun:
+    """Laplace at the polished mode, then MCMC from there (chain kept in ``chain.npz`` of the output
+    folder); write the comparison table, markdown and JSON."""
     from problems.analysis.identifiability import analyse_jacobian, refine_mode
+    from problems.inverse.cases import get_case
     from solvers import solve
 
     t_start = time.perf_counter()
@@ -116,8 +144,10 @@ def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto",
     options = {"ball_size": ball}
     if n_walkers:
         options["n_walkers"] = int(n_walkers)
+    d = output_dir("uncertainty", case_name, out)
+    (d / CHAIN_FILE).unlink(missing_ok=True)  # no stale chain if this run produces none
     t1 = time.perf_counter()
-    run = solve(obj, "mcmc", budget=budget, seed=seed, x0=x_map, **options)
+    run = solve(obj, "mcmc", budget=budget, seed=seed, x0=x_map, chain_path=str(d / CHAIN_FILE), **options)
     mcmc_wall = time.perf_counter() - t1
     ex = run.extra
     if "mean" not in ex:
@@ -139,7 +169,6 @@ def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto",
             "mcmc_wall_s": mcmc_wall, "total_evaluations": laplace_evals + run.n_evals, "total_wall_s": total_wall,
             "workers": workers}
 
-    d = output_dir("uncertainty", case_name, out)
     paths = [write_csv(d / "uncertainty.csv", rows)]
     fmt = {k: ".6g" for k in rows[0] if k not in ("parameter", "verdict")}
     md = [f"# Uncertainty of {case_name} (mesh {mesh}): MCMC against Laplace", "",
@@ -158,24 +187,35 @@ def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto",
     md += [f"- note: {w}" for w in notes]
     (d / "uncertainty.md").write_text("\n".join(md) + "\n")
     paths.append(d / "uncertainty.md")
-    chain = np.asarray(ex.get("chain")) if "chain" in ex else None
+    units = {p.name: p.unit for p in get_case(case_name).parameters}
     paths.append(write_json(d / "uncertainty.json", {
-        "case": case_name, "mesh": mesh, "data": text, "budget": budget, "seed": seed, "x_map": dict(zip(names, x_map)),
-        "cost_map": cost_map, "chi2_per_dof": chi2_dof, "at_bound": at_bound, "notes": notes, "laplace": {"mean": dict(zip(names, x_map)), "std": dict(zip(names, lap.std_x)),
-                                          "cov": lap.cov_x, "condition": lap.condition, "warnings": lap.warnings},
-        "mcmc": {k: v for k, v in ex.items() if k not in ("chain", "log_prob")}, "table": rows, "overall": overall,
-        "cost": cost, "status": run.status}))
-    if chain is not None:
-        np.savez_compressed(d / "chain.npz", chain=chain, log_prob=np.asarray(ex["log_prob"]), names=np.array(names))
-        paths.append(d / "chain.npz")
-    if figures and chain is not None:
-        from bench.studies.figures import corner_plot
-        from problems.inverse.cases import get_case
+        "case": case_name, "mesh": mesh, "data": text, "budget": budget, "seed": seed, "names": list(names),
+        "units": units, "reference": dict(zip(names, ref)), "x_map": dict(zip(names, x_map)),
+        "cost_map": cost_map, "chi2_per_dof": chi2_dof, "at_bound": at_bound, "notes": notes,
+        "laplace": {"mean": dict(zip(names, x_map)), "std": dict(zip(names, lap.std_x)), "cov": lap.cov_x,
+                    "condition": lap.condition, "warnings": lap.warnings},
+        "mcmc": {k: v for k, v in ex.items() if k not in ("chain", "log_prob", "chain_path")},
+        "chain_file": CHAIN_FILE, "table": rows, "overall": overall, "cost": cost, "status": run.status}))
+    paths.append(d / CHAIN_FILE)
+    return UncertaintyRun(rows, overall, lap, run, x_map, cost, chi2_dof, mcmc_warnings, notes, Path(d), paths)
 
-        kept = chain[ex["burn"]:].reshape(-1, len(names))
-        units = {p.name: p.unit for p in get_case(case_name).parameters}
-        paths.append(corner_plot(kept, names, d / "corner.png", reference=ref, laplace_mean=x_map,
-                                 laplace_cov=lap.cov_x, units=units, seed=seed,
-                                 title=f"{case_name}, mesh {mesh}: MCMC ({run.n_evals} evaluations) vs Laplace"))
-    return {"rows": rows, "overall": overall, "laplace": lap, "run": run, "x_map": x_map, "cost": cost,
-            "paths": paths, "mcmc_warnings": mcmc_warnings, "notes": notes, "chi2_per_dof": chi2_dof}
+
+def render_uncertainty(folder) -> list[Path]:
+    """Draw ``corner.png`` from ``folder/uncertainty.json`` and the chain in ``folder/chain.npz``
+    (burn-in discarded; chain in z times its ``scale``, or physical in files without one)."""
+    from bench.studies.figures import corner_plot
+    from solvers.npz_backend import NpzBackend
+
+    d = Path(folder)
+    doc = read_json(d / "uncertainty.json")
+    backend = NpzBackend.load(d / doc.get("chain_file", CHAIN_FILE))
+    names = doc.get("names") or list(doc["x_map"])
+    scale = np.asarray(backend.metadata.get("scale", np.ones(len(names))), float)
+    kept = backend.get_chain(discard=int(doc["mcmc"]["burn"]), flat=True) * scale
+    lap = doc["laplace"]
+    mean = np.array([as_float(lap["mean"][n]) for n in names])
+    cov = np.array([[as_float(v) for v in r] for r in lap["cov"]])
+    reference = [as_float(doc["reference"][n]) for n in names] if "reference" in doc else None
+    title = f"{doc['case']}, mesh {doc['mesh']}: MCMC ({doc['cost']['mcmc_evaluations']} evaluations) vs Laplace"
+    return [corner_plot(kept, names, d / "corner.png", reference=reference, laplace_mean=mean, laplace_cov=cov,
+                        units=doc.get("units"), seed=int(doc.get("seed", 0)), title=title)]

@@ -3,7 +3,8 @@ correlation, and the DIC measurement route of the inverse problem. See ``docs/di
 
 Modules: ``speckle`` (pattern, analytic rendering, camera, noise), ``warp`` (inverse mapping,
 symmetry), ``imageio`` (TIFF/PNG/BMP), ``interpolate`` (B-splines), ``correlate`` (IC-GN),
-``seed`` (FFT guess, neighbour graph), ``pipeline`` (``measure_front_face``), ``figures``.
+``seed`` (FFT guess, neighbour graph), ``pipeline`` (``measure_front_face``), ``subsets`` (the
+data of the Fig.-2-like subset figure, drawn by ``bench.dic_figures``).
 """
 from problems.dic.correlate import Correlator, DICConfig, DICResult, grid_points
 from problems.dic.imageio import read_image, write_image

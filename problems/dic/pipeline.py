@@ -49,7 +49,7 @@ class DICMeasurement:
     centres_px   : (m, 2) the integer subset centres used
     camera, speckle, dic, seed : everything needed to regenerate the images (with the fields)
     image_paths  : written images (reference first), empty if none were written
-    figure_path  : the Fig.-2-like subset figure, if written
+    subsets_path : the panels of the Fig.-2-like subset figure (``dic_subsets.npz``), if written
     """
 
     u_h: np.ndarray
@@ -69,7 +69,7 @@ class DICMeasurement:
     dic: DICConfig
     seed: int
     image_paths: tuple[str, ...] = ()
-    figure_path: str | None = None
+    subsets_path: str | None = None
     meta: dict = field(default_factory=dict)
 
     def covariance(self) -> np.ndarray:
@@ -168,7 +168,9 @@ def measure_front_face(
     camera, speckle, dic : configurations; seed : pattern and noise seed
     image_dir      : if given, the images are written there as 8/16-bit PackBits TIFFs
                      (``reference.tif``, ``deformed_001.tif``, ...), with ``dic_setup.json``
-                     and, if ``figure``, ``dic_subsets.png`` (last snapshot)
+                     and, if ``figure``, ``dic_subsets.npz``: the panels of the Fig.-2-like subset
+                     figure of the last snapshot (:mod:`problems.dic.subsets`; drawn to
+                     ``dic_subsets.png`` by :func:`bench.dic_figures.render_subsets`)
     progress       : tqdm progress bar over the snapshots
 
     Each snapshot's correlation starts from the previous snapshot's solution.
@@ -225,13 +227,12 @@ def measure_front_face(
     )
     if outdir is not None:
         if figure and last is not None and np.any(last[1].converged):
-            from problems.dic.figures import plot_subsets
+            from problems.dic.subsets import subset_figure_data
 
             idx = _figure_points(pts_mm, camera.face_mm)
             labels = [f"y = {pts_mm[i, 0]:g}, z = {pts_mm[i, 1]:g} mm" for i in idx]
-            meas.figure_path = str(
-                plot_subsets(ref, last[0], last[1], idx, outdir / "dic_subsets.png", dic.subset, dic.order,
-                             labels=labels, title=f"DIC subsets, snapshot {N}")
-            )
+            panels = subset_figure_data(ref, last[0], last[1], idx, dic.subset, dic.order, labels=labels,
+                                        title=f"DIC subsets, snapshot {N}")
+            meas.subsets_path = str(panels.save(outdir / "dic_subsets.npz"))
         (outdir / "dic_setup.json").write_text(json.dumps(meas.setup(), indent=2))
     return meas

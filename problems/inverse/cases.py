@@ -24,6 +24,9 @@ from problems.materials.hardening import HARDENINGS
 #: the active (identified) parameters of each form are the material's own parameters
 ACTIVE = FORM_PARAMETERS
 UNITS = {name: PARAMETER_RANGES[name][4] for names in FORM_PARAMETERS.values() for name in names}
+#: TeX symbol of each parameter (figure and table labels)
+LABELS = {"E": r"$E$", "nu": r"$\nu$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$",
+          "sigma0": r"$\sigma_0$", "H": r"$H$", "pt0": r"$p_{t0}$", "a": r"$a$", "b": r"$b$"}
 FIXED = dict(OPTIONAL_PARAMETERS)
 
 # Reference concrete (compression variants).
