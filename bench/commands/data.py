@@ -86,5 +86,9 @@ def main(args) -> int:
             status |= 0 if same else 1
             continue
         save(ds, path)
+        if settings.route == "dic":
+            from bench.dic_figures import render_subsets
+
+            render_subsets(images)
         print(f"{name}: wrote {path} (hash {ds.hash[:12]}, {len(ds.values)} values)")
     return status
