@@ -1,0 +1,163 @@
+r"""The surrogate forward model: POD basis + regression of its coefficients, behind the forward-model protocol.
+
+``U(x) = ybar + sigma * (Phi a(z))``,  ``z = (x - lower) / (upper - lower)``, and its Jacobian
+``dU/dx = diag(sigma) Phi (da/dz) diag(1 / (upper - lower))`` in physical units, exact for the
+surrogate (the regressions differentiate their kernels).
+
+Validity: ``check`` rejects what the model the surrogate stands for rejects (its own ``check``,
+for the FE model the case's material rule) and points outside the case's box. Extrapolation: a
+point inside the box but outside the box the training design covered gets a result whose
+``message`` starts with ``extrapolation:``; :meth:`SurrogateModel.extrapolation` also gives the
+distance to the nearest training point and, on request, whether the point lies in the convex hull
+of the training points (a linear programme; in 6 dimensions the hull of a few hundred points
+fills only a small part of the box, so it is a diagnostic, not the flag).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from problems.inverse.protocol import ForwardResult
+from problems.surrogate.pod import POD
+
+
+@dataclass(frozen=True, eq=False)
+class SurrogateModel:
+    """A picklable forward model approximating another one (see the module docstring).
+
+    names      : parameter names
+    lower, upper : (d,) the case's box, physical units (also the scaling of z)
+    pod        : the POD basis (mean, scale = the data's sigma, modes)
+    regression : :class:`~problems.surrogate.regression.RBFFit` or ``GPFit`` of the coefficients
+    train_z    : (n, d) scaled successful training points
+    design_box : (lower, upper) of the training design, physical units
+    checker    : object whose ``check(x)`` is the validity rule (the FE model; never run), or None
+    hold_out_variance : (m,) mean squared hold-out error of each measurement, units of the
+                 measurement squared (mm^2, kN^2), or None before validation; the likelihood adds it
+                 to the noise variance: ``C = diag(sigma^2 + hold_out_variance)``
+    info       : settings, cost, selection, validation and hashes (JSON-ready)
+    """
+
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    pod: POD
+    regression: object
+    train_z: np.ndarray
+    design_box: tuple[np.ndarray, np.ndarray]
+    checker: object = None
+    hold_out_variance: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+    provides_jacobian = True
+
+    @property
+    def n_values(self) -> int:
+        return self.pod.mean.size
+
+    @property
+    def n_modes(self) -> int:
+        return self.pod.n_modes
+
+    @property
+    def kind(self) -> str:
+        return self.regression.kind
+
+    @property
+    def hash(self) -> str | None:
+        """Content hash of the stored model (set by :func:`problems.surrogate.store.save` / ``load``)."""
+        return self.info.get("hash")
+
+    def to_scaled(self, x) -> np.ndarray:
+        return (np.asarray(x, float) - self.lower) / (self.upper - self.lower)
+
+    def check(self, x) -> str | None:
+        """None when ``x`` (physical) is valid: right shape, finite, in the box, accepted by the checker."""
+        x = np.asarray(x, float)
+        if x.shape != self.lower.shape:
+            return f"expected {self.lower.size} parameters {self.names}, got shape {x.shape}"
+        if not np.all(np.isfinite(x)):
+            return "non-finite parameters"
+        out = [f"{n} = {v:.6g} not in [{lo:.6g}, {hi:.6g}]"
+               for n, v, lo, hi in zip(self.names, x, self.lower, self.upper) if not lo <= v <= hi]
+        if out:
+            return "outside the box: " + "; ".join(out)
+        return None if self.checker is None else self.checker.check(x)
+
+    def __call__(self, x, jacobian: bool = False) -> ForwardResult:
+        """Predicted measurement vector at physical ``x`` (and ``dU/dx`` (m, d) with ``jacobian=True``).
+        Invalid points give ``ok=False`` with the reason; extrapolation is said in ``message``."""
+        t0 = time.perf_counter()
+        x = np.asarray(x, float)
+        reason = self.check(x)
+        if reason is not None:
+            return ForwardResult(False, None, reason, time.perf_counter() - t0)
+        z = self.to_scaled(x)
+        a = self.regression.predict(z[None])[0]
+        values = self.pod.mean + self.pod.scale * (self.pod.modes @ a)
+        J = None
+        if jacobian:
+            G = self.regression.gradient(z)  # (r, d)
+            # one matrix-vector product per parameter: a threaded (m, r) x (r, d) GEMM is far slower on a busy machine
+            J = np.column_stack([self.pod.modes @ G[:, i] for i in range(G.shape[1])])
+            J *= self.pod.scale[:, None] / (self.upper - self.lower)
+        return ForwardResult(True, values, self.extrapolation_message(x), time.perf_counter() - t0, J)
+
+    def predict(self, X) -> np.ndarray:
+        """(q, m) predictions at the rows of ``X`` (physical), no checks (vectorised)."""
+        Z = self.to_scaled(np.atleast_2d(X))
+        return self.pod.reconstruct(self.regression.predict(Z))
+
+    # --- extrapolation -------------------------------------------------------------------------
+
+    def box_excess(self, x) -> np.ndarray:
+        """(d,) how far ``x`` lies outside the training design box, in fractions of the case's
+        box width per parameter (0 inside)."""
+        lo, hi = self.design_box
+        x = np.asarray(x, float)
+        return np.maximum(np.maximum(lo - x, x - hi), 0.0) / (self.upper - self.lower)
+
+    def extrapolation_message(self, x) -> str:
+        """``""`` inside the training design box, else ``"extrapolation: ..."`` naming the parameters."""
+        ex = self.box_excess(x)
+        if not np.any(ex > 0):
+            return ""
+        parts = [f"{n} by {e:.3g}" for n, e in zip(self.names, ex) if e > 0]
+        return "extrapolation: outside the training design box (" + ", ".join(parts) + " of the box width)"
+
+    def extrapolation(self, x, *, hull: bool = False) -> dict:
+        """Where ``x`` lies relative to the training points (scaled units): ``outside_box``,
+        ``box_excess`` (d,), ``nn_distance`` to the nearest training point, ``nn_ratio`` (that over the
+        median nearest-neighbour distance within the design) and, with ``hull=True``, ``in_hull``."""
+        z = self.to_scaled(x)
+        d = np.sqrt(np.sum((self.train_z - z) ** 2, axis=1))
+        D = np.sqrt(np.sum((self.train_z[:, None] - self.train_z[None]) ** 2, axis=2))
+        np.fill_diagonal(D, np.inf)
+        typical = float(np.median(D.min(axis=1))) if len(D) > 1 else float("nan")
+        ex = self.box_excess(x)
+        out = {"outside_box": bool(np.any(ex > 0)), "box_excess": ex, "nn_distance": float(d.min()),
+               "nn_ratio": float(d.min() / typical) if typical > 0 else float("nan")}
+        if hull:
+            out["in_hull"] = in_hull(self.train_z, z)
+        return out
+
+    def inflated_sigma(self, sigma) -> np.ndarray:
+        """``sqrt(sigma^2 + hold_out_variance)``: the standard deviations a likelihood on this
+        surrogate should use (``sigma`` the data's, same units)."""
+        s = np.broadcast_to(np.asarray(sigma, float), (self.n_values,))
+        if self.hold_out_variance is None:
+            return s.copy()
+        return np.sqrt(s ** 2 + self.hold_out_variance)
+
+
+def in_hull(points: np.ndarray, z: np.ndarray) -> bool:
+    """True when ``z`` is a convex combination of the rows of ``points`` (linear feasibility problem)."""
+    from scipy.optimize import linprog
+
+    n = len(points)
+    A_eq = np.vstack([points.T, np.ones((1, n))])
+    b_eq = np.concatenate([z, [1.0]])
+    res = linprog(np.zeros(n), A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+    return bool(res.status == 0)
