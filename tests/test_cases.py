@@ -14,7 +14,41 @@ def test_nine_cases_with_the_paper_active_parameters():
                                    for h in ("compression", "shear", "tension"))
     assert CASES["linear-shear"].names == ("E", "beta", "K", "psi", "sigma0", "H")
     assert CASES["hyperbolic-tension"].names == ("E", "beta", "psi", "sigma0", "H", "pt0")
-    assert CASES["exponent-compression"].names == ("E", "psi", "sigma0", "H", "a", "b")
+    # the exponent form identifies its hydrostatic tension strength pt0 in place of a
+    assert CASES["exponent-compression"].names == ("E", "psi", "sigma0", "H", "pt0", "b")
+
+
+@pytest.mark.parametrize("hardening", ["compression", "shear", "tension"])
+def test_exponent_cases_derive_the_papers_a_exactly(hardening):
+    case = CASES[f"exponent-{hardening}"]
+    mat = case.material_parameters(case.reference)
+    assert "pt0" not in mat and math.isclose(mat["a"], A_REF, rel_tol=1e-12)   # the same concrete
+    x = case.reference * np.array([1.1, 0.9, 1.2, 0.8, 0.85, 1.15])
+    names = ("E", "psi", "sigma0", "H", "a", "b", "nu")
+    J = case.material_jacobian(x, names)
+    for j in range(6):
+        h = 1e-6 * x[j]
+        up, dn = x.copy(), x.copy()
+        up[j] += h
+        dn[j] -= h
+        fd = [(case.material_parameters(up)[n] - case.material_parameters(dn)[n]) / (2 * h) for n in names]
+        np.testing.assert_allclose(J[:, j], fd, rtol=1e-7, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_at_least_95_percent_of_every_box_is_a_well_posed_material(name):
+    from problems.materials.drucker_prager import validate_parameters
+
+    case = CASES[name]
+    ok = 0
+    X = case.random_starts(1000, seed=7)
+    for x in X:
+        try:
+            validate_parameters(case.form, case.hardening, case.material_parameters(x))
+            ok += 1
+        except ValueError:
+            pass
+    assert ok / len(X) >= 0.95
 
 
 def test_exponent_a_gives_2_5_MPa_hydrostatic_tension():

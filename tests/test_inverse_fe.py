@@ -11,7 +11,7 @@ from problems.inverse.cases import CASES
 from problems.inverse.data import DataSettings, load, make_data, save
 from problems.inverse.forward import FEForwardModel
 from problems.inverse.build import build_objective
-from problems.inverse.starts import start_point
+from problems.inverse.starts import feasible_toward_reference, start_point
 
 MESH = "3,3,6"
 CASE = CASES["linear-compression"]
@@ -71,16 +71,28 @@ def test_rounding_to_1um_gives_unit_mean_square_whitened_residuals(rounded_data)
 
 
 def test_infeasible_points_are_rejected_without_fe_and_counted():
-    case = CASES["exponent-compression"]
+    case = CASES["hyperbolic-tension"]
     obj = build_objective(case, mesh=MESH, data=make_data(case, mesh=MESH, resolution_um=0, force_resolution_kN=0))
-    z = case.start / case.reference           # a sigma0^b < sigma0/3: no tensile strength
-    ev = obj.evaluate(z)
+    x = case.reference.copy()
+    x[case.names.index("sigma0")] = case.upper[case.names.index("sigma0")]
+    x[case.names.index("pt0")] = case.lower[case.names.index("pt0")]   # pt0 < sigma0/3: degenerate hyperbola
+    ev = obj.evaluate(x / case.reference)
     assert not ev.feasible and not ev.ok
-    assert "a" in ev.message
+    assert "pt0" in ev.message
     assert obj.n_evals == 1 and obj.n_infeasible == 1 and ev.wall_s == 0.0
-    x0 = start_point(case)
-    assert FEForwardModel(case).check(x0) is None   # the default start is pulled back to feasibility
-    assert np.all(np.sign(x0 - case.reference) == np.sign(case.start - case.reference))
+    back = feasible_toward_reference(case, x, FEForwardModel(case).check)   # how a random start is repaired
+    assert FEForwardModel(case).check(back) is None
+    assert np.all(np.sign(back - case.reference) == np.sign(x - case.reference))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_every_default_start_is_valid_and_yields_before_the_last_snapshot(name):
+    case = CASES[name]
+    model = FEForwardModel(case, MESH)
+    assert model.check(case.start) is None
+    assert np.array_equal(start_point(case), case.start)
+    resp = model.response(case.start)
+    assert resp.converged and resp.state[-1, :, 0].max() > 1e-4   # equivalent plastic strain
 
 
 def test_data_files_are_deterministic_and_hash_checked(tmp_path, rounded_data):

@@ -64,6 +64,7 @@ def main(args) -> int:
 
     from tqdm import tqdm
 
+    from bench.dic_figures import PANELS_FILE, render_subsets
     from problems.inverse.cases import CASES, get_case
     from problems.inverse.data import DataSettings, dic_image_dir, make_data, save
 
@@ -86,9 +87,7 @@ def main(args) -> int:
             status |= 0 if same else 1
             continue
         save(ds, path)
-        if settings.route == "dic":
-            from bench.dic_figures import render_subsets
-
+        if settings.route == "dic" and (images / PANELS_FILE).is_file():
             render_subsets(images)
         print(f"{name}: wrote {path} (hash {ds.hash[:12]}, {len(ds.values)} values)")
     return status

@@ -9,6 +9,7 @@ Units: MPa for E, sigma0, H, pt0; degrees for beta and psi; ``a`` in MPa^(1-b); 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.stats import qmc
@@ -33,7 +34,12 @@ class Parameter:
 
 @dataclass(frozen=True)
 class Case:
-    """An identification problem: active parameters, bounds, default start and fixed constants."""
+    """An identification problem: active parameters, bounds, default start and fixed constants.
+
+    derive     : picklable ``values -> (material values, d material / d identified)`` when the
+                 identified parameters are not the material's own (e.g. the exponent form's
+                 ``pt0`` in place of ``a``); None when they are
+    """
 
     name: str
     form: str
@@ -41,6 +47,7 @@ class Case:
     parameters: tuple[Parameter, ...]
     fixed: dict = field(default_factory=dict)
     kind: str = "fe"
+    derive: Callable | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -77,12 +84,31 @@ class Case:
         unit = qmc.LatinHypercube(d=len(self.parameters), seed=np.random.default_rng(seed)).random(n)
         return qmc.scale(unit, self.lower, self.upper)
 
-    def material_parameters(self, x) -> dict[str, float]:
-        """Full material parameter dict (active values from ``x`` plus the fixed constants)."""
+    def identified(self, x) -> dict[str, float]:
+        """``{name: value}`` of the identified parameters at ``x``."""
         x = np.asarray(x, float)
         if x.shape != (len(self.parameters),):
-            raise ValueError(f"{self.name}: expected {len(self.parameters)} parameters {self.names}, got shape {x.shape}")
-        return {**self.fixed, **dict(zip(self.names, map(float, x)))}
+            raise ValueError(f"{self.name}: expected {len(self.parameters)} parameters {self.names}, "
+                             f"got shape {x.shape}")
+        return dict(zip(self.names, map(float, x)))
+
+    def material_parameters(self, x) -> dict[str, float]:
+        """Full material parameter dict at ``x``: the identified values (or what they derive)
+        plus the fixed constants."""
+        values = self.identified(x)
+        if self.derive is not None:
+            values = self.derive(values)[0]
+        return {**self.fixed, **values}
+
+    def material_jacobian(self, x, material_names) -> np.ndarray:
+        """d (material parameters ``material_names``) / d (identified parameters), shape (P, n)."""
+        values = self.identified(x)
+        chain = self.derive(values)[1] if self.derive is not None else {}
+        J = np.zeros((len(material_names), len(self.names)))
+        for i, m in enumerate(material_names):
+            for j, c in enumerate(self.names):
+                J[i, j] = chain[m].get(c, 0.0) if m in chain else float(m == c)
+        return J
 
     def to_dict(self) -> dict:
         """The JSON form listed by ``femubench cases --json``."""

@@ -11,6 +11,7 @@ Units: MPa for E, sigma0, H, pt0; degrees for beta and psi; ``a`` in MPa^(1-b); 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from scipy.optimize import brentq
 
@@ -19,11 +20,13 @@ from problems.inverse.case import Case, Parameter
 from problems.materials.drucker_prager import (
     FORM_PARAMETERS, FORMS, OPTIONAL_PARAMETERS, PARAMETER_RANGES, hyperbolic_l0,
 )
-from problems.materials.hardening import HARDENINGS
+from problems.materials.hardening import HARDENINGS, reference_test
 
-#: the active (identified) parameters of each form are the material's own parameters
-ACTIVE = FORM_PARAMETERS
-UNITS = {name: PARAMETER_RANGES[name][4] for names in FORM_PARAMETERS.values() for name in names}
+#: the identified parameters of each form: the material's own, except that the exponent form
+#: identifies its hydrostatic tension strength pt0 in place of a (every point of the box is then
+#: a well-posed material; a = (pt0 + p_hat sigma0) / (q_hat sigma0)^b is reported alongside)
+ACTIVE = {**FORM_PARAMETERS, "exponent": ("E", "psi", "sigma0", "H", "pt0", "b")}
+UNITS = {name: PARAMETER_RANGES[name][4] for name in PARAMETER_RANGES}
 #: TeX symbol of each parameter (figure and table labels)
 LABELS = {"E": r"$E$", "nu": r"$\nu$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$",
           "sigma0": r"$\sigma_0$", "H": r"$H$", "pt0": r"$p_{t0}$", "a": r"$a$", "b": r"$b$"}
@@ -67,13 +70,38 @@ def _sigma0_exponent(hardening: str) -> float:
 _SIGMA0 = {"linear": _sigma0_linear, "hyperbolic": _sigma0_hyperbolic, "exponent": _sigma0_exponent}
 
 
-def _parameter(name: str, ref: float) -> Parameter:
-    absolute = {"beta": (20.0, 50.0), "psi": (5.0, 30.0), "K": (0.778, 1.0)}
-    if name in absolute:
-        lo, hi = absolute[name]
+@dataclass(frozen=True)
+class ExponentStrength:
+    """The exponent form identified through pt0: ``a = (pt0 + p_hat sigma0) / (q_hat sigma0)^b``
+    (the surface through p = -pt0, q = 0; p_hat, q_hat of the hardening's reference test)."""
+
+    hardening: str
+
+    def __call__(self, v: dict[str, float]) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+        test = reference_test(self.hardening)
+        s0, pt0, b = v["sigma0"], v["pt0"], v["b"]
+        S = test.q_hat * s0
+        a = (pt0 + test.p_hat * s0) / S**b
+        values = {k: w for k, w in v.items() if k != "pt0"} | {"a": a}
+        da = {"pt0": 1.0 / S**b, "sigma0": test.p_hat / S**b - b * a / s0, "b": -a * math.log(S)}
+        return values, {"a": da}
+
+
+#: relative half-width of the box of each parameter (angles and K have absolute boxes)
+BOX = {"E": (0.5, 0.5), "H": (0.5, 0.5), "sigma0": (0.3, 0.3), "pt0": (0.3, 0.3), "a": (0.3, 0.3),
+       "b": (0.3, 0.3)}
+ABSOLUTE_BOX = {"beta": (20.0, 50.0), "psi": (5.0, 30.0), "K": (0.778, 1.0)}
+#: hyperbolic surfaces hardened in tension need pt0 > sigma0/3: a box reaching 20 % (not 30 %)
+#: below the reference pt0 keeps >= 95 % of the box well-posed
+BOX_OVERRIDES = {("hyperbolic", "tension"): {"pt0": (0.2, 0.3)}}
+
+
+def _parameter(name: str, ref: float, form: str, hardening: str) -> Parameter:
+    if name in ABSOLUTE_BOX:
+        lo, hi = ABSOLUTE_BOX[name]
     else:
-        rel = 0.5 if name in ("E", "H") else 0.3
-        lo, hi = ref * (1 - rel), ref * (1 + rel)
+        below, above = BOX_OVERRIDES.get((form, hardening), {}).get(name, BOX[name])
+        lo, hi = ref * (1 - below), ref * (1 + above)
     return Parameter(name, UNITS[name], ref, lo, hi)
 
 
@@ -86,8 +114,10 @@ def make_case(form: str, hardening: str) -> Case:
     sigma0 = _SIGMA0[form](hardening)
     refs = {"E": E_REF, "beta": BETA_REF, "K": K_REF, "psi": PSI_REF, "sigma0": sigma0,
             "H": H_OVER_SIGMA0 * sigma0, "pt0": PT0_REF, "a": A_REF, "b": B_REF}
-    params = tuple(_parameter(n, refs[n]) for n in ACTIVE[form])
-    return Case(f"{form}-{hardening}", form, hardening, params, dict(FIXED))
+    params = tuple(_parameter(n, refs[n], form, hardening) for n in ACTIVE[form])
+    name = f"{form}-{hardening}"
+    derive = ExponentStrength(hardening) if form == "exponent" else None
+    return Case(name, form, hardening, params, dict(FIXED), derive=derive)
 
 
 CASES: dict[str, Case] = {c.name: c for c in (make_case(f, h) for f in FORMS for h in HARDENINGS)}
