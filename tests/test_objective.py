@@ -305,3 +305,11 @@ def test_charges_survive_reset_and_convert_to_forward_equivalents():
     obj.costs([[1.0, 1.0], [1.1, 1.0]])    # plain runs of 1 s each
     assert obj.charges == {"hifi": {"n": 2, "wall_s": 10.0}}
     assert obj.charged_equivalents() == {"hifi": pytest.approx(10.0)}
+
+
+def test_observers_see_every_recorded_evaluation():
+    obj, _ = make()
+    seen = []
+    obj.observers.append(lambda ev_, e: seen.append((ev_.n_evals, e.cached)))
+    obj.costs([[1.0, 1.0], [1.1, 1.0], [1.0, 1.0]])
+    assert seen == [(1, False), (2, False), (2, True)]

@@ -102,6 +102,9 @@ class Evaluator:
     mapper   : ``mapper(fn, items) -> iterable`` used for every batch; ``None`` = sequential
     cache    : True (unbounded), False, or an int (keep the most recent ``cache`` points)
     exact_jacobian : use the model's exact Jacobian when it provides one (else finite differences)
+
+    ``observers`` (a list) holds callables ``observer(evaluator, evaluation)`` called after each
+    recorded evaluation (progress bars, live logs); they must not raise.
     """
 
     def __init__(self, problem: LeastSquaresProblem, *, mapper: Mapper | None = None,
@@ -112,6 +115,7 @@ class Evaluator:
         self.exact_jacobian = exact_jacobian and provides_jacobian(problem.model)
         self._warned = False
         self.charges: dict[str, dict[str, float]] = {}
+        self.observers: list = []
         self.reset()
 
     # --- the problem, as a solver sees it --------------------------------------------------------
@@ -234,6 +238,8 @@ class Evaluator:
                 self.best = ev
         self.log.append({"x": ev.x, "cost": ev.cost, "ok": ev.ok, "feasible": ev.feasible,
                          "wall_s": ev.wall_s, "cached": ev.cached, "n_evals": self.n_evals, "kind": kind})
+        for observe in self.observers:
+            observe(self, ev)
 
     def evaluate_many(self, Z, *, with_jacobian: bool = False) -> list[Evaluation]:
         """Evaluate a batch of scaled points; the uncached feasible ones go through one mapper call.
