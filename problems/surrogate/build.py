@@ -138,7 +138,8 @@ def fit_surrogate(runs: Runs, lower, upper, sigma, *, names, settings: Surrogate
             reg, _ = _fit_family(family, Z[fit], A, scorer, s)
             E = (pod.reconstruct(reg.predict(Z[sel])) - runs.Y[sel]) / pod.scale
             ms = scorer.scaled_ms(E)
-            scores[family] = {"score": scorer.score(ms), "rms_sigma": {k: float(np.sqrt(v)) for k, v in ms.items()}}
+            scores[family] = {"score": scorer.score(ms), "rms_sigma": {k: float(np.sqrt(v)) for k, v in ms.items()},
+                              "settings": reg.settings() if family == "rbf" else {"kind": "gp"}}
         kind = min(scores, key=lambda k: scores[k]["score"])
         selection = {"n_fit": len(fit), "n_selection": n_sel, "scores": scores, "chosen": kind}
     pod = fit_pod(runs.Y, sigma, tol_sigma=s.tol_sigma, blocks=blocks, max_modes=s.max_modes)
