@@ -21,7 +21,8 @@ def solve_iterated(make_objective: Callable, correction_at: Callable, method: st
                    seed: int | None = 0, tol: float = 1e-3, max_rounds: int = 8, **options) -> RunResult:
     """Minimise with the iterated correction; returns the last round's result with totals.
 
-    make_objective : ``correction -> Evaluator`` (the objective with that correction applied)
+    make_objective : ``correction -> Evaluator``, the objective with that correction applied and its
+                     runs charged (as :func:`problems.inverse.build.build_objective` does)
     correction_at  : ``x (physical) -> Correction`` (high-fidelity and inverse runs at x, counted)
     """
     if not 0 < tol < 1:
@@ -37,8 +38,6 @@ def solve_iterated(make_objective: Callable, correction_at: Callable, method: st
             break
         corr = correction_at(x)
         objective = make_objective(corr)
-        objective.charge("hifi", corr.n_hifi, corr.hifi_wall_s)
-        objective.charge("inverse-for-correction", corr.n_inverse, corr.inverse_wall_s)
         result = solve(objective, method, budget=left, seed=seed, x0=x, **options)
         used += result.n_evals
         fe += result.forward_equivalents

@@ -19,7 +19,7 @@ CASE = CASES["linear-compression"]
 
 @pytest.fixture(scope="module")
 def exact_data():
-    return make_data(CASE, mesh=MESH, resolution_um=0.0, force_resolution_kN=0.0, snapshots=4)
+    return make_data(CASE, mesh=MESH, resolution_um=0.0, force_resolution_kN=0.0, snapshots=4, tier="consistent")
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +31,7 @@ def central_jacobian(exact_data):
 
 @pytest.fixture(scope="module")
 def rounded_data():
-    return make_data(CASE, mesh=MESH, resolution_um=1.0, force_resolution_kN=0.0)
+    return make_data(CASE, mesh=MESH, resolution_um=1.0, force_resolution_kN=0.0, tier="consistent")
 
 
 def test_cost_is_zero_at_the_reference_and_jacobian_has_full_rank(central_jacobian):
@@ -72,7 +72,7 @@ def test_rounding_to_1um_gives_unit_mean_square_whitened_residuals(rounded_data)
 
 def test_infeasible_points_are_rejected_without_fe_and_counted():
     case = CASES["hyperbolic-tension"]
-    obj = build_objective(case, mesh=MESH, data=make_data(case, mesh=MESH, resolution_um=0, force_resolution_kN=0))
+    obj = build_objective(case, mesh=MESH, data=make_data(case, mesh=MESH, resolution_um=0, force_resolution_kN=0, tier="consistent"))
     x = case.reference.copy()
     x[case.names.index("sigma0")] = case.upper[case.names.index("sigma0")]
     x[case.names.index("pt0")] = case.lower[case.names.index("pt0")]   # pt0 < sigma0/3: degenerate hyperbola
@@ -96,7 +96,7 @@ def test_every_default_start_is_valid_and_yields_before_the_last_snapshot(name):
 
 
 def test_data_files_are_deterministic_and_hash_checked(tmp_path, rounded_data):
-    again = make_data(CASE, mesh=MESH, resolution_um=1.0, force_resolution_kN=0.0)
+    again = make_data(CASE, mesh=MESH, resolution_um=1.0, force_resolution_kN=0.0, tier="consistent")
     assert again.to_json() == rounded_data.to_json()
     path = save(rounded_data, tmp_path / "d.json")
     back = load(path)

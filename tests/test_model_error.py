@@ -81,7 +81,10 @@ def _objective(correction, data):
     from problems.inverse.evaluator import Evaluator
 
     shift = 0.0 if correction is None else correction.shift
-    return Evaluator(LeastSquaresProblem(Coarse(), data - shift, [1.0, 0.5], [3.0, 1.5], [2.0, 1.0], sigma=1e-3))
+    ev = Evaluator(LeastSquaresProblem(Coarse(), data - shift, [1.0, 0.5], [3.0, 1.5], [2.0, 1.0], sigma=1e-3))
+    if correction is not None:
+        ev.charge("hifi", correction.n_hifi, correction.hifi_wall_s)
+    return ev
 
 
 def test_iterated_correction_converges_to_the_truth_where_one_point_does_not():
@@ -100,3 +103,59 @@ def test_iterated_correction_converges_to_the_truth_where_one_point_does_not():
     assert it.extra["correction_converged"] and len(it.extra["correction_rounds"]) >= 2
     assert it.charges["hifi"]["n"] == len(it.extra["correction_rounds"])
     assert it.n_evals == sum(r["n_evals"] for r in it.extra["correction_rounds"]) <= 400
+
+
+# --- on the FE model (tiny meshes) -------------------------------------------------------------
+
+def _fe_data(mesh, tier="model-error"):
+    from problems.inverse.data import make_data
+
+    return make_data("linear-compression", mesh=mesh, snapshots=2, tier=tier)
+
+
+def test_build_objective_refuses_the_data_mesh_in_the_loop_and_labels_the_tiers():
+    from problems.inverse.build import build_objective
+
+    data = _fe_data("2,2,4")
+    with pytest.raises(HonestyError, match="forward model uses discretisation 2,2,4"):
+        build_objective("linear-compression", mesh="2,2,4", data=data)
+    with pytest.raises(HonestyError, match="forward"):          # the quarter model of the same mesh too
+        build_objective("linear-compression", mesh="2,2,4:quarter", data=data)
+    corr = Correction("one-point", shift=np.zeros(1))
+    with pytest.raises(HonestyError, match="hifi model"):
+        build_objective("linear-compression", mesh="1,1,2", data=data, correction=corr, hifi_mesh="2,2,4")
+    obj = build_objective("linear-compression", mesh="1,1,2", data=data)
+    assert obj.provenance["data_tier"] == "model-error" and obj.provenance["data_mesh"] == "2,2,4"
+    consistent = _fe_data("1,1,2", tier="consistent")
+    assert build_objective("linear-compression", mesh="1,1,2", data=consistent).provenance["data_tier"] == "consistent"
+    with pytest.raises(ValueError, match="consistent-tier data were made on mesh 1,1,2"):
+        build_objective("linear-compression", mesh="2,2,4", data=consistent)
+
+
+def test_region_leaves_out_the_points_near_the_plates():
+    from problems.inverse.build import Region, build_objective
+
+    data = _fe_data("2,2,4")
+    full = build_objective("linear-compression", mesh="1,1,2", data=data)
+    inner = build_objective("linear-compression", mesh="1,1,2", data=data, region=Region(30.0))
+    z = data.points[:, 1]
+    kept = int(np.sum((z >= 30) & (z <= 120)))
+    assert inner.n_residuals == 2 * 2 * kept + 2 and full.n_residuals == 2 * 2 * len(z) + 2
+    assert inner.provenance["region_plate_margin_mm"] == 30.0
+    with pytest.raises(ValueError, match="plate_margin_mm"):
+        Region(80.0)
+
+
+def test_one_point_fe_correction_is_applied_and_charged():
+    from problems.inverse.build import build_objective, model_pair
+    from problems.inverse.cases import CASES
+
+    data = _fe_data("2,2,4")
+    case = CASES["linear-compression"]
+    hifi, inverse = model_pair(case, "1,1,2", "1,1,4", data)
+    corr = one_point(hifi, inverse, case.start)
+    plain = build_objective(case, mesh="1,1,2", data=data)
+    fixed = build_objective(case, mesh="1,1,2", data=data, correction=corr, hifi_mesh="1,1,4")
+    assert fixed.charges["hifi"]["n"] == 1 and fixed.provenance["treatment"] == "one-point"
+    z = np.ones(6)
+    np.testing.assert_allclose(fixed.residual(z) - plain.residual(z), fixed.whiten(-corr.shift), rtol=1e-12)

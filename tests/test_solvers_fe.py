@@ -13,7 +13,7 @@ def test_lm_recovers_linear_compression_on_the_coarse_mesh():
     from solvers import solve
 
     case = get_case("linear-compression")
-    data = make_data(case, mesh="coarse", resolution_um=0, noise_um=0, force_resolution_kN=0)
+    data = make_data(case, mesh="coarse", resolution_um=0, noise_um=0, force_resolution_kN=0, tier="consistent")
     objective = build_objective(case, mesh="coarse", data=data)
     budget = 300
     result = solve(objective, "lm", budget=budget, seed=0, x0=start_point(case, kind="default"))

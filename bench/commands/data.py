@@ -9,12 +9,18 @@ cache (``$FEMUBENCH_CACHE_DIR``). DIC-route images go next to the data file, in
 from __future__ import annotations
 
 NAME = "data"
-HELP = "Compute a pseudo-experimental data set of a case (reference response on a finer mesh, noised, rounded)."
+HELP = ("Compute a pseudo-experimental data set of a case: the reference response, rounded (and noised), "
+        "in the model-error tier (xfine mesh) or the consistent tier (the inverse model's mesh).")
 
 
 def add_arguments(p) -> None:
     p.add_argument("case", help="case name, or 'all' for the nine cases")
-    p.add_argument("--mesh", default="fine", help="data mesh (default fine; never the inverse model's mesh)")
+    p.add_argument("--tier", choices=["model-error", "consistent"], default="model-error",
+                   help="model-error: made on a discretisation finer than any model of the inverse loop; "
+                        "consistent: made with the inverse model's own mesh (default model-error)")
+    p.add_argument("--mesh", default=None,
+                   help="data mesh (default: xfine for the model-error tier; for the consistent tier the "
+                        "inverse model's mesh, default coarse)")
     p.add_argument("--resolution-um", type=float, default=1.0, help="displacement rounding, um (default 1.0)")
     p.add_argument("--noise-um", type=float, default=0.0, help="Gaussian displacement noise std, um (default 0)")
     p.add_argument("--force-resolution-kN", type=float, default=0.1, help="force rounding, kN (default 0.1)")
@@ -35,11 +41,11 @@ def target_paths(names: list[str], settings, out: str | None, *, every: bool) ->
     ``--out`` that does not fit: a file name for ``all``."""
     from pathlib import Path
 
-    from problems.inverse.data import DataSettings, cached_path, default_path
+    from problems.inverse.data import cached_path, default_path, is_default
 
     if out is None:
-        default = settings == DataSettings()
-        return {n: default_path(n) if default else cached_path(n, settings) for n in names}
+        default = is_default(settings)
+        return {n: default_path(n, settings.tier) if default else cached_path(n, settings) for n in names}
     out = Path(out)
     if every:
         if (out.exists() and not out.is_dir()) or out.suffix == ".json":
@@ -55,7 +61,7 @@ def refuse_shipped(paths, force: bool) -> None:
 
     protected = {SHIPPED_DIR.resolve(), data_dir().resolve()}
     for path in paths:
-        if not force and path.exists() and path.resolve().parent in protected:
+        if not force and path.exists() and path.resolve().parent.parent in protected:
             raise ValueError(f"{path} is a shipped data set; add --force to overwrite it")
 
 
@@ -66,12 +72,13 @@ def main(args) -> int:
 
     from bench.dic_figures import PANELS_FILE, render_subsets
     from problems.inverse.cases import CASES, get_case
-    from problems.inverse.data import DataSettings, dic_image_dir, make_data, save
+    from problems.inverse.data import dic_image_dir, make_data, save, tier_settings
 
     every = args.case == "all"
     names = list(CASES) if every else [get_case(args.case).name]
-    settings = DataSettings(mesh=args.mesh, resolution_um=args.resolution_um, noise_um=args.noise_um,
-                            force_resolution_kN=args.force_resolution_kN, seed=args.seed, route=args.route)
+    mesh = {"mesh": args.mesh} if args.mesh else {}
+    settings = tier_settings(args.tier, **mesh, resolution_um=args.resolution_um, noise_um=args.noise_um,
+                             force_resolution_kN=args.force_resolution_kN, seed=args.seed, route=args.route)
     paths = target_paths(names, settings, args.out, every=every)
     if not args.check:
         refuse_shipped(paths.values(), args.force)

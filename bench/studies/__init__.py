@@ -85,7 +85,7 @@ def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto",
         ds = get_data(case.name, progress=True)
         text = f"shipped data {default_path(case.name)} (mesh {ds.settings.mesh})"
     elif data == "synthetic":
-        ds = make_data(case, mesh=mesh, resolution_um=0.0, force_resolution_kN=0.0)
+        ds = make_data(case, mesh=mesh, resolution_um=0.0, force_resolution_kN=0.0, tier="consistent")
         text = (f"synthetic data: the {mesh} mesh's own response at the reference, unrounded "
                 f"(weights as for 1 um rounding; no model error)")
     else:

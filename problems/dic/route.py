@@ -38,23 +38,22 @@ def front_face_fields(response) -> list:
     return fields
 
 
-def dic_dataset(case, settings, x, response, *, progress: bool = True, image_dir=None):
-    """A :class:`problems.inverse.data.Dataset` whose displacements were measured by DIC on rendered images.
+def measure_by_dic(response, points, *, seed: int = 0, progress: bool = True, image_dir=None):
+    """Front-face displacements of ``response`` at ``points`` (m, 2) mm measured by DIC on rendered images.
 
-    ``image_dir``: where the images and the Fig.-2-like subset figure go (None: not written).
+    Returns ``(u_h (N, m), u_v (N, m), std (2, N, m), meta)`` in mm; points whose correlation failed
+    get zero value and infinite standard deviation. ``image_dir``: where the images and the
+    subset panels go (None: not written).
     """
-    from problems.inverse.data import Dataset, _round, package_version
     from problems.dic import measure_front_face
 
-    m = measure_front_face(front_face_fields(response), settings.points, seed=settings.seed, progress=progress,
+    m = measure_front_face(front_face_fields(response), points, seed=seed, progress=progress,
                            image_dir=image_dir, figure=True)
     ok = m.converged
     u_h = np.where(ok, m.u_h, 0.0)
     u_v = np.where(ok, m.u_v, 0.0)
     std = np.stack([np.where(ok, m.std_h, np.inf), np.where(ok, m.std_v, np.inf)])
-    meta = {"package_version": package_version(), "mesh": response.mesh.info(),
-            "dic": {"camera": asdict(m.camera), "speckle": asdict(m.speckle), "dic": asdict(m.dic), "seed": m.seed,
+    meta = {"dic": {"camera": asdict(m.camera), "speckle": asdict(m.speckle), "dic": asdict(m.dic), "seed": m.seed,
                     "converged_fraction": float(ok.mean()), "median_std_mm": float(np.nanmedian(m.std_h)),
                     "max_abs_cov_hv_mm2": float(np.nanmax(np.abs(m.cov_hv))) if ok.any() else None}}
-    return Dataset(case.name, settings, dict(zip(case.names, map(float, x))), settings.points, response.snapshots_mm,
-                   u_h, u_v, _round(response.reaction_kN, settings.force_resolution_kN), std, meta)
+    return u_h, u_v, std, meta

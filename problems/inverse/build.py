@@ -1,22 +1,98 @@
-"""The inverse problem of a case: the evaluated least-squares problem against a data set."""
+"""The inverse problem of a case: the evaluated least-squares problem against a data set.
+
+:func:`build_objective` joins a case, a data set (a tier, or an explicit file), a measurement
+region, the FE forward model on the inverse mesh and a model-error correction into one
+:class:`~problems.inverse.evaluator.Evaluator`, and records where everything came from in its
+``provenance``. The honesty rule is enforced here: a model-error data set's discretisation is
+never used by a model of the loop (:func:`problems.inverse.model_error.check_honest`).
+"""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from problems.fe.mesh import SIZE_MM, discretisation_key
 from problems.inverse import layout
 from problems.inverse.case import Case
 from problems.inverse.cases import get_case
-from problems.inverse.data import Dataset, get_data, load
+from problems.inverse.data import Dataset, get_data, load, tier_settings
 from problems.inverse.evaluator import Evaluator
+from problems.inverse.model_error import Correction, check_honest
 from problems.inverse.problem import LeastSquaresProblem
 
+#: high-fidelity mesh of a model-error correction for each inverse mesh (the next finer preset;
+#: never the model-error data's own ``xfine``)
+DEFAULT_HIFI = {"coarse": "paper", "paper": "fine"}
 
-def build_objective(case: Case | str, *, mesh: str = "coarse", data: Dataset | str | Path | None = None,
-                    mapper=None, sigma_force_kN: float = 1.0, cache: bool = True) -> Evaluator:
+
+@dataclass(frozen=True)
+class Region:
+    """Which front-face points the objective uses: those at least ``plate_margin_mm`` from both
+    plates (z in [margin, 150 - margin] mm). The force is always used."""
+
+    plate_margin_mm: float = 0.0
+
+    def __post_init__(self):
+        if not (np.isfinite(self.plate_margin_mm) and 0.0 <= self.plate_margin_mm < SIZE_MM[2] / 2):
+            raise ValueError(f"plate_margin_mm = {self.plate_margin_mm!r} is out of range: "
+                             f"0 <= margin < {SIZE_MM[2] / 2:g} mm")
+
+    def mask(self, points) -> np.ndarray:
+        """Boolean mask over front-face points (m, 2) = (y, z) mm."""
+        z = np.asarray(points, float)[:, 1]
+        return (z >= self.plate_margin_mm - 1e-9) & (z <= SIZE_MM[2] - self.plate_margin_mm + 1e-9)
+
+
+def hifi_mesh_for(mesh: str) -> str:
+    """The default high-fidelity mesh of a correction for inverse mesh ``mesh``."""
+    base = str(mesh).partition(":")[0]
+    if base not in DEFAULT_HIFI:
+        raise ValueError(f"no default high-fidelity mesh for inverse mesh {mesh!r}; allowed inverse meshes: "
+                         f"{', '.join(DEFAULT_HIFI)} (or name the high-fidelity mesh explicitly)")
+    return DEFAULT_HIFI[base]
+
+
+def resolve_data(case: Case, mesh: str, tier: str, data: Dataset | str | Path | None) -> Dataset:
+    """The data set: explicit (a Dataset or a file) or the tier's default for the inverse ``mesh``."""
+    if data is None:
+        return get_data(case.name, tier_settings(tier, inverse_mesh=mesh))
+    return data if isinstance(data, Dataset) else load(data)
+
+
+def subset(data: Dataset, region: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(points, values, sigma_displacement)`` of the data restricted to ``region``."""
+    keep = region.mask(data.points)
+    if not keep.any():
+        raise ValueError(f"the measurement region (plate margin {region.plate_margin_mm:g} mm) leaves no point")
+    std = data.std_u_mm[:, :, keep]
+    values = layout.stack(data.u_h[:, keep], data.u_v[:, keep], data.reaction_kN)
+    return data.points[keep], values, std
+
+
+def model_pair(case: Case | str, mesh: str, hifi_mesh: str, data: Dataset, region: Region = Region()):
+    """``(hifi, inverse)`` FE forward models of a correction on the objective's points and loading."""
+    from problems.inverse.forward import FEForwardModel
+
+    case = get_case(case) if isinstance(case, str) else case
+    points = data.points[region.mask(data.points)]
+    return (FEForwardModel(case, hifi_mesh, data.settings.loading, points),
+            FEForwardModel(case, mesh, data.settings.loading, points))
+
+
+def build_objective(case: Case | str, *, mesh: str = "coarse", tier: str = "model-error",
+                    data: Dataset | str | Path | None = None, region: Region = Region(),
+                    correction: Correction | None = None, hifi_mesh: str | None = None, mapper=None,
+                    sigma_force_kN: float = 1.0, cache: bool = True) -> Evaluator:
     """The evaluator (a solver's objective) of ``case`` with the FE model on ``mesh``.
 
-    data : a :class:`Dataset`, a data-file path, or None for the case's shipped pseudo-experimental
-           data. Analytic cases ignore mesh and data.
+    tier       : ``model-error`` or ``consistent`` data (ignored when ``data`` is given: its own
+                 tier is used); analytic cases ignore mesh, tier and data
+    region     : the front-face points used (:class:`Region`)
+    correction : a model-error correction (see :mod:`problems.inverse.model_error`) made with the
+                 high-fidelity model on ``hifi_mesh``: its mean shifts the data, its low-rank
+                 covariance is added to the noise's; its runs are charged to the evaluator
     sigma_force_kN : standard deviation of the plate force, kN
     """
     from problems.inverse.forward import FEForwardModel
@@ -26,16 +102,34 @@ def build_objective(case: Case | str, *, mesh: str = "coarse", data: Dataset | s
         from problems.inverse.analytic import analytic_objective
 
         return analytic_objective(case.name, mapper=mapper)
-    if data is None:
-        data = get_data(case.name)
-    elif not isinstance(data, Dataset):
-        data = load(data)
-    if data.case != case.name:
-        raise ValueError(f"data set is for case {data.case!r}, not {case.name!r}")
-    model = FEForwardModel(case, mesh, data.settings.loading, data.points)
+    ds = resolve_data(case, mesh, tier, data)
+    if ds.case != case.name:
+        raise ValueError(f"data set is for case {ds.case!r}, not {case.name!r}")
+    tier = ds.settings.tier
+    data_key, inverse_key = discretisation_key(ds.settings.mesh), discretisation_key(mesh)
+    if tier == "consistent" and data_key != inverse_key:
+        raise ValueError(f"consistent-tier data were made on mesh {ds.settings.mesh} ({data_key}); the inverse "
+                         f"model uses {mesh} ({inverse_key}): use data made on the inverse mesh")
+    hifi_key = discretisation_key(hifi_mesh) if (correction is not None and hifi_mesh) else None
+    check_honest(data_key, tier, forward=inverse_key, hifi=hifi_key)
+    points, values, std = subset(ds, region)
+    sigma = np.concatenate([std.ravel(), np.full(len(ds.reaction_kN), sigma_force_kN)])
+    if not sigma_force_kN > 0:
+        raise ValueError(f"sigma_force_kN = {sigma_force_kN!r} is out of range: must be > 0 kN")
+    model = FEForwardModel(case, mesh, ds.settings.loading, points)
+    shift = 0.0 if correction is None or correction.shift is None else correction.shift
     problem = LeastSquaresProblem(
-        model, data.values, case.lower, case.upper, case.reference, sigma=data.sigma(sigma_force_kN),
-        blocks=layout.blocks(len(data.snapshots_mm), len(data.points)),
-        provenance={"case": case.name, "data_hash": data.hash, "data_mesh": data.settings.mesh,
-                    "inverse_mesh": mesh})
-    return Evaluator(problem, mapper=mapper, cache=cache)
+        model, values - shift, case.lower, case.upper, case.reference, sigma=sigma,
+        covariance_factor=None if correction is None else correction.factor,
+        blocks=layout.blocks(len(ds.snapshots_mm), len(points)),
+        provenance={"case": case.name, "data_tier": tier, "data_hash": ds.hash, "data_mesh": ds.settings.mesh,
+                    "data_route": ds.settings.route, "inverse_mesh": mesh,
+                    "region_plate_margin_mm": region.plate_margin_mm,
+                    "treatment": "none" if correction is None else correction.treatment,
+                    "hifi_mesh": hifi_mesh if correction is not None else None,
+                    "correction_hash": None if correction is None else correction.hash})
+    evaluator = Evaluator(problem, mapper=mapper, cache=cache)
+    if correction is not None:
+        evaluator.charge("hifi", correction.n_hifi, correction.hifi_wall_s)
+        evaluator.charge("inverse-for-correction", correction.n_inverse, correction.inverse_wall_s)
+    return evaluator

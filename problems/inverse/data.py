@@ -3,11 +3,20 @@
 One data set is one JSON file (format ``femubench-data/1``) holding the measurements, the
 settings that made them and a SHA-256 content hash. The same settings give the same bytes.
 
+Two tiers, labelled in every file, record and report:
+
+* ``model-error``: made on ``xfine`` (32 x 32 x 64), a discretisation finer than every model of
+  the inverse loop (inverse model, high-fidelity model of a correction, BAE statistics,
+  surrogate training): the honest pseudo-experiment, with the inverse model's discretisation
+  error in it;
+* ``consistent``: made with the inverse model's own discretisation plus the same measurement
+  model (rounding, optional noise): a known optimum, for judging the optimisers alone.
+
 Where data sets live:
 
-* the nine default sets ship as package data in ``problems/inverse/datasets/`` (so that the main
-  job never needs the fine mesh); the environment variable ``FEMUBENCH_DATA_DIR`` points the
-  look-up at another directory of ``<case>.json`` files instead;
+* the default sets of both tiers ship as package data in ``problems/inverse/datasets/<tier>/``
+  (the consistent tier for the default inverse mesh, ``coarse``); the environment variable
+  ``FEMUBENCH_DATA_DIR`` points the look-up at another directory with the same layout;
 * data sets of other settings are computed on first use and cached in ``FEMUBENCH_CACHE_DIR``
   (default ``$XDG_CACHE_HOME/femubench/data``, i.e. ``~/.cache/femubench/data``), never inside
   the installed package; DIC-route images go next to the data file, in ``<stem>__dic_images/``.
@@ -36,6 +45,11 @@ SHIPPED_DIR = Path(__file__).resolve().parent / "datasets"
 DATA_DIR_ENV = "FEMUBENCH_DATA_DIR"
 #: Environment variable: directory of the cache of computed non-default data sets.
 CACHE_DIR_ENV = "FEMUBENCH_CACHE_DIR"
+TIERS = ("model-error", "consistent")
+#: the discretisation that makes the model-error tier (never used inside the inverse loop)
+MODEL_ERROR_MESH = "xfine"
+#: the inverse model's mesh of the shipped consistent tier
+DEFAULT_INVERSE_MESH = "coarse"
 
 
 def data_dir() -> Path:
@@ -58,7 +72,9 @@ def cache_dir() -> Path:
 class DataSettings:
     """How a data set is made.
 
-    mesh                : mesh of the *data* model (never the inverse model's), default ``fine``
+    tier                : ``model-error`` or ``consistent`` (see the module docstring)
+    mesh                : mesh of the data model: ``xfine`` for the model-error tier, the inverse
+                          model's own for the consistent tier
     resolution_um       : displacement rounding step, micrometres (0: no rounding)
     noise_um            : standard deviation of added Gaussian displacement noise, micrometres
     force_resolution_kN : force rounding step, kN (0: no rounding)
@@ -67,7 +83,8 @@ class DataSettings:
     spacing_mm, margin_mm : the front-face measurement grid
     """
 
-    mesh: str = "fine"
+    tier: str = "model-error"
+    mesh: str = MODEL_ERROR_MESH
     resolution_um: float = 1.0
     noise_um: float = 0.0
     force_resolution_kN: float = 0.1
@@ -86,6 +103,11 @@ class DataSettings:
                 raise ValueError(f"{name} = {v!r} is out of range: must be >= 0")
         if self.route not in ("fe", "dic"):
             raise ValueError(f"route = {self.route!r} is unknown; allowed: fe, dic")
+        if self.tier not in TIERS:
+            raise ValueError(f"tier = {self.tier!r} is unknown; allowed: {', '.join(TIERS)}")
+        from problems.fe.mesh import parse_mesh_spec
+
+        parse_mesh_spec(self.mesh)  # validates the mesh spec
         self.loading  # validates displacement, snapshots, plates
 
     @property
@@ -184,26 +206,34 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
     resp = model.response(x, progress=progress)
     if not resp.converged:
         raise RuntimeError(f"data model of {case.name} on mesh {settings.mesh} failed: {resp.message}")
-    u_h, u_v = resp.front_face(settings.points)
+    meta = {"package_version": package_version(), "mesh": resp.mesh.info(), "symmetry": resp.symmetry}
     if settings.route == "dic":
-        return _dic_dataset(case, settings, x, resp, image_dir)
-    rng = np.random.default_rng(settings.seed)
-    noise = settings.noise_um * 1e-3
-    if noise > 0:
-        u_h = u_h + rng.normal(0.0, noise, u_h.shape)
-        u_v = u_v + rng.normal(0.0, noise, u_v.shape)
-    res = settings.resolution_um * 1e-3
-    std = np.full((2,) + u_h.shape, displacement_std_mm(settings))
-    return Dataset(case.name, settings, dict(zip(case.names, map(float, x))), settings.points, resp.snapshots_mm,
-                   _round(u_h, res), _round(u_v, res), _round(resp.reaction_kN, settings.force_resolution_kN), std,
-                   {"package_version": package_version(), "mesh": resp.mesh.info()})
+        from problems.dic.route import measure_by_dic
+
+        u_h, u_v, std, dic_meta = measure_by_dic(resp, settings.points, seed=settings.seed, progress=progress,
+                                                 image_dir=image_dir)
+        meta |= dic_meta
+    else:
+        u_h, u_v = resp.front_face(settings.points)
+        rng = np.random.default_rng(settings.seed)
+        noise = settings.noise_um * 1e-3
+        if noise > 0:
+            u_h = u_h + rng.normal(0.0, noise, u_h.shape)
+            u_v = u_v + rng.normal(0.0, noise, u_v.shape)
+        res = settings.resolution_um * 1e-3
+        u_h, u_v = _round(u_h, res), _round(u_v, res)
+        std = np.full((2,) + u_h.shape, displacement_std_mm(settings))
+    return Dataset(case.name, settings, case.identified(x), settings.points, resp.snapshots_mm, u_h, u_v,
+                   _round(resp.reaction_kN, settings.force_resolution_kN), std, meta)
 
 
-def _dic_dataset(case: Case, settings: DataSettings, x, resp, image_dir=None) -> Dataset:
-    """The DIC route: render speckle images of the response, correlate them back (see problems.dic)."""
-    from problems.dic.route import dic_dataset
-
-    return dic_dataset(case, settings, x, resp, image_dir=image_dir)
+def tier_settings(tier: str, inverse_mesh: str = DEFAULT_INVERSE_MESH, **overrides) -> DataSettings:
+    """The default settings of a tier: ``consistent`` on ``inverse_mesh``, ``model-error`` on
+    :data:`MODEL_ERROR_MESH`; ``overrides`` set other fields (rounding, noise, seed, ...)."""
+    if tier not in TIERS:
+        raise ValueError(f"tier = {tier!r} is unknown; allowed: {', '.join(TIERS)}")
+    mesh = inverse_mesh if tier == "consistent" else MODEL_ERROR_MESH
+    return DataSettings(**{"tier": tier, "mesh": mesh, **overrides})
 
 
 def dic_image_dir(path: str | Path) -> Path:
@@ -289,9 +319,14 @@ def _array(doc: dict, name: str) -> np.ndarray:
         raise ValueError(f"field {name} is not a rectangular array of numbers") from None
 
 
-def default_path(case: str) -> Path:
-    """Where the default data set of ``case`` lives (shipped, or in ``$FEMUBENCH_DATA_DIR``)."""
-    return data_dir() / f"{case}.json"
+def default_path(case: str, tier: str = "model-error") -> Path:
+    """Where the default data set of ``case`` in ``tier`` lives (shipped, or in ``$FEMUBENCH_DATA_DIR``)."""
+    return data_dir() / tier / f"{case}.json"
+
+
+def is_default(settings: DataSettings) -> bool:
+    """True when ``settings`` are those of a shipped data set (the tier's default)."""
+    return settings == tier_settings(settings.tier)
 
 
 def cached_path(case: str, settings: DataSettings) -> Path:
@@ -303,7 +338,7 @@ def cached_path(case: str, settings: DataSettings) -> Path:
 def get_data(case: str, settings: DataSettings | None = None, *, progress: bool = False) -> Dataset:
     """The data set of ``case`` for ``settings`` (default: shipped), computed and cached if missing."""
     settings = settings or DataSettings()
-    path = default_path(case) if settings == DataSettings() else cached_path(case, settings)
+    path = default_path(case, settings.tier) if is_default(settings) else cached_path(case, settings)
     if path.exists():
         return load(path)
     if progress:

@@ -56,8 +56,9 @@ def material_from(case_name: str | None, overrides: dict[str, float]):
         raise ValueError(f"--param {sorted(unknown)} unknown for case {case.name}; allowed: {', '.join(sorted(allowed))}")
     from problems.materials.drucker_prager import make_material
 
-    params = {**case.material_parameters(case.reference), **overrides}
-    return make_material(case.form, case.hardening, params)
+    x = np.array([overrides.get(n, r) for n, r in zip(case.names, case.reference)], float)
+    fixed = {k: v for k, v in overrides.items() if k in case.fixed}
+    return make_material(case.form, case.hardening, {**case.material_parameters(x), **fixed})
 
 
 @dataclass(frozen=True, eq=False)
