@@ -9,7 +9,17 @@ def add_arguments(p) -> None:
     p.add_argument("case", help="case name (see `femubench cases --analytic`)")
     p.add_argument("--solver", required=True, metavar="METHOD", help="method name (see `femubench solvers`)")
     p.add_argument("--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)")
-    p.add_argument("--data", metavar="FILE", help="data set to fit (default: the case's shipped pseudo-experimental data)")
+    p.add_argument("--tier", choices=["model-error", "consistent"], default="model-error",
+                   help="data tier: model-error (made on a finer discretisation than any model of the loop) or "
+                        "consistent (made with the inverse mesh itself: judges the optimiser alone); "
+                        "default model-error")
+    p.add_argument("--data", metavar="FILE", help="data set to fit (default: the tier's shipped data set)")
+    p.add_argument("--correction", choices=["none", "one-point", "iterated", "bae"], default="none",
+                   help="model-error treatment (default none; see `femubench cases` for each case's default)")
+    p.add_argument("--hifi-mesh", metavar="MESH",
+                   help="high-fidelity mesh of the correction (default: paper for coarse, fine for paper)")
+    p.add_argument("--plate-margin-mm", type=float, default=0.0, metavar="MM",
+                   help="leave out front-face points closer than MM to the plates (default 0)")
     p.add_argument("--budget", type=int, default=300, metavar="N", help="maximum forward evaluations (default 300)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the solver and of random starts (default 0)")
     p.add_argument("--start", choices=["default", "random"], default="default",
@@ -47,35 +57,42 @@ def format_identification(case, result) -> str:
         f"  cost {result.cost:.6g}   status {result.status}: {result.message}",
         f"  forward evaluations {result.n_evals} (failed {result.n_failed}, infeasible {result.n_infeasible}; "
         f"cache hits {result.n_cache_hits} not counted), iterations {result.n_iterations}, wall {result.wall_s:.2f} s",
+        f"  forward-equivalents {result.forward_equivalents:.1f}"
+        + "".join(f", {k} {c['n']} runs = {c['forward_equivalents']:.1f} fe" for k, c in result.charges.items()),
     ]
+    prov = result.provenance
+    if prov.get("data_tier"):
+        lines.append(f"  data: {prov['data_tier']} tier, mesh {prov.get('data_mesh')}, hash {str(prov.get('data_hash'))[:12]}; "
+                     f"inverse mesh {prov.get('inverse_mesh')}; treatment {prov.get('treatment')}"
+                     + (f" (high-fidelity mesh {prov['hifi_mesh']})" if prov.get("hifi_mesh") else ""))
     return "\n".join(lines)
 
 
-def result_document(result, **context) -> dict:
-    """The JSON written by ``--json``: the RunResult (context in ``extra``) plus ``errors_percent``."""
-    result.extra.update(context)
-    return {**result.to_dict(), "errors_percent": result.errors_percent()}
+def result_document(result) -> dict:
+    """The JSON written by ``--json``: the RunResult (with its ``provenance``: case, data tier and
+    hash, data and inverse meshes, treatment and its high-fidelity mesh, start), ``iterations``,
+    ``errors_percent`` and the package version."""
+    from bench.cli import package_version
+
+    return {**result.to_dict(), "iterations": result.n_iterations, "errors_percent": result.errors_percent(),
+            "package_version": package_version()}
 
 
 def main(args) -> int:
     import json
     from pathlib import Path
 
+    from bench.identification import Identification, identify
     from problems.inverse.cases import get_case
-    from problems.inverse.build import build_objective
-    from problems.inverse.starts import start_point
-    from solvers import solve
 
     case = get_case(args.case)
-    options = parse_options(args.option)
-    objective = build_objective(case, mesh=args.mesh, data=args.data)
-    x0 = start_point(case, kind=args.start, seed=args.seed)
-    result = solve(objective, args.solver, budget=args.budget, seed=args.seed, x0=x0, **options)
+    spec = Identification(case.name, args.solver, mesh=args.mesh, tier=args.tier, data=args.data,
+                          treatment=args.correction, hifi_mesh=args.hifi_mesh,
+                          plate_margin_mm=args.plate_margin_mm, budget=args.budget, seed=args.seed,
+                          start=args.start, options=parse_options(args.option))
+    result = identify(spec)
     print(format_identification(case, result))
     if args.json:
-        context = {"case": case.name, "mesh": args.mesh, "start": args.start, "data": args.data}
-        if getattr(objective, "data_hash", None):
-            context["data_hash"] = objective.data_hash
-        Path(args.json).write_text(json.dumps(result_document(result, **context), indent=1))
+        Path(args.json).write_text(json.dumps(result_document(result), indent=1))
         print(f"  written {args.json}")
     return 0
