@@ -124,9 +124,10 @@ def dataset_for(config: RunConfig, *, progress: bool = False):
     suite's ``[data]`` settings (computed on first use and cached by problems.inverse.data)."""
     if is_analytic(config.case):
         return None
-    from problems.inverse.data import DataSettings, get_data
+    from problems.inverse.data import get_data, tier_settings
 
-    return get_data(config.case, DataSettings(**config.data) if config.data else None, progress=progress)
+    return get_data(config.case, tier_settings(config.tier, inverse_mesh=config.mesh, **config.data),
+                    progress=progress)
 
 
 def failed_result(config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0):
@@ -184,26 +185,28 @@ def run_one(config: RunConfig | dict, *, mapper: Callable | None = None, suite: 
 
 
 def _run_guarded(config: RunConfig, mapper, dataset, t0):
-    case = x0 = objective = None
+    case = x0 = None
     error = data_hash = None
+    evaluations = [0]  # the objective's counter, kept for a crash report
     try:
+        from bench.identification import Identification, identify
         from problems.inverse.cases import get_case
-        from problems.inverse.build import build_objective
-        from solvers import solve
 
         case = get_case(config.case)
         if dataset is None and not is_analytic(config.case):
             dataset = dataset_for(config)
-        objective = build_objective(case, mesh=config.mesh, data=dataset, mapper=mapper)
-        data_hash = getattr(objective, "data_hash", None)
         x0 = initial_point(case, config)
-        result = solve(objective, config.method, budget=config.budget, seed=config.seed, x0=x0,
-                       **dict(config.options))
+        spec = Identification(config.case, config.method, mesh=config.mesh, tier=config.tier,
+                              treatment=config.treatment, plate_margin_mm=config.plate_margin_mm,
+                              budget=config.budget, seed=config.seed, start=config.start,
+                              start_index=config.start_index, options=dict(config.options))
+        result = identify(spec, mapper=mapper, dataset=dataset,
+                          observers=[lambda ev, _: evaluations.__setitem__(0, ev.n_evals)])
+        data_hash = result.provenance.get("data_hash")
     except Exception as exc:  # a crash must never take a suite down
         error = "".join(traceback.format_exception(exc))
-        n_evals = int(getattr(objective, "n_evals", 0) or 0) if objective is not None else 0
         result = failed_result(config, f"{type(exc).__name__}: {exc}\n{error}", case=case, x0=x0,
-                               n_evals=n_evals, wall_s=time.perf_counter() - t0)
+                               n_evals=evaluations[0], wall_s=time.perf_counter() - t0)
     return result, data_hash, error
 
 

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 #: Version of the run-configuration schema; part of every config hash.
-CONFIG_SCHEMA = 1
+CONFIG_SCHEMA = 2
 
 START_KINDS = ("default", "random")
 
@@ -50,6 +50,9 @@ SUITE_KEYS = {
     "random_starts": "random starts per seed when 'random' is listed (integer >= 1, default 1)",
     "budgets": "list of positive integers: forward evaluations per run",
     "mesh": "FE mesh name (default 'coarse')",
+    "tiers": 'list of data tiers, "model-error" and/or "consistent" (default ["model-error"])',
+    "treatments": 'list of model-error treatments: "none", "one-point", "iterated", "bae" (default ["none"])',
+    "plate_margin_mm": "leave out front-face points closer than this to the plates, mm (default 0)",
 }
 TOP_KEYS = ("suite", "data", "options")
 
@@ -72,19 +75,25 @@ class RunConfig:
     mesh: str
     data: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
+    tier: str = "model-error"
+    treatment: str = "none"
+    plate_margin_mm: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "case": self.case, "method": self.method, "seed": self.seed, "start": self.start,
             "start_index": self.start_index, "budget": self.budget, "mesh": self.mesh,
             "data": dict(sorted(self.data.items())), "options": dict(sorted(self.options.items())),
+            "tier": self.tier, "treatment": self.treatment, "plate_margin_mm": self.plate_margin_mm,
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "RunConfig":
         return cls(case=d["case"], method=d["method"], seed=int(d["seed"]), start=d["start"],
                    start_index=int(d["start_index"]), budget=int(d["budget"]), mesh=d["mesh"],
-                   data=dict(d.get("data") or {}), options=dict(d.get("options") or {}))
+                   data=dict(d.get("data") or {}), options=dict(d.get("options") or {}),
+                   tier=d.get("tier", "model-error"), treatment=d.get("treatment", "none"),
+                   plate_margin_mm=float(d.get("plate_margin_mm", 0.0)))
 
     @property
     def hash(self) -> str:
@@ -92,8 +101,9 @@ class RunConfig:
 
     @property
     def label(self) -> str:
-        """Short human-readable label, e.g. ``linear-shear/lm/s0/default0/b200``."""
-        return f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}"
+        """Short human-readable label, e.g. ``linear-shear/lm/s0/default0/b200/model-error/none``."""
+        return (f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}/"
+                f"{self.tier}/{self.treatment}")
 
 
 def canonical_json(obj: Any) -> str:
@@ -121,26 +131,33 @@ class Suite:
     mesh: str = "coarse"
     data: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)  # method -> {option: value}
+    tiers: tuple[str, ...] = ("model-error",)
+    treatments: tuple[str, ...] = ("none",)
+    plate_margin_mm: float = 0.0
     description: str = ""
     source: str | None = None  # the TOML text it was read from, if any
 
     def runs(self) -> list[RunConfig]:
-        """All runs, ordered case, method, budget, seed, start, start index."""
+        """All runs, ordered tier, treatment, case, method, budget, seed, start, start index."""
         out = []
-        for case in self.cases:
-            for method in self.methods:
-                for budget in self.budgets:
-                    for seed in self.seeds:
-                        for start in self.starts:
-                            n = 1 if start == "default" else self.random_starts
-                            for i in range(n):
-                                out.append(RunConfig(case, method, seed, start, i, budget, self.mesh,
-                                                     dict(self.data), dict(self.options.get(method, {}))))
+        for tier in self.tiers:
+            for treatment in self.treatments:
+                if tier == "consistent" and treatment != "none":
+                    continue  # nothing to correct: the data come from the inverse model itself
+                for case in self.cases:
+                    for method in self.methods:
+                        for budget in self.budgets:
+                            for seed in self.seeds:
+                                for start in self.starts:
+                                    n = 1 if start == "default" else self.random_starts
+                                    for i in range(n):
+                                        out.append(RunConfig(case, method, seed, start, i, budget, self.mesh,
+                                                             dict(self.data), dict(self.options.get(method, {})),
+                                                             tier, treatment, self.plate_margin_mm))
         return out
 
     def __len__(self) -> int:
-        per_seed = sum(1 if s == "default" else self.random_starts for s in self.starts)
-        return len(self.cases) * len(self.methods) * len(self.budgets) * len(self.seeds) * per_seed
+        return len(self.runs())
 
     @property
     def total_budget(self) -> int:
@@ -167,7 +184,8 @@ def _data_settings() -> dict[str, tuple]:
     """Allowed [data] keys (the fields of problems.inverse.data.DataSettings) -> accepted Python types."""
     from problems.inverse.data import DataSettings
 
-    return {f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings)}
+    return {f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings)
+            if f.name != "tier"}  # the tier is a suite dimension: [suite] tiers
 
 
 def _check_data_settings(data: dict) -> str | None:
@@ -319,6 +337,17 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     if why:
         err(f"[suite] {why}")
 
+    from problems.inverse.data import TIERS
+    from problems.inverse.model_error import TREATMENTS
+
+    tiers = _choice_list(s, "tiers", ["model-error"], TIERS, err)
+    treatments = _choice_list(s, "treatments", ["none"], TREATMENTS, err)
+    plate_margin = s.get("plate_margin_mm", 0.0)
+    if isinstance(plate_margin, bool) or not isinstance(plate_margin, (int, float)) \
+            or not (math.isfinite(plate_margin) and 0 <= plate_margin < 75):
+        err(f"[suite] plate_margin_mm = {plate_margin!r} is out of range: 0 <= margin < 75 mm")
+        plate_margin = 0.0
+
     # [data]
     raw_data = raw.get("data", {})
     if not isinstance(raw_data, dict):
@@ -383,12 +412,27 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
 
     return Suite(name=sname, cases=tuple(cases), methods=tuple(methods), seeds=tuple(seeds),
                  starts=tuple(starts), random_starts=random_starts, budgets=tuple(budgets),
-                 mesh=mesh, data=dict(data), options=clean_options, description=description,
+                 mesh=mesh, data=dict(data), options=clean_options, tiers=tuple(tiers),
+                 treatments=tuple(treatments), plate_margin_mm=float(plate_margin), description=description,
                  source=source)
 
 
 def _q(m: str) -> str:
     return m if m.replace("-", "").replace("_", "").isalnum() else f'"{m}"'
+
+
+def _choice_list(s: dict, key: str, default: list[str], allowed, err) -> list[str]:
+    """A non-empty list of distinct names from ``allowed`` (in the order of ``allowed``)."""
+    value = s.get(key, default)
+    if not isinstance(value, list) or not value:
+        err(f"[suite] {key} must be a non-empty list of {', '.join(map(repr, allowed))}, got {value!r}")
+        return list(default)
+    bad = [v for v in value if v not in allowed]
+    if bad:
+        err(f"[suite] {key}: {', '.join(map(repr, bad))} unknown; allowed: {', '.join(allowed)}")
+        return list(default)
+    _no_duplicates(key, value, err)
+    return [a for a in allowed if a in value]
 
 
 def _int_list(s: dict, key: str, default, *, minimum: int, err) -> list[int]:

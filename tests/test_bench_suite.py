@@ -72,7 +72,7 @@ def test_config_hash_is_canonical_and_stable():
     assert RunConfig.from_dict(a.to_dict()) == a
     # changing this value orphans every stored record: bump CONFIG_SCHEMA deliberately if needed
     assert config_hash(RunConfig("linear-compression", "lm", 0, "default", 0, 200, "coarse")) == \
-        "59064abca4ad72a36e177bb07e19b2d4d22b46d46c40bc9479eb1b7e46446770"
+        "eed14cf8837e99bd0b695de64ff8df2cc2e0df32c4069d7586a377ab23af057b"
 
 
 @pytest.mark.parametrize("raw, needles", [
@@ -168,3 +168,17 @@ def test_default_and_paper_suites_have_the_documented_shape():
     for m in ("lm", "gauss-newton", "ga", "pso", "sa", "mcmc"):
         assert m in p.methods
     assert sum(m.startswith("nlopt:") for m in p.methods) >= 5
+
+
+def test_tiers_and_treatments_span_the_suite_without_correcting_consistent_data():
+    raw = {"suite": {"cases": ["linear-compression"], "methods": ["lm"], "budgets": [50],
+                     "tiers": ["consistent", "model-error"], "treatments": ["none", "iterated"],
+                     "plate_margin_mm": 15.0}}
+    s = parse_suite(raw)
+    combos = sorted((r.tier, r.treatment) for r in s.runs())
+    assert combos == [("consistent", "none"), ("model-error", "iterated"), ("model-error", "none")]
+    assert all(r.plate_margin_mm == 15.0 for r in s.runs()) and len(s) == 3
+    with pytest.raises(ValueError, match="treatments: 'twice' unknown"):
+        parse_suite({"suite": {**raw["suite"], "treatments": ["twice"]}})
+    with pytest.raises(ValueError, match="plate_margin_mm = 80"):
+        parse_suite({"suite": {**raw["suite"], "plate_margin_mm": 80}})
