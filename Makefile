@@ -14,6 +14,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	@# compile the numba kernels once into their cache (otherwise every test worker compiles them)
 	$(BIN)/python -c "from problems.inverse.cases import CASES; from problems.inverse.forward import case_material; import numpy as np; [case_material(c, c.reference).update(np.full((2, 6), -1e-3), np.zeros((2, 6)), np.zeros((2, 7))) for c in CASES.values()]"
+	$(BIN)/python -c "from problems.fe.mesh import box_mesh; from problems.fe.newton import discretise, run; from problems.materials import LinearElastic; run(discretise(box_mesh(1, 1, 2)), LinearElastic())"
 	touch $(STAMP)
 
 install: $(STAMP)

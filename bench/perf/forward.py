@@ -1,15 +1,27 @@
-"""Benchmark of one complete forward run (not a test): DOFs, wall time and where the time goes.
+"""Benchmark of one complete forward run (not a test): DOFs, wall time, where the time goes, and
+the speed-up over the old code path measured in the same run.
 
-    python -m bench.perf.forward [--meshes coarse,paper] [--cases all|elastic|NAME,...] [--repeat 3]
+    OMP_NUM_THREADS=1 python -m bench.perf.forward [--meshes coarse,paper] [--cases linear-compression|all|elastic|NAME,...]
+                                                   [--repeat 3] [--no-baseline]
 
-Prints, per mesh and material, the best of ``--repeat`` runs of the default 10-snapshot test
-(1.5 mm, friction plates) split into assembly, material update and linear solve. Run it with
-``OMP_NUM_THREADS=1`` for one-core figures.
+Per mesh spec (``MESH[:eighth|quarter]``: ``coarse`` solves the eighth model, ``coarse:quarter``
+the whole height) and material, the best of ``--repeat`` runs of the default 10-snapshot test
+(1.5 mm, friction plates, FORWARD_SETTINGS: rtol 1e-10) with the production settings (fused
+assembly, ``linear_solver="auto"``), split into assembly (tangent, internal force, strain),
+material update, factorisation and solve (Krylov iterations in ``kryl``); then, unless
+``--no-baseline``, the old code path on the same input (SuperLU per Newton iteration + numpy
+assembly: ``NewtonSettings(linear_solver="superlu", assembly="numpy")``), its best wall time,
+the speed-up old / new and the largest relative difference of the plate forces. The runs of the
+two paths alternate, so both see the same machine load. Run it with ``OMP_NUM_THREADS=1`` for
+one-core figures.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
+
+import numpy as np
 
 from problems.inverse.cases import CASES
 from problems.fe.newton import Loading, discretise, run
@@ -17,29 +29,56 @@ from problems.inverse.forward import FORWARD_SETTINGS, case_material
 from problems.materials import LinearElastic
 from problems.fe.mesh import parse_mesh_spec
 
+#: the code path before the fused assembly and the CHOLMOD-preconditioned Krylov solver
+BASELINE = dict(linear_solver="superlu", assembly="numpy")
+
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--meshes", default="coarse,paper")
-    ap.add_argument("--cases", default="all", help="all | elastic | comma-separated case names")
+    ap.add_argument("--cases", default="linear-compression", help="all | elastic | comma-separated case names")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--no-baseline", action="store_true", help="skip the old code path")
     args = ap.parse_args(argv)
-    names = list(CASES) if args.cases == "all" else args.cases.split(",")
-    print(f"{'mesh':8} {'dofs':>7} {'material':24} {'ok':>3} {'incr':>4} {'iter':>4} {'cuts':>4} "
-          f"{'wall s':>8} {'assem s':>8} {'mater s':>8} {'solve s':>8} {'F kN':>9}")
+    names = ["elastic"] + list(CASES) if args.cases == "all" else args.cases.split(",")
+    for name in names:
+        if name != "elastic" and name not in CASES:
+            raise SystemExit(f"case {name!r} is unknown; allowed: elastic, all, {', '.join(CASES)}")
+    new_settings = FORWARD_SETTINGS
+    old_settings = dataclasses.replace(FORWARD_SETTINGS, **BASELINE)
+    head = (f"{'mesh':14} {'dofs':>6} {'material':20} {'ok':>3} {'incr':>4} {'iter':>4} {'kryl':>5} {'fact':>4} "
+            f"{'wall s':>7} {'assem':>6} {'mater':>6} {'factor':>6} {'solve':>6} {'F kN':>8}")
+    if not args.no_baseline:
+        head += f" | {'old s':>7} {'speed-up':>8} {'max dF/F':>8}"
+    print(head)
     for spec in args.meshes.split(","):
         t = time.perf_counter()
-        ms = parse_mesh_spec(spec)  # "coarse" solves the eighth model, "coarse:quarter" the whole height
+        ms = parse_mesh_spec(spec)
         disc = discretise(ms.mesh, symmetry=ms.symmetry)
         setup = time.perf_counter() - t
-        for name in ["elastic"] + [n for n in names if n != "elastic"] if args.cases == "all" else names:
+        for name in names:
             mat = LinearElastic() if name == "elastic" else case_material(CASES[name], CASES[name].reference)
-            best = min((run(disc, mat, Loading(), FORWARD_SETTINGS) for _ in range(args.repeat)), key=lambda r: r.wall_s)
-            tm = best.timing
-            print(f"{spec:8} {disc.mesh.n_dofs:7d} {name:24} {'yes' if best.converged else 'NO':>3} {best.increments:4d} "
-                  f"{best.iterations:4d} {best.cuts:4d} {best.wall_s:8.3f} {tm['assembly_s']:8.3f} "
-                  f"{tm['material_s']:8.3f} {tm['solve_s']:8.3f} {best.reaction_kN[-1] if len(best.reaction_kN) else float('nan'):9.2f}")
-        print(f"{spec:8} setup (B-bar, sparsity pattern): {setup:.3f} s")
+            best = {}
+            for _ in range(args.repeat):
+                for key, settings in (("new", new_settings), ("old", old_settings)):
+                    if key == "old" and args.no_baseline:
+                        continue
+                    r = run(disc, mat, Loading(), settings)
+                    if key not in best or r.wall_s < best[key].wall_s:
+                        best[key] = r
+            r = best["new"]
+            tm = r.timing
+            line = (f"{spec:14} {disc.mesh.n_dofs:6d} {name:20} {'yes' if r.converged else 'NO':>3} {r.increments:4d} "
+                    f"{r.iterations:4d} {tm['krylov_iterations']:5d} {tm['factorisations']:4d} {r.wall_s:7.3f} "
+                    f"{tm['assembly_s']:6.3f} {tm['material_s']:6.3f} {tm['factor_s']:6.3f} {tm['solve_s']:6.3f} "
+                    f"{r.reaction_kN[-1] if len(r.reaction_kN) else float('nan'):8.2f}")
+            if "old" in best:
+                o = best["old"]
+                same = len(o.reaction_kN) == len(r.reaction_kN) and len(r.reaction_kN) > 0
+                dF = np.max(np.abs(r.reaction_kN / o.reaction_kN - 1.0)) if same else float("nan")
+                line += f" | {o.wall_s:7.3f} {o.wall_s / r.wall_s:8.2f} {dF:8.1e}"
+            print(line, flush=True)
+        print(f"{spec:14} setup (B-bar, sparsity pattern): {setup:.3f} s")
 
 
 if __name__ == "__main__":

@@ -5,11 +5,14 @@ the mid-height symmetry of identical plates, as its lower half (``symmetry="eigh
 mm, mid-plane u_z = -delta/2 prescribed, u_x and u_y free there) whose answer :func:`run` unfolds onto
 the quarter mesh, so a :class:`Response` is the same whichever model solved it.
 
-Full Newton-Raphson with the material's consistent tangent (possibly non-symmetric), one sparse
-direct solve per iteration (SuperLU), convergence on the relative residual force *and* the relative
-displacement correction, fixed sub-increments between snapshots and automatic bisection of an
-increment that fails (material return mapping failure, divergence, too many iterations), with a
-bounded number of cuts. A run that still fails returns a :class:`Response` flagged
+Full Newton-Raphson with the material's consistent tangent (possibly non-symmetric), assembled by
+compiled kernels straight into the free-free block; each correction solved by GMRES on the exact
+tangent, preconditioned by a reused CHOLMOD factorisation of a tangent's symmetric part, to a
+Newton forcing term that keeps the convergence quadratic (or by SuperLU per iteration:
+``NewtonSettings.linear_solver``; see problems/fe/linear_solver.py); convergence on the relative
+residual force *and* the relative displacement correction, fixed sub-increments between snapshots
+and automatic bisection of an increment that fails (material return mapping failure, divergence,
+too many iterations, singular tangent), with a bounded number of cuts. A run that still fails returns a :class:`Response` flagged
 ``converged=False`` with the snapshots completed so far and a message saying where and why; it
 never raises into the caller.
 
@@ -18,20 +21,24 @@ Units: mm, N, MPa. Compression of the specimen is reported positive (``snapshots
 """
 from __future__ import annotations
 
+import math
 import time
+import weakref
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from problems.fe.assembly import Pattern, build_pattern, element_forces, element_matrices
+from problems.fe.assembly import FusedAssembler, Pattern, build_pattern, element_forces, element_matrices
+from problems.fe.linear_solver import (LINEAR_SOLVERS, Factor, LinearSolver, SingularMatrixError,
+                                       make_linear_solver, superlu_factor)
 from problems.fe.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
 from problems.materials.base import Material
 from problems.fe.mesh import Mesh, check_symmetry, lower_half, nested_dissection_order, unfold_mid_height
 
 PLATES = ("friction", "frictionless")
+ASSEMBLIES = ("fused", "numpy")
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,12 @@ class NewtonSettings:
     max_cuts          : total bisections allowed in a run
     linear_rtol       : an increment whose residual is below linear_rtol * rtol_force is accepted
                         without the displacement test (Abaqus' "linear increment" rule)
+    linear_solver     : ``auto`` (``cholmod-gmres`` when kvxopt is installed, else ``superlu``),
+                        ``cholmod-gmres`` (CHOLMOD of the tangent's symmetric part, reused across
+                        iterations, preconditioning GMRES on the exact tangent) or ``superlu`` (a
+                        new LU per iteration, the old path); see problems/fe/linear_solver.py
+    assembly          : ``fused`` (compiled kernels straight into the free-free block) or ``numpy``
+                        (the batched numpy reference and a full CSR matrix, the old path)
     """
 
     rtol_force: float = 1e-8
@@ -79,6 +92,14 @@ class NewtonSettings:
     substeps: int = 1
     max_cuts: int = 8
     linear_rtol: float = 1e-4
+    linear_solver: str = "auto"
+    assembly: str = "fused"
+
+    def __post_init__(self):
+        if self.linear_solver not in LINEAR_SOLVERS:
+            raise ValueError(f"linear_solver = {self.linear_solver!r} is unknown; allowed: {', '.join(LINEAR_SOLVERS)}")
+        if self.assembly not in ASSEMBLIES:
+            raise ValueError(f"assembly = {self.assembly!r} is unknown; allowed: {', '.join(ASSEMBLIES)}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -323,6 +344,11 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
 
 @dataclass
 class _Increment:
+    """Result of one increment. ``factor`` is the last factorisation (or preconditioner) the
+    increment used and ``factor_at_converged`` whether its matrix is the tangent at the converged
+    state (then it solves with that tangent directly); :meth:`_Newton.converged_factor` gives one
+    that always does, for sensitivity solves after the increment."""
+
     ok: bool
     reason: str = ""
     u: np.ndarray | None = None
@@ -330,57 +356,236 @@ class _Increment:
     state: np.ndarray | None = None
     tangent: np.ndarray | None = None
     f_int: np.ndarray | None = None
+    factor: Factor | None = None
+    factor_at_converged: bool = False
+
+
+#: Newton forcing terms of the Krylov solves (relative linear residual asked of GMRES). Predictor:
+#: ETA_PREDICTOR. Correction at relative residual r: ``FORCING * r`` -- the linear residual then adds
+#: FORCING * r^2 to the next r, so convergence stays quadratic -- but never tighter than needed to
+#: land below the final acceptance level a = rtol_force * linear_rtol (``FORCING * a / r``),
+#: clipped to [ETA_MIN, ETA_MAX]. Measured on coarse, nine cases, 5 and 10 snapshots: with
+#: ETA_MAX = 1e-3 an early correction near the onset of plasticity can land on a different set of
+#: yielding points and cost an extra iteration (r: 1.9e-4 -> 6.5e-7 instead of 4.3e-8); 1e-4 gives
+#: the exact solves' residual histories (largest r_next / r^2 = 13 in both); ETA_PREDICTOR = 1e-4
+#: or FORCING = 1 cost extra iterations, tighter values only Krylov iterations.
+ETA_PREDICTOR, FORCING, ETA_MIN, ETA_MAX = 1e-5, 0.3, 1e-12, 1e-4
+
+#: refactorise the preconditioner once its ageing has cost this many extra Krylov iterations: one
+#: CHOLMOD numeric factorisation costs about 10-20 iterations (triangular solve pair + product) on
+#: coarse to fine (bench/perf/linear_solvers.py: factor / (solve at 1e-12 / its))
+REFACTOR_ITERATIONS = 15
+
+
+def forcing_term(rel_r: float, settings: NewtonSettings) -> float:
+    """Relative tolerance of the linear solve of a Newton correction at relative residual ``rel_r``."""
+    final = settings.rtol_force * settings.linear_rtol
+    return min(ETA_MAX, max(ETA_MIN, FORCING * rel_r, FORCING * final / max(rel_r, 1e-300)))
+
+
+_SHARED: "weakref.WeakKeyDictionary[Discretisation, dict]" = weakref.WeakKeyDictionary()
+
+
+def _shared(disc: Discretisation, key, make):
+    """Per-discretisation cache (fused assembler, linear solvers with their symbolic analysis)."""
+    d = _SHARED.setdefault(disc, {})
+    if key not in d:
+        d[key] = make()
+    return d[key]
+
+
+def _perm_position(bc: BoundaryConditions) -> np.ndarray:
+    pos = np.full(bc.disc.pattern.n_dofs, -1)
+    pos[bc.free] = np.arange(len(bc.free))
+    return pos[bc.elimination_order]
+
+
+def _free_block_slot(bc: BoundaryConditions):
+    """Slot map of element entries into the free-free block in elimination order (-1: constrained
+    row or column) and that block's CSC structure, as :meth:`BoundaryConditions.free_block` has it."""
+    take, indices, indptr, _ = bc._free_block
+    position = np.full(len(bc.disc.pattern.indices), -1, dtype=np.int64)
+    position[take] = np.arange(len(take))
+    return position[bc.disc.pattern.slot], indices, indptr
 
 
 class _Newton:
-    """Newton iterations of one load increment; keeps counters and timings across increments."""
+    """Newton iterations of one load increment; keeps counters and timings across increments.
+
+    ``timing``: assembly_s (tangent into the free-free block, predictor right-hand side, internal
+    force, strain), material_s, factor_s (factorisations of the linear solver), solve_s (Krylov
+    iterations or triangular solves), all wall seconds; factorisations and krylov_iterations are
+    counts.
+    """
 
     def __init__(self, disc: Discretisation, material: Material, bc: BoundaryConditions, settings: NewtonSettings):
         self.disc, self.material, self.bc, self.settings = disc, material, bc, settings
         self.iterations = 0
-        self.timing = {"assembly_s": 0.0, "material_s": 0.0, "solve_s": 0.0}
+        self.timing = {"assembly_s": 0.0, "material_s": 0.0, "factor_s": 0.0, "solve_s": 0.0,
+                       "factorisations": 0, "krylov_iterations": 0}
         self.residual_history: list[list[float]] = []
-        pos = np.full(disc.pattern.n_dofs, -1)
-        pos[bc.free] = np.arange(len(bc.free))
-        self._free_position = pos                  # global dof -> index in bc.free
+        # elimination order -> index in bc.free (cached: the ordering is computed once per mesh and plates)
+        self._perm_position = _shared(disc, ("perm position", bc.plates), lambda: _perm_position(bc))
+        self.linear: LinearSolver = _shared(disc, ("linear", bc.plates, settings.linear_solver),
+                                            lambda: make_linear_solver(settings.linear_solver))
+        self._fused = (_shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
+                       if settings.assembly == "fused" else None)
+        self._free_slot = (_shared(disc, ("free slot", bc.plates), lambda: _free_block_slot(bc))
+                           if self._fused is not None else None)
+        self._factor: Factor | None = None         # the current factorisation / preconditioner
+        self._factor_D = None                      # the material tangent it was formed from
+        self._fresh_rate = None                    # Krylov iterations per decade right after it
+        self._excess = 0.0                         # Krylov iterations its ageing has added since
+
+    def _virgin_tangent(self):
+        n = self.disc.n_points
+        return self.material.update(np.zeros((n, 6)), np.zeros((n, 6)), self.material.initial_state(n)).tangent
 
     def _tangent(self, D):
+        """Global tangent K (CSR, N/mm) for the material tangents D (n_points, 6, 6) MPa (None: virgin)."""
         t = time.perf_counter()
         if D is None:  # virgin state: the material's response to a zero increment
-            n = self.disc.n_points
-            D = self.material.update(np.zeros((n, 6)), np.zeros((n, 6)), self.material.initial_state(n)).tangent
-        ne = self.disc.mesh.n_elements
-        K = self.disc.pattern.matrix(element_matrices(self.disc.B, np.broadcast_to(D, (self.disc.n_points, 6, 6)).reshape(ne, 8, 6, 6), self.disc.dV))
+            D = self._virgin_tangent()
+        if self._fused is not None:
+            K = self._fused.matrix(D)
+        else:
+            ne = self.disc.mesh.n_elements
+            K = self.disc.pattern.matrix(element_matrices(self.disc.B, np.broadcast_to(D, (self.disc.n_points, 6, 6)).reshape(ne, 8, 6, 6), self.disc.dV))
         self.timing["assembly_s"] += time.perf_counter() - t
         return K
 
-    def _solve(self, K, rhs_free):
-        """Solve K_ff du = rhs for the free dofs (rhs and du in ``bc.free`` order)."""
+    def _tangent_free(self, D):
+        """The free-free block of the tangent K(D), permuted to the elimination order (CSC, N/mm).
+
+        Fused assembly writes it directly (no full matrix); numpy assembly extracts it from K.
+        """
+        if self._fused is None:
+            K = self._tangent(D)
+            t = time.perf_counter()
+            Kff = self.bc.free_block(K)
+            self.timing["assembly_s"] += time.perf_counter() - t
+            return Kff
         t = time.perf_counter()
-        perm = self.bc.elimination_order
+        if D is None:
+            D = self._virgin_tangent()
+        slot, indices, indptr = self._free_slot
+        n = len(indptr) - 1
+        Kff = sp.csc_matrix((self._fused.tangent(D, slot, len(indices)), indices, indptr), shape=(n, n))
+        self.timing["assembly_s"] += time.perf_counter() - t
+        return Kff
+
+    def _predictor(self, D, du):
+        """K_ff(D) and -(K(D) du) on the free dofs, N, for an increment du that is non-zero on
+        prescribed dofs only (fused: element by element, without the constrained columns of K)."""
+        if self._fused is None:
+            K = self._tangent(D)
+            t = time.perf_counter()
+            Kff, rhs = self.bc.free_block(K), -(K @ du)[self.bc.free]
+            self.timing["assembly_s"] += time.perf_counter() - t
+            return Kff, rhs
+        Kff = self._tangent_free(D)
+        t = time.perf_counter()
+        eps = self._fused.strain(du)
+        sig = np.einsum("pij,pj->pi", D, eps) if np.ndim(D) == 3 else eps @ np.asarray(D).T
+        rhs = -self._fused.internal_force(sig)[self.bc.free]
+        self.timing["assembly_s"] += time.perf_counter() - t
+        return Kff, rhs
+
+    def _strain(self, du):
+        if self._fused is not None:
+            return self._fused.strain(du)
+        return np.einsum("egia,ea->egi", self.disc.B, du[self.disc.pattern.edofs]).reshape(-1, 6)
+
+    def _internal_force(self, stress):
+        if self._fused is not None:
+            return self._fused.internal_force(stress)
+        ne = self.disc.mesh.n_elements
+        return self.disc.pattern.vector(element_forces(self.disc.B, stress.reshape(ne, 8, 6), self.disc.dV))
+
+    def _factorise(self, Kff, D) -> Factor:
+        t = time.perf_counter()
+        factor = self.linear.factorise(Kff)
+        self.timing["factor_s"] += time.perf_counter() - t
+        self.timing["factorisations"] += 1
+        self._factor, self._factor_D = factor, D
+        self._fresh_rate, self._excess = None, 0.0
+        return factor
+
+    def _solve(self, Kff, rhs_free, D, rtol):
+        """Solve K_ff du = rhs for the free dofs (rhs and du in ``bc.free`` order), K_ff the free
+        block of K(D) in elimination order (:meth:`_tangent_free`).
+
+        Reuses the current factorisation as a preconditioner while the Krylov iterations its
+        ageing has added (beyond the iterations per decade of tolerance of its first solve) stay
+        below REFACTOR_ITERATIONS, about what a numeric factorisation costs in iterations; else
+        (and always for direct solvers) factorises K_ff. Counting iterations, not seconds, keeps
+        runs reproducible. ``rtol`` is the relative residual asked of a Krylov solve. Returns the
+        correction and "" or NaNs and the reason (singular tangent).
+        """
         du = np.empty_like(rhs_free)
         try:
-            # The ordering is already fill-reducing: keep it (NATURAL) and pivot on the diagonal.
-            lu = spla.splu(self.bc.free_block(K), permc_spec="NATURAL", diag_pivot_thresh=0.0,
-                           options={"SymmetricMode": True})
-            du[self._free_position[perm]] = lu.solve(rhs_free[self._free_position[perm]])
+            factor = None
+            if self._factor is not None and self._excess <= REFACTOR_ITERATIONS:
+                factor = self._factor.for_matrix(Kff)
+            if factor is None:
+                factor = self._factorise(Kff, D)
+            else:
+                self._factor, self._factor_D = factor, D
+            t = time.perf_counter()
+            du[self._perm_position] = factor.solve(rhs_free[self._perm_position], rtol)
+            self.timing["solve_s"] += time.perf_counter() - t
+            its = factor.krylov_iterations
+            self.timing["krylov_iterations"] += its
+            if its:  # bookkeeping of the preconditioner's ageing (iterations per decade of rtol)
+                decades = max(-math.log10(max(rtol, 1e-16)), 1.0)
+                if self._fresh_rate is None:
+                    self._fresh_rate = its / decades
+                else:
+                    self._excess += max(its - self._fresh_rate * decades, 0.0)
             why = ""
-        except RuntimeError as exc:  # exactly singular tangent
+        except SingularMatrixError as exc:  # exactly singular tangent
             du[:], why = np.nan, f"singular tangent ({exc})"
-        self.timing["solve_s"] += time.perf_counter() - t
+            self._factor = None
         return du, why
 
+    def converged_factor(self, inc: _Increment, exact: bool = False) -> Factor:
+        """A factor that solves with the free block of the tangent at the converged state of ``inc``
+        (elimination order), for sensitivity solves: ``inc.factor`` if it was formed there, else that
+        factor as the preconditioner of the converged tangent or, for direct solvers, a new
+        factorisation. ``exact=True`` insists on a direct factorisation (SuperLU unless the kept
+        one is exact): cheaper than GMRES for 6-7 right-hand sides at tight tolerances
+        (bench/perf/linear_solvers.py, column "7 rhs")."""
+        if inc.factor is not None and inc.factor_at_converged and (inc.factor.exact or not exact):
+            return inc.factor
+        Kff = self._tangent_free(inc.tangent)
+        if exact:
+            t = time.perf_counter()
+            f = superlu_factor(Kff)
+            self.timing["factor_s"] += time.perf_counter() - t
+            self.timing["factorisations"] += 1
+            return f
+        if inc.factor is not None:
+            f = inc.factor.for_matrix(Kff)
+            if f is not None:
+                return f
+        return self._factorise(Kff, inc.tangent)
+
+    def _converged(self, **kw) -> _Increment:
+        D = kw["tangent"]
+        at = self._factor is not None and self._factor_D is not None and (
+            self._factor_D is D or (np.shape(self._factor_D) == np.shape(D) and np.array_equal(self._factor_D, D)))
+        return _Increment(True, factor=self._factor, factor_at_converged=bool(at), **kw)
+
     def increment(self, u_n, stress_n, state_n, D_n, dtop_mm) -> _Increment:
-        s, bc, disc = self.settings, self.bc, self.disc
-        ne = disc.mesh.n_elements
-        edofs = disc.pattern.edofs
+        s, bc = self.settings, self.bc
         du = np.zeros_like(u_n)
         du[bc.top_z] = dtop_mm
         # Predictor: linearise about the converged state, so the prescribed jump is spread
         # over the body instead of being concentrated in the boundary layer of elements.
-        K = self._tangent(D_n)
-        rhs = -(K @ du)
-        corr, why = self._solve(K, rhs[bc.free])
+        if D_n is None:
+            D_n = self._virgin_tangent()
+        Kff, rhs = self._predictor(D_n, du)
+        corr, why = self._solve(Kff, rhs, D_n, ETA_PREDICTOR)
         self.iterations += 1
         if why:
             return _Increment(False, why)
@@ -388,13 +593,15 @@ class _Newton:
         norms = []
         for it in range(s.max_iterations):
             t = time.perf_counter()
-            deps = np.einsum("egia,ea->egi", disc.B, du[edofs]).reshape(-1, 6)
+            deps = self._strain(du)
+            self.timing["assembly_s"] += time.perf_counter() - t
+            t = time.perf_counter()
             upd = self.material.update(deps, stress_n, state_n)
             self.timing["material_s"] += time.perf_counter() - t
             if not np.all(upd.ok):
                 return _Increment(False, f"material return mapping failed at {np.count_nonzero(~upd.ok)} points")
             t = time.perf_counter()
-            f_int = disc.pattern.vector(element_forces(disc.B, upd.stress.reshape(ne, 8, 6), disc.dV))
+            f_int = self._internal_force(upd.stress)
             self.timing["assembly_s"] += time.perf_counter() - t
             r_free = f_int[bc.free]
             scale = max(np.linalg.norm(f_int[bc.fixed]), 1e-30)
@@ -405,11 +612,10 @@ class _Newton:
                 return _Increment(False, "residual is not finite")
             if rel_r <= s.rtol_force * (1.0 if rel_u <= s.rtol_displacement else s.linear_rtol):
                 self.residual_history.append(norms)
-                return _Increment(True, u=u_n + du, stress=upd.stress, state=upd.state, tangent=upd.tangent, f_int=f_int)
+                return self._converged(u=u_n + du, stress=upd.stress, state=upd.state, tangent=upd.tangent, f_int=f_int)
             if it >= 3 and rel_r > 1e3 * norms[0]:
                 return _Increment(False, f"Newton diverged (relative residual {rel_r:.3g})")
-            K = self._tangent(upd.tangent)
-            corr, why = self._solve(K, -r_free)
+            corr, why = self._solve(self._tangent_free(upd.tangent), -r_free, upd.tangent, forcing_term(rel_r, s))
             self.iterations += 1
             if why or not np.all(np.isfinite(corr)):
                 return _Increment(False, why or "non-finite correction")
