@@ -8,6 +8,6 @@ Importing the package registers every adapter in :data:`METHODS`.
 from solvers.base import METHODS, MethodInfo, Outcome, Run, find_method, get_method, register, solve
 from solvers.result import RunResult
 
-from solvers import scipy_, gauss_newton, pymoo_, pyswarms_, nlopt_, emcee_, hybrid  # noqa: E402,F401  (registration)
+from solvers import scipy_, gauss_newton, pymoo_, pyswarms_, nlopt_, emcee_, hybrid, cma_, bo_, nevergrad_  # noqa: E402,F401  (registration)
 
 __all__ = ["solve", "METHODS", "RunResult", "MethodInfo", "Outcome", "Run", "get_method", "find_method", "register"]
