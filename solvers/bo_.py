@@ -23,14 +23,19 @@ process fitted to *all* points evaluated so far.
   finite value that keeps the GP well scaled while steering away from the failing region.
 * A suggestion that repeats an evaluated point (a free cache hit, which would not advance the
   run) is replaced by a seeded uniform point in the box.
-* The surrogate's refit and the acquisition search cost O(k^3) in the number k of points, about
-  0.1-0.3 s per iteration at k ~ 100 on one core: the run stops after ``max_evals`` evaluations
-  (status ``max_iterations``) even if the budget is larger. The GP runs with BLAS limited to one
-  thread (tiny matrices: threads only contend, 3x slower on two busy cores).
+* The GP hyperparameters are re-optimised every ``refit_every`` iterations and kept in between
+  (a refit with fixed hyperparameters is one Cholesky factorisation); the acquisition search scores
+  ``n_points`` random points and polishes the ``n_restarts`` best with L-BFGS-B.
+* The surrogate costs O(k^3) in the number k of points (the acquisition search O(k^2) per
+  prediction), about 0.1-0.5 s per iteration up to k ~ 100 on one core: the run stops after
+  ``max_evals`` evaluations (status ``max_iterations``) even if the budget is larger. The GP runs
+  with BLAS limited to one thread (tiny matrices: threads only contend, 3x slower on two busy cores).
 
 Seeding: the design from the run's seed, and every scikit-optimize ``Optimizer`` (a fresh one per
 iteration, fitted on all points, so that failure substitutes can follow the worst cost) gets a
-``random_state`` drawn from a seeded generator.
+``random_state`` drawn from a seeded generator; the GP and acquisition steps run inside
+:func:`~solvers.base.isolated_global_rng` (scikit-learn/scikit-optimize draw from NumPy's global
+generator in places: without it, equal seeds gave different points).
 """
 from __future__ import annotations
 
@@ -51,8 +56,9 @@ BO_OPTIONS = {
     "failure_penalty": (1.0, "failed points: worst transformed cost so far + failure_penalty"),
     "acq_optimizer": ("lbfgs", "acquisition search: lbfgs (random points + L-BFGS-B polish) | sampling"),
     "n_points": (2000, "random points scored per acquisition search"),
-    "n_restarts": (5, "L-BFGS-B starts of the acquisition search (lbfgs; at least 1)"),
+    "n_restarts": (2, "L-BFGS-B starts of the acquisition search (lbfgs; at least 1)"),
     "gp_restarts": (1, "random restarts of the GP hyperparameter (marginal likelihood) fit"),
+    "refit_every": (5, "fit the GP hyperparameters at every refit_every-th iteration; in between keep them"),
     "noise": ("gaussian", "GP noise: gaussian (a learned white-noise level) | a fixed variance (of the normalised target)"),
     "max_evals": (200, "stop after this many evaluations (the GP costs O(k^3)); None: the budget"),
 }
@@ -100,10 +106,13 @@ def run_bo(r: Run) -> Outcome:
         r.record(Z[j], c[j], n_points=len(C))
 
     evaluate(U0)
-    iterations = 0
+    iterations, hyper = 0, None
     while obj.n_evals < cap:
         seed = int(rng.integers(2**31 - 1))
-        u = np.clip(_suggest(np.array(U), np.array(C), np.array(ok), o, how, scale, seed), 0.0, 1.0)
+        if iterations % max(1, int(o["refit_every"])) == 0:
+            hyper = None  # fit the hyperparameters afresh
+        u, hyper = _suggest(np.array(U), np.array(C), np.array(ok), o, how, scale, seed, hyper)
+        u = np.clip(u, 0.0, 1.0)
         if _is_cached(obj, np.clip(r.lower + u * width, r.lower, r.upper)):
             u = rng.uniform(0.0, 1.0, n)  # a repeat would be a free cache hit: explore instead
         before = obj.n_evals
@@ -122,8 +131,13 @@ def _is_cached(obj, z) -> bool:
     return any(np.array_equal(x, e["x"]) for e in obj.log)
 
 
-def _suggest(U: np.ndarray, C: np.ndarray, ok: np.ndarray, o: dict, how: str, scale, seed: int) -> np.ndarray:
-    """Next point (unit box) from a GP fitted to all points ``U`` with costs ``C`` (``ok``: usable)."""
+def _suggest(U: np.ndarray, C: np.ndarray, ok: np.ndarray, o: dict, how: str, scale, seed: int, hyper=None):
+    """Next point (unit box) from a GP fitted to all points ``U`` with costs ``C`` (``ok``: usable).
+
+    ``hyper``: ``(kernel, noise)`` of an earlier fit to keep (no hyperparameter optimisation), or
+    ``None`` to fit them. Returns the point and the ``hyper`` of this GP.
+    """
+    from sklearn.gaussian_process.kernels import Sum, WhiteKernel
     from skopt import Optimizer
     from threadpoolctl import threadpool_limits
 
@@ -137,20 +151,30 @@ def _suggest(U: np.ndarray, C: np.ndarray, ok: np.ndarray, o: dict, how: str, sc
         y[:] = 0.0
     acq_kwargs = {"xi": float(o["xi"]), "kappa": float(o["kappa"])}
     opt_kwargs = {"n_points": int(o["n_points"]), "n_restarts_optimizer": max(1, int(o["n_restarts"])), "n_jobs": 1}
-    gp = _gp(U.shape[1], o["noise"], int(o["gp_restarts"]))
+    gp = _gp(U.shape[1], o["noise"], int(o["gp_restarts"]), hyper)
     with threadpool_limits(1), isolated_global_rng(seed), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # sklearn's GP convergence warnings, skopt's repeat warnings
         opt = Optimizer([(0.0, 1.0)] * U.shape[1], base_estimator=gp, n_initial_points=0,
                         acq_func=str(o["acq_func"]), acq_optimizer=str(o["acq_optimizer"]),
                         acq_func_kwargs=acq_kwargs, acq_optimizer_kwargs=opt_kwargs, random_state=seed)
         opt.tell([list(map(float, u)) for u in U], [float(v) for v in y])
-        return np.asarray(opt.ask(), dtype=float)
+        model = opt.models[-1]
+        kernel = model.kernel_
+        if isinstance(kernel, Sum) and isinstance(kernel.k2, WhiteKernel):
+            kernel = kernel.k1  # skopt adds the noise term at every fit (and zeroes it for predictions)
+        return np.asarray(opt.ask(), dtype=float), (kernel, model.noise_)
 
 
-def _gp(n: int, noise, restarts: int):
-    """scikit-optimize's default GP for ``n`` continuous parameters (noise model and restarts as given)."""
+def _gp(n: int, noise, restarts: int, hyper=None):
+    """scikit-optimize's default GP for ``n`` continuous parameters (noise model and restarts as given);
+    with ``hyper = (kernel, noise level)``, a GP with these hyperparameters kept fixed."""
     from skopt.learning import GaussianProcessRegressor
     from skopt.learning.gaussian_process.kernels import ConstantKernel, Matern
+
+    if hyper is not None:
+        kernel, level = hyper
+        return GaussianProcessRegressor(kernel=kernel, normalize_y=True, optimizer=None,
+                                        noise=float(level) if level else None)
 
     kernel = ConstantKernel(1.0, (0.01, 1000.0)) * Matern(length_scale=np.ones(n), length_scale_bounds=[(0.01, 100)] * n,
                                                           nu=2.5)
