@@ -10,9 +10,30 @@ import sys
 import bench.commands
 
 
+class UsageError(ValueError):
+    """A command line argparse rejected (unknown option, bad value); ``prog`` is the (sub-)command."""
+
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog = prog
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line (no usage block): ``femubench CMD: error: ...``."""
+
+    def error(self, message):
+        raise UsageError(self.prog, message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """Return the top-level parser with one sub-parser per module of :mod:`bench.commands`."""
-    parser = argparse.ArgumentParser(
+    """Return the top-level parser with one sub-parser per module of :mod:`bench.commands`.
+
+    Every sub-parser goes through :func:`bench.commands._args.harden`: options declared with a bare
+    ``int``/``float`` or none get checked types (finite numbers, seeds >= 0, counts >= 1, mesh specs).
+    """
+    from bench.commands._args import harden
+
+    parser = Parser(
         prog="femubench",
         description="Benchmark local and global optimizers on the identification of "
         "extended Drucker-Prager parameters of concrete from a cube compression test.",
@@ -25,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         p = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
+        harden(p)
         p.set_defaults(_main=module.main)
     return parser
 
@@ -42,9 +64,11 @@ def package_version() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code.
 
-    Bad input (ValueError, or an OSError such as a missing file or an output path that is a
-    directory) gives a one-line message and exit code 2; a closed output pipe (``femubench ... |
-    head``) ends the program quietly with exit code 141; Ctrl-C with 130.
+    Bad input (a rejected option, a ValueError, or an OSError such as a missing file or an output
+    path that is a directory) gives a one-line message and exit code 2; a closed output pipe
+    (``femubench ... | head``) ends the program quietly with exit code 141; Ctrl-C with 130. Any
+    other exception (a bug, or a library error no check foresaw) is one line too, with exit code 1;
+    ``FEMUBENCH_DEBUG=1`` shows its traceback instead.
     """
     try:
         try:
@@ -62,17 +86,36 @@ def main(argv: list[str] | None = None) -> int:
 def run(argv: list[str] | None = None) -> int:
     """Parse ``argv`` and run the sub-command; bad input becomes a message and exit code 2."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as exc:
+        hint = f" (see '{exc.prog} --help')" if exc.prog != "femubench" else " (see 'femubench --help')"
+        print(f"{exc.prog}: error: {one_line(exc)}{hint}", file=sys.stderr)
+        return 2
     if not getattr(args, "_main", None):
         parser.print_help()
         return 0
     try:
         return int(args._main(args) or 0)
-    except BrokenPipeError:
+    except (BrokenPipeError, KeyboardInterrupt):
         raise
     except (ValueError, OSError) as exc:  # bad input: a clear message, no traceback
-        print(f"femubench {args.command}: error: {exc}", file=sys.stderr)
+        print(f"femubench {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except Exception as exc:  # noqa: BLE001 - the last resort: never a raw library traceback
+        if os.environ.get("FEMUBENCH_DEBUG"):
+            raise
+        print(f"femubench {args.command}: internal error: {type(exc).__name__}: {one_line(exc)} "
+              "(set FEMUBENCH_DEBUG=1 for the traceback)", file=sys.stderr)
+        return 1
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (an OSError without text: its class and file name)."""
+    text = " ".join(str(exc).split())
+    if not text:
+        text = type(exc).__name__
+    return text
 
 
 def silence_stdout() -> None:

@@ -200,11 +200,59 @@ class Run:
         return out
 
 
+#: options that count something (population, walkers, iterations, evaluations): whole numbers >= 1
+COUNT_OPTIONS = frozenset({
+    "pop_size", "popsize", "n_particles", "n_starts", "n_walkers", "n_steps", "n_initial", "n_points", "n_restarts",
+    "num_workers", "max_generations", "max_iterations", "maxiter", "maxeval", "max_nfev", "max_backtracks",
+    "max_evals", "ftol_iter"})
+#: options that are probabilities or fractions: numbers in [0, 1]
+FRACTION_OPTIONS = frozenset({"crossover_prob", "mutation_prob", "CR", "burn_fraction", "global_fraction"})
+
+
+def option_value_error(name: str, value: Any, default: Any, description: str = "") -> str | None:
+    """Why ``value`` is not a valid value of the option ``name`` (default ``default``), or None.
+
+    The default's type is the option's type: a bool takes a bool; a number takes a number (an
+    integer default a whole number), finite unless the default is not, or a string quoted in the
+    description (``x_scale``: ``'jac'``); counts (:data:`COUNT_OPTIONS`) are >= 1, fractions
+    (:data:`FRACTION_OPTIONS`) in [0, 1]. A None default takes anything (the method checks).
+    """
+    if value is None:
+        return None if default is None else f"{value!r} is not allowed (default {default!r})"
+    if isinstance(default, bool):
+        return None if isinstance(value, bool) else f"{value!r} is not true/false"
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    if isinstance(default, (int, float)) or (default is None and number):
+        if isinstance(value, str):
+            if f"'{value}'" in description:
+                return None
+            return f"{value!r} is not a number"
+        if not number:
+            return f"{value!r} is not a number"
+        if not math.isfinite(float(value)) and (default is None or math.isfinite(float(default))):
+            return f"{value!r} is not a finite number"
+        if isinstance(default, int) and float(value) != int(value):
+            return f"{value!r} is not a whole number"
+        if name in COUNT_OPTIONS and (float(value) != int(value) or value < 1):
+            return f"{value!r} is out of range: a whole number >= 1"
+        if name in FRACTION_OPTIONS and not 0 <= value <= 1:
+            return f"{value!r} is out of range: must be in [0, 1]"
+        return None
+    return None  # a string default (the method checks the name; bo's noise also takes a number)
+
+
 def resolve_options(info: MethodInfo, options: dict[str, Any], strict: bool = True) -> dict[str, Any]:
-    """Defaults overridden by ``options``; unknown names raise ``ValueError`` (or are dropped)."""
+    """Defaults overridden by ``options``; unknown names and impossible values (see
+    :func:`option_value_error`) raise ``ValueError`` (unknown names are dropped when not ``strict``)."""
     unknown = set(options) - set(info.options)
     if unknown and strict:
         raise ValueError(f"{info.name}: unknown option(s) {sorted(unknown)}; allowed: {sorted(info.options)}")
+    if strict:
+        for k, v in options.items():
+            default, text = info.options[k]
+            why = option_value_error(k, v, default, text)
+            if why:
+                raise ValueError(f"{info.name}: option {k} = {why} (default {default!r}: {text})")
     out = {k: d for k, (d, _) in info.options.items()}
     out.update({k: v for k, v in options.items() if k in info.options})
     return out

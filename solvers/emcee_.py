@@ -157,6 +157,8 @@ def run_mcmc(r: Run) -> Outcome:
     n = r.lower.size
     nw = int(o["n_walkers"] or max(16, 4 * n))
     nw += nw % 2
+    if nw < 2 * n:  # emcee's ensemble moves need it
+        raise ValueError(f"mcmc: n_walkers = {o['n_walkers']} is out of range: at least twice the {n} parameters ({2 * n})")
     p0 = initial_ensemble(r, nw)
     if obj.remaining < nw:
         return Outcome("budget", f"budget below the {nw} evaluations of the initial ensemble", 0)

@@ -200,10 +200,12 @@ def test_cli_writes_csv(tmp_path, images, capsys):
               "--roi", "10,10,118,118", "--csv", str(out), "--no-progress"])
     assert rc == 0
     lines = out.read_text().splitlines()
-    assert lines[0] == "x,y,u,v,zncc,converged"
+    assert lines[0] == "x_px,y_px,u_px,v_px,std_u_px,std_v_px,zncc,converged"  # units in the header
     rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
     assert len(rows) == len(grid_points(ref.shape, 21, 10, (10, 10, 118, 118)))
-    assert rows[:, 5].all() and np.allclose(rows[:, 2], 0.4, atol=0.03) and np.allclose(rows[:, 3], -0.3, atol=0.03)
+    assert rows[:, 7].all() and np.allclose(rows[:, 2], 0.4, atol=0.03) and np.allclose(rows[:, 3], -0.3, atol=0.03)
+    # the per-point standard deviations the correlator computes: positive, small against the 0.03 px check
+    assert np.all(rows[:, 4:6] > 0) and np.all(rows[:, 4:6] < 0.03)
     assert rows[:, 0].min() - 10 >= 10 and rows[:, 0].max() + 10 < 118
 
 

@@ -10,14 +10,17 @@ HELP = ("cross-check the linear Drucker-Prager form (K = 1) against OpenSees: on
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--out", metavar="DIR",
+    from bench.commands._args import add_mesh_argument, comma_list, float_in, output_dir, positive_int
+
+    p.add_argument("--out", metavar="DIR", type=output_dir,
                    help="output folder for opensees_dp.json and the PNGs (default results/crosscheck in the results "
                         "root, see docs/crosscheck_opensees.md)")
-    p.add_argument("--mesh", default="coarse", help="cube mesh: coarse | paper | NX,NY,NZ (default: coarse)")
+    add_mesh_argument(p, "coarse", help="cube mesh: coarse | paper | NX,NY,NZ (default: coarse)")
     p.add_argument("--skip-cube", action="store_true", help="only the single element (and the tangent audit)")
-    p.add_argument("--psi", default="35,15", help="dilatancy angles to run, degrees (<= beta = 35; default 35,15)")
-    p.add_argument("--steps", type=int, default=10, help="cube load steps (snapshots; default 10)")
-    p.add_argument("--element-steps", type=int, default=60, help="single-element load steps (default 60)")
+    p.add_argument("--psi", default="35,15", type=comma_list(float_in(0.0, 35.0, unit="degrees"), what="angle"),
+                   help="dilatancy angles to run, degrees (0 <= psi <= beta = 35; default 35,15)")
+    p.add_argument("--steps", type=positive_int, default=10, help="cube load steps (snapshots; default 10)")
+    p.add_argument("--element-steps", type=positive_int, default=60, help="single-element load steps (default 60)")
     p.add_argument("--all-strategies", action="store_true",
                    help="run every OpenSees solution strategy on the cube, not only until one converges")
     figures = p.add_mutually_exclusive_group()
@@ -41,14 +44,7 @@ def main(args) -> int:
         for path in render_crosscheck(out):
             print(f"wrote {path}")
         return 0
-    try:
-        psis = tuple(float(s) for s in args.psi.split(",") if s.strip())
-    except ValueError:
-        raise ValueError(f"--psi {args.psi!r} is malformed: comma-separated angles in degrees, e.g. 35,15") from None
-    if not psis:
-        raise ValueError("--psi: no angle given")
-    if args.steps < 1 or args.element_steps < 1:
-        raise ValueError(f"--steps {args.steps} / --element-steps {args.element_steps}: must be >= 1")
+    psis = tuple(args.psi)  # checked by the argument type: degrees in [0, 35]
     from bench.crosscheck.report import print_report
     from bench.crosscheck.study import run_crosscheck
 

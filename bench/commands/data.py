@@ -14,17 +14,22 @@ HELP = ("Compute a pseudo-experimental data set of a case: the reference respons
 
 
 def add_arguments(p) -> None:
+    from bench.commands._args import add_quiet_argument, mesh_spec, nonneg_float, nonneg_int
+
     p.add_argument("case", help="case name, or 'all' for the nine cases")
     p.add_argument("--tier", choices=["model-error", "consistent"], default="model-error",
                    help="model-error: made on a discretisation finer than any model of the inverse loop; "
                         "consistent: made with the inverse model's own mesh (default model-error)")
-    p.add_argument("--mesh", default=None,
+    p.add_argument("--mesh", default=None, type=mesh_spec,
                    help="data mesh (default: xfine for the model-error tier; for the consistent tier the "
                         "inverse model's mesh, default coarse)")
-    p.add_argument("--resolution-um", type=float, default=1.0, help="displacement rounding, um (default 1.0)")
-    p.add_argument("--noise-um", type=float, default=0.0, help="Gaussian displacement noise std, um (default 0)")
-    p.add_argument("--force-resolution-kN", type=float, default=0.1, help="force rounding, kN (default 0.1)")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    p.add_argument("--resolution-um", type=nonneg_float, default=1.0,
+                   help="displacement rounding, um, >= 0 (default 1.0; 0: no rounding)")
+    p.add_argument("--noise-um", type=nonneg_float, default=0.0,
+                   help="Gaussian displacement noise std, um, >= 0 (default 0)")
+    p.add_argument("--force-resolution-kN", type=nonneg_float, default=0.1,
+                   help="force rounding, kN, >= 0 (default 0.1; 0: no rounding)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="noise seed, >= 0 (default 0)")
     p.add_argument("--route", choices=["fe", "dic"], default="fe",
                    help="fe: displacements from the FE field; dic: rendered speckle images correlated by DIC "
                         "(images in <data file stem>__dic_images/ next to the data file)")
@@ -34,6 +39,7 @@ def add_arguments(p) -> None:
     p.add_argument("--force", action="store_true", help="allow overwriting a shipped (default) data set")
     p.add_argument("--check", action="store_true",
                    help="recompute and compare byte for byte with the existing file (exit 1 on a difference)")
+    add_quiet_argument(p)
 
 
 def target_paths(names: list[str], settings, out: str | None, *, every: bool) -> dict:
@@ -51,6 +57,11 @@ def target_paths(names: list[str], settings, out: str | None, *, every: bool) ->
         if (out.exists() and not out.is_dir()) or out.suffix == ".json":
             raise ValueError(f"--out {out}: 'all' writes one file per case, so --out must be a directory")
         return {n: out / f"{n}.json" for n in names}
+    if out.exists() and not out.is_dir() and out.suffix != ".json":
+        raise ValueError(f"--out {out}: a data set is a .json file (or give a directory)")
+    parent = next((q for q in out.parents if q.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise ValueError(f"--out {out}: {parent} is a file, not a folder")
     return {n: out / f"{n}.json" if out.is_dir() else out for n in names}
 
 
@@ -71,6 +82,7 @@ def main(args) -> int:
     from tqdm import tqdm
 
     from bench.dic_figures import PANELS_FILE, render_subsets
+    from bench.progress import enabled, warn_if_long
     from problems.inverse.cases import CASES, get_case
     from problems.inverse.data import dic_image_dir, make_data, save, tier_settings
 
@@ -82,11 +94,13 @@ def main(args) -> int:
     paths = target_paths(names, settings, args.out, every=every)
     if not args.check:
         refuse_shipped(paths.values(), args.force)
+    warn_if_long(NAME, len(names), settings.mesh, what=f"{len(names)} data set(s)")
     status = 0
-    for name in tqdm(names, desc="data sets", disable=len(names) == 1):
+    show = enabled(args.quiet)
+    for name in tqdm(names, desc="data sets", disable=len(names) == 1 or not show):
         path = paths[name]
         images = None if args.check else dic_image_dir(path)
-        ds = make_data(name, replace(settings), progress=True, image_dir=images)
+        ds = make_data(name, replace(settings), progress=show, image_dir=images)
         text = ds.to_json()
         if args.check:
             same = path.exists() and path.read_text() == text

@@ -6,7 +6,8 @@ import argparse
 NAME = "dic"
 HELP = "Correlate deformed images against a reference image (subset DIC, IC-GN, ZNSSD)."
 
-COLUMNS = ("x", "y", "u", "v", "zncc", "converged")
+#: CSV columns; the suffix names the unit (px: pixels, x right, y down; zncc dimensionless; converged 0/1)
+COLUMNS = ("x_px", "y_px", "u_px", "v_px", "std_u_px", "std_v_px", "zncc", "converged")
 
 
 def _roi(text: str) -> tuple[int, int, int, int]:
@@ -19,25 +20,53 @@ def _roi(text: str) -> tuple[int, int, int, int]:
     return vals  # type: ignore[return-value]
 
 
+def _odd_subset(text: str) -> int:
+    from bench.commands._args import int_at_least
+
+    value = int_at_least(5)(text)
+    if value % 2 == 0:
+        raise argparse.ArgumentTypeError(f"{value} is even: the subset side must be an odd integer >= 5 px")
+    return value
+
+
+def _figure_file(text: str) -> str:
+    from pathlib import Path
+
+    from bench.commands._args import output_file
+
+    if Path(text).suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise argparse.ArgumentTypeError(f"{text!r}: the figure format is taken from the suffix; allowed: .png, .pdf, .svg")
+    return output_file(text)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("ref", metavar="REF", help="reference image (TIFF, PNG or BMP; 8 or 16 bit)")
-    parser.add_argument("deformed", metavar="DEF", nargs="+", help="deformed image(s), same size as REF")
-    parser.add_argument("--subset", type=int, default=21, help="subset side in px, odd (default 21)")
-    parser.add_argument("--step", type=int, default=10, help="grid step in px (default 10)")
+    from bench.commands._args import float_in, input_file, nonneg_int, output_file, positive_int
+
+    parser.add_argument("ref", metavar="REF", type=input_file, help="reference image (TIFF, PNG or BMP; 8 or 16 bit)")
+    parser.add_argument("deformed", metavar="DEF", nargs="+", type=input_file,
+                        help="deformed image(s), same size as REF")
+    parser.add_argument("--subset", type=_odd_subset, default=21, help="subset side in px, odd, >= 5 (default 21)")
+    parser.add_argument("--step", type=positive_int, default=10, help="grid step in px, >= 1 (default 10)")
     parser.add_argument(
         "--roi", type=_roi, default=None, metavar="X0,Y0,X1,Y1",
         help="region of interest in px, half-open (X0 <= x < X1); default: the whole image",
     )
     parser.add_argument(
-        "--csv", default=None, metavar="FILE",
-        help="write x, y, u, v, zncc, converged (px; x right, y down) to FILE; with several DEF "
-        "images one file per image, FILE's stem suffixed _1, _2, ...",
+        "--csv", default=None, metavar="FILE", type=output_file,
+        help="write one row per point: x_px, y_px (subset centre), u_px, v_px (displacement), std_u_px, "
+        "std_v_px (its standard deviation from the IC-GN covariance), zncc, converged (0/1); px, x right, "
+        "y down; NaN where not converged. With several DEF images one file per image, FILE's stem "
+        "suffixed _1, _2, ...",
     )
     parser.add_argument("--order", type=int, choices=(3, 5), default=3, help="B-spline order: 3 bicubic, 5 biquintic")
-    parser.add_argument("--zncc-min", type=float, default=0.9, help="flag points whose final ZNCC is lower (default 0.9)")
-    parser.add_argument("--search", type=int, default=32, help="integer search radius of the FFT seed guess, px")
-    parser.add_argument("--figure", default=None, metavar="PNG", help="subset figure (reference / warped / deformed) of the last image")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--zncc-min", type=float_in(-1.0, 1.0), default=0.9,
+                        help="flag points whose final ZNCC is lower, in [-1, 1] (default 0.9)")
+    parser.add_argument("--search", type=nonneg_int, default=32,
+                        help="integer search radius of the FFT seed guess, px (default 32; 0: no search)")
+    parser.add_argument("--figure", default=None, metavar="PNG", type=_figure_file,
+                        help="subset figure (reference / warped / deformed) of the last image (.png, .pdf or .svg)")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress bar (there is none either when stderr is not a terminal)")
 
 
 def _csv_paths(base: str, n: int) -> list:
@@ -50,20 +79,25 @@ def _csv_paths(base: str, n: int) -> list:
 
 
 def write_csv(path, result) -> None:
-    """One row per point: x, y, u, v (px), zncc, converged (0/1); NaN u, v where not converged."""
+    """One row per point (:data:`COLUMNS`): subset centre x, y (px), displacement u, v (px), their
+    standard deviations std_u, std_v (px; square roots of the IC-GN covariance diagonal), zncc and
+    converged (0/1); u, v and the standard deviations are NaN where not converged."""
     import numpy as np
 
-    data = np.column_stack([result.x, result.y, result.u, result.v, result.zncc, result.converged.astype(float)])
+    data = np.column_stack([result.x, result.y, result.u, result.v, result.std_u, result.std_v, result.zncc,
+                            result.converged.astype(float)])
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(",".join(COLUMNS) + "\n")
         for row in data:
-            fh.write(f"{row[0]:.0f},{row[1]:.0f},{row[2]:.6f},{row[3]:.6f},{row[4]:.6f},{int(row[5])}\n")
+            fh.write(f"{row[0]:.0f},{row[1]:.0f},{row[2]:.6f},{row[3]:.6f},{row[4]:.6g},{row[5]:.6g},"
+                     f"{row[6]:.6f},{int(row[7])}\n")
 
 
 def main(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
 
+    from bench.progress import enabled
     from problems.dic.correlate import Correlator, DICConfig, as_grey, check_not_blank, grid_points
     from problems.dic.imageio import read_image
 
@@ -88,7 +122,7 @@ def main(args: argparse.Namespace) -> int:
     prev = None
     res = None
     for path, img, out in tqdm(list(zip(args.deformed, images, outs)), desc="DIC", unit="img",
-                               disable=args.no_progress):
+                               disable=not enabled(args.no_progress)):
         res = corr.correlate(img, initial=prev)
         if np.any(res.converged):
             prev = res

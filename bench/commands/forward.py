@@ -6,33 +6,28 @@ HELP = "Run the FE model of the cube compression test once (elastic, or a case's
 
 
 def add_arguments(p) -> None:
+    from bench.commands._args import MESH_HELP, add_mesh_argument, output_dir, output_file, positive_float, positive_int
+
     p.add_argument("case", nargs="?", help="case name (see `femubench cases`); elastic material when absent")
-    p.add_argument("--mesh", default="coarse",
-                   help="coarse | paper | fine | NX,NY,NZ, optionally :eighth or :quarter (default: coarse)")
+    add_mesh_argument(p, "coarse", help=f"{MESH_HELP} (default: coarse)")
     p.add_argument("--symmetry", default=None, metavar="eighth|quarter",
                    help="model that is solved: the eighth (z <= 75 mm, mirrored; default where exact, i.e. "
                         "NZ even) or the whole-height quarter; same answers, the eighth at half the dofs")
     p.add_argument("--plates", default="friction", choices=["friction", "frictionless"])
-    p.add_argument("--displacement", type=float, default=1.5, metavar="MM", help="top-plate displacement, mm (default 1.5)")
-    p.add_argument("--snapshots", type=int, default=10, metavar="N", help="number of snapshots (default 10)")
+    p.add_argument("--displacement", type=positive_float, default=1.5, metavar="MM",
+                   help="top-plate displacement, mm, > 0 (default 1.5)")
+    p.add_argument("--snapshots", type=positive_int, default=10, metavar="N", help="number of snapshots, >= 1 (default 10)")
     p.add_argument("--param", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
                    help="material parameters (MPa, degrees); elastic: E, nu; a case: any of its parameters")
-    p.add_argument("--json", metavar="FILE", help="write the response as JSON")
-    p.add_argument("--vtu", metavar="DIR", help="write one VTU file per snapshot and a .pvd collection")
+    p.add_argument("--json", metavar="FILE", type=output_file, help="write the response as JSON")
+    p.add_argument("--vtu", metavar="DIR", type=output_dir, help="write one VTU file per snapshot and a .pvd collection")
 
 
 def parse_params(items: list[str]) -> dict[str, float]:
-    """``["E=3e4", "nu=0.2"]`` -> ``{"E": 30000.0, "nu": 0.2}``; malformed items raise ValueError."""
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            if not sep or not name:
-                raise ValueError
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise ValueError(f"--param {item!r} is malformed: expected NAME=VALUE with a number") from None
-    return out
+    """``["E=3e4", "nu=0.2"]`` -> ``{"E": 30000.0, "nu": 0.2}``; malformed or non-finite items raise ValueError."""
+    from bench.commands._args import assignments
+
+    return assignments(items, "--param")
 
 
 def main(args) -> int:
@@ -43,6 +38,8 @@ def main(args) -> int:
     from problems.fe.front_face import measurement_grid
     from problems.fe.mesh import SYMMETRIES, check_symmetry, parse_mesh_spec
 
+    from bench.progress import enabled, warn_if_long
+
     spec = parse_mesh_spec(args.mesh)
     if args.symmetry is not None:
         if args.symmetry not in SYMMETRIES:
@@ -52,11 +49,12 @@ def main(args) -> int:
         spec = type(spec)(spec.shape, check_symmetry(args.symmetry, spec.shape, "--symmetry"))
     material = material_from(args.case, parse_params(args.param))
     loading = Loading(args.displacement, args.snapshots, args.plates)
+    warn_if_long(NAME, 1, f"{','.join(map(str, spec.shape))}:{spec.symmetry}", what="this forward run")
     mesh = spec.mesh
     disc = discretise(mesh, symmetry=spec.symmetry)
     print(f"mesh {args.mesh}: {mesh.n_elements} elements, {mesh.n_dofs} dofs; solved as the {spec.symmetry} "
           f"({disc.mesh.n_elements} elements, {disc.mesh.n_dofs} dofs); material {material!r}")
-    response = run(disc, material, loading, progress=disc.mesh.n_elements > 1000)
+    response = run(disc, material, loading, progress=disc.mesh.n_elements > 1000 and enabled())
     print(f"{'snapshot':>8} {'top mm':>8} {'reaction kN':>12}")
     for k, (d, f) in enumerate(zip(response.snapshots_mm, response.reaction_kN), 1):
         print(f"{k:8d} {d:8.4f} {f:12.3f}")

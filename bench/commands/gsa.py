@@ -6,29 +6,41 @@ HELP = ("global sensitivity of the cost, peak force and lateral bulge over the p
         "total indices (Saltelli sampling) or Morris screening (SALib); prints the FE evaluations and wall time")
 
 
+def _box_scale(text: str):
+    """``auto`` or a number in (0, 1]."""
+    from bench.commands._args import ArgumentTypeError, float_in
+
+    if text == "auto":
+        return "auto"
+    try:
+        return float_in(0.0, 1.0, low_open=True)(text)
+    except ArgumentTypeError as exc:
+        raise ArgumentTypeError(f"{exc} (or auto)") from None
+
+
 def add_arguments(p) -> None:
+    from bench.commands._args import (
+        add_cluster_arguments, add_mesh_argument, add_quiet_argument, int_at_least, nonneg_int, output_dir, study_data,
+    )
     from bench.studies import DATA_HELP
 
     p.add_argument("case", metavar="CASE", help="case name (FE or analytic-*)")
     p.add_argument("--method", default="sobol", choices=["sobol", "morris"])
-    p.add_argument("--samples", type=int, default=None, metavar="N",
-                   help="Sobol: base samples N, N (d + 2) evaluations, a power of 2 (default 32); "
-                        "Morris: trajectories r, r (d + 1) evaluations (default 10)")
-    p.add_argument("--mesh", default="coarse", help="coarse | paper | fine | NX,NY,NZ (default: coarse)")
-    p.add_argument("--data", default="auto", help=DATA_HELP)
-    p.add_argument("--box-scale", default="auto", metavar="S",
+    p.add_argument("--samples", type=int_at_least(2), default=None, metavar="N",
+                   help="Sobol: base samples N, N (d + 2) evaluations, best a power of 2 (default 32; others are flagged); "
+                        "Morris: trajectories r >= 2, r (d + 1) evaluations (default 10)")
+    add_mesh_argument(p, "coarse")
+    p.add_argument("--data", default="auto", type=study_data, help=DATA_HELP)
+    p.add_argument("--box-scale", default="auto", metavar="S", type=_box_scale,
                    help="shrink the case's box about the reference by S in (0, 1]; auto (default): 1, or the largest "
                         "S whose sample points are all feasible")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", metavar="DIR",
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the sample, >= 0 (default 0)")
+    p.add_argument("--out", metavar="DIR", type=output_dir,
                    help="output directory (default results/studies/gsa/<case> in the results root, "
                         "see docs/sensitivity.md)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="local Dask worker processes (default: one per core); 1 runs in-process")
-    where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
+    add_cluster_arguments(p)
     p.add_argument("--dry-run", action="store_true", help="print the planned evaluations and the box, run nothing")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_argument(p)
     figures = p.add_mutually_exclusive_group()
     figures.add_argument("--no-figures", action="store_true", help="write CSV/markdown/JSON only")
     figures.add_argument("--render", action="store_true",
@@ -39,6 +51,7 @@ def main(args) -> int:
     import os
 
     from bench.parallel import mapper
+    from bench.progress import enabled, warn_if_long
     from bench.studies import existing_dir
     from bench.studies.global_sensitivity import render_gsa, run_gsa
     from problems.inverse.cases import get_case
@@ -48,25 +61,15 @@ def main(args) -> int:
         for path in render_gsa(existing_dir(NAME, case.name, args.out), (args.method,)):
             print(f"wrote {path}")
         return 0
-    samples = args.samples or (32 if args.method == "sobol" else 10)
-    if samples < 2:
-        raise ValueError(f"--samples {samples} is out of range: need at least 2")
-    if args.box_scale != "auto":
-        try:
-            scale = float(args.box_scale)
-        except ValueError:
-            raise ValueError(f"--box-scale {args.box_scale!r} is malformed: a number in (0, 1] or auto") from None
-        if not 0 < scale <= 1:
-            raise ValueError(f"--box-scale {scale} is out of range: 0 < S <= 1")
-    else:
-        scale = "auto"
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    samples = args.samples if args.samples is not None else (32 if args.method == "sobol" else 10)
+    scale = args.box_scale
     workers = 1 if case.is_analytic else (args.workers or os.cpu_count() or 1)
 
     def confirm(planned, box, s, n_bad):
         extra = f"; box scaled by {s:g} ({n_bad} sample points infeasible in the full box)" if s < 1 else ""
         print(f"{args.method} on {case.name} (mesh {args.mesh}): {planned} evaluations planned{extra}", flush=True)
+        if not case.is_analytic:
+            warn_if_long(NAME, planned, args.mesh, workers=workers, what=f"{args.method} with {samples} samples")
         if args.dry_run:
             for n, lo, hi in zip(case.names, *box):
                 print(f"  {n:>8} [{lo:.6g}, {hi:.6g}]")
@@ -74,7 +77,7 @@ def main(args) -> int:
 
     with mapper(1 if case.is_analytic else args.workers, args.scheduler) as m:
         res = run_gsa(case.name, method=args.method, samples=samples, mesh=args.mesh, data=args.data, box_scale=scale,
-                      seed=args.seed, mapper=m, workers=workers, out=args.out, progress=not args.quiet,
+                      seed=args.seed, mapper=m, workers=workers, out=args.out, progress=enabled(args.quiet),
                       confirm=confirm)
     if res is None:  # dry run
         return 0

@@ -7,22 +7,23 @@ HELP = ("Fisher information J^T J of the whitened residual, its eigenvalues and 
 
 
 def add_arguments(p) -> None:
+    from bench.commands._args import add_cluster_arguments, add_mesh_argument, float_in, output_dir, study_data
     from bench.studies import DATA_HELP
 
     p.add_argument("cases", nargs="+", metavar="CASE", help="case name(s) (FE or analytic-*), or all (the nine FE cases)")
-    p.add_argument("--mesh", default="coarse", help="coarse | paper | fine | NX,NY,NZ (default: coarse)")
-    p.add_argument("--data", default="auto", help=DATA_HELP)
+    add_mesh_argument(p, "coarse")
+    p.add_argument("--data", default="auto", type=study_data, help=DATA_HELP)
     p.add_argument("--x", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
                    help="evaluate at this point (physical units) instead of the reference, e.g. an identified one")
     p.add_argument("--scheme", default="forward", choices=["forward", "central"],
                    help="finite-difference scheme of the Jacobian (forward: n + 1 runs, central: 2 n + 1)")
-    p.add_argument("--rel-step", type=float, default=1e-6, help="finite-difference step in z = x / reference")
-    p.add_argument("--out", metavar="DIR",
+    p.add_argument("--rel-step", type=float_in(0.0, 0.1, low_open=True), default=1e-6,
+                   help="finite-difference step in z = x / reference, in (0, 0.1] (default 1e-6)")
+    p.add_argument("--out", metavar="DIR", type=output_dir,
                    help="output directory (default results/studies/identifiability/<case> in the results root, "
                         "see docs/sensitivity.md; with several cases DIR/<case>)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=1, metavar="N", help="Dask worker processes (default 1)")
-    where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
+    add_cluster_arguments(p, default_workers=1)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     figures = p.add_mutually_exclusive_group()
     figures.add_argument("--no-figures", action="store_true", help="write CSV/markdown/JSON only")
     figures.add_argument("--render", action="store_true",
@@ -32,8 +33,10 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     from pathlib import Path
 
+    from bench.commands._args import assignments
     from bench.parallel import mapper
-    from bench.studies import case_names, existing_dir, parse_assignments
+    from bench.progress import enabled, warn_if_long
+    from bench.studies import case_names, existing_dir
     from bench.studies.identifiability import render_identifiability, render_summary, run_identifiability
     from problems.inverse.cases import get_case
 
@@ -42,9 +45,7 @@ def main(args) -> int:
     if args.x:
         if len(cases) != 1:
             raise ValueError("--x needs exactly one case")
-        x = parse_assignments(args.x, get_case(cases[0]).names)
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+        x = assignments(args.x, "--x", get_case(cases[0]).names)
     if args.render:
         paths = []
         for name in cases:
@@ -55,9 +56,14 @@ def main(args) -> int:
         for path in paths:
             print(f"wrote {path}")
         return 0
+    fe = [c for c in cases if not get_case(c).is_analytic]
+    if fe:
+        per_case = {"forward": 1 + 6, "central": 1 + 12}[args.scheme]  # at most 6 parameters per case
+        warn_if_long(NAME, len(fe) * per_case, args.mesh, workers=args.workers, what=f"{len(fe)} FE case(s)")
     with mapper(args.workers, args.scheduler) as m:
         res = run_identifiability(cases, mesh=args.mesh, data=args.data, x=x, scheme=args.scheme,
-                                  rel_step=args.rel_step, mapper=m, out=args.out)
+                                  rel_step=args.rel_step, mapper=m, out=args.out,
+                                  progress=enabled(args.quiet) and len(cases) > 1)
     if not args.no_figures:
         for d in res.dirs.values():
             res.paths += render_identifiability(d)

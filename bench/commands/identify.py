@@ -27,6 +27,8 @@ def add_arguments(p) -> None:
     p.add_argument("--option", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
                    help="solver option (value parsed as JSON, else a string), e.g. --option scheme=central")
     p.add_argument("--json", metavar="FILE", help="write the RunResult plus errors_percent as JSON")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (evaluations, best cost, time left; never drawn when stderr is not a terminal)")
 
 
 def parse_options(items: list[str]) -> dict:
@@ -90,7 +92,13 @@ def main(args) -> int:
                           treatment=args.correction, hifi_mesh=args.hifi_mesh,
                           plate_margin_mm=args.plate_margin_mm, budget=args.budget, seed=args.seed,
                           start=args.start, options=parse_options(args.option))
-    result = identify(spec)
+    from bench.progress import EvaluationProgress, enabled, warn_if_long
+
+    if not case.is_analytic:
+        warn_if_long(NAME, args.budget, args.mesh, what=f"budget {args.budget}")
+    with EvaluationProgress(total=args.budget, desc=f"{case.name} {args.solver}",
+                            disable=not enabled(args.quiet)) as progress:
+        result = identify(spec, observers=[progress])
     print(format_identification(case, result))
     if args.json:
         Path(args.json).write_text(json.dumps(result_document(result), indent=1))

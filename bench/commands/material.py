@@ -10,6 +10,8 @@ _HARDENINGS = ("compression", "shear", "tension")
 
 
 def add_arguments(parser) -> None:
+    from bench.commands._args import output_file, positive_float, positive_int
+
     parser.add_argument("case", metavar="CASE",
                         help="a case name such as linear-compression, or a form (linear, hyperbolic, "
                              "exponent) together with --hardening")
@@ -18,29 +20,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--path", choices=_PATHS, default=None,
                         help="loading path (default: the hardening test's own path); shear prescribes "
                              "the engineering strain gamma_xy, hydrostatic is equal triaxial extension")
-    parser.add_argument("--strain", type=float, default=None, metavar="VALUE",
+    parser.add_argument("--strain", type=positive_float, default=None, metavar="VALUE",
                         help="final strain magnitude, > 0; the path sets the sign (default: 5 times "
                              "the elastic strain at first yield in the hardening test)")
-    parser.add_argument("--steps", type=int, default=50, metavar="N", help="number of equal steps (default 50)")
+    parser.add_argument("--steps", type=positive_int, default=50, metavar="N", help="number of equal steps, >= 1 (default 50)")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                         help="override a material parameter (repeatable); E, sigma0, H, pt0 in MPa, "
                              "beta, psi in degrees; defaults are the case's reference values")
-    parser.add_argument("--csv", metavar="FILE", default=None, help="also write the table as CSV")
+    parser.add_argument("--csv", metavar="FILE", default=None, type=output_file, help="also write the table as CSV")
 
 
 def parse_overrides(items) -> dict[str, float]:
-    """``["E=30000", "psi=10"]`` -> {"E": 30000.0, "psi": 10.0}; malformed items raise ValueError."""
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if not sep or not name:
-            raise ValueError(f"--param expects NAME=VALUE, got {item!r}")
-        try:
-            out[name] = float(value)
-        except ValueError:
-            raise ValueError(f"--param {name}: {value!r} is not a number") from None
-    return out
+    """``["E=30000", "psi=10"]`` -> {"E": 30000.0, "psi": 10.0}; malformed or non-finite items raise ValueError."""
+    from bench.commands._args import assignments
+
+    return assignments(items, "--param")
 
 
 def resolve_case(case: str, hardening: str | None) -> tuple[str, str]:

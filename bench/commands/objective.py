@@ -6,29 +6,27 @@ HELP = "Evaluate a case's objective at one point: cost, its split by measurement
 
 
 def add_arguments(p) -> None:
+    from bench.commands._args import add_mesh_argument, input_file
+
     p.add_argument("case", help="case name (see `femubench cases --analytic`)")
     p.add_argument("--x", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
-                   help="parameter values (physical units); the others take their reference value")
-    p.add_argument("--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)")
-    p.add_argument("--data", metavar="FILE", help="data set (default: the case's shipped pseudo-experimental data)")
+                   help="parameter values (physical units, finite); the others take their reference value; a point "
+                        "outside the bounds is evaluated as infeasible")
+    add_mesh_argument(p, "coarse", help="FE mesh of the forward model (default: coarse)")
+    p.add_argument("--data", metavar="FILE", type=input_file,
+                   help="data set (default: the case's shipped pseudo-experimental data)")
     p.add_argument("--json", action="store_true", help="print the evaluation as JSON")
 
 
 def point(case, items: list[str]):
-    """The reference of ``case`` with the ``NAME=VALUE`` items applied (ValueError if malformed/unknown)."""
+    """The reference of ``case`` with the ``NAME=VALUE`` items applied (ValueError if malformed, non-finite
+    or unknown)."""
+    from bench.commands._args import assignments
+
     x = case.reference.copy()
     names = list(case.names)
-    for item in items:
-        name, sep, value = item.partition("=")
-        name = name.strip()
-        if name not in names:
-            raise ValueError(f"--x {item!r}: parameter {name!r} is unknown for {case.name}; allowed: {', '.join(names)}")
-        try:
-            if not sep:
-                raise ValueError
-            x[names.index(name)] = float(value)
-        except ValueError:
-            raise ValueError(f"--x {item!r} is malformed: expected NAME=VALUE with a number") from None
+    for name, value in assignments(items, "--x", names).items():
+        x[names.index(name)] = value
     return x
 
 

@@ -6,14 +6,12 @@ HELP = "run a suite (TOML) of identifications; resumes where a previous run stop
 
 
 def add_arguments(parser) -> None:
+    from bench.commands._args import add_cluster_arguments, output_dir
+
     parser.add_argument("suite", metavar="SUITE", help="suite file, e.g. suites/default.toml")
-    parser.add_argument("--out", metavar="DIR", default=None,
+    parser.add_argument("--out", metavar="DIR", default=None, type=output_dir,
                         help="results directory (default: results/<suite name>)")
-    where = parser.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N", default=None,
-                       help="local Dask worker processes (default: one per core); 1 runs in-process")
-    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="submit to an existing Dask cluster, e.g. tcp://host:8786")
+    add_cluster_arguments(parser)
     parser.add_argument("--force", action="store_true", help="rerun runs that already have a record")
     parser.add_argument("--retry-failed", action="store_true",
                         help="also rerun the runs whose record is a crash (an exception)")
@@ -28,17 +26,18 @@ def main(args) -> int:
     import sys
     from pathlib import Path
 
+    from bench.progress import enabled, warn_if_long
+    from bench.runner import pending_runs
     from bench.suite import load_suite
+    from problems.inverse.cases import get_case
 
     suite = load_suite(args.suite)  # ValueError -> message + exit 2 (bench.cli)
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
     out = Path(args.out) if args.out else Path("results") / suite.name
+    runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
+    fe_evals = sum(r.budget for r in pending if not get_case(r.case).is_analytic)
+    warn_if_long(NAME, fe_evals, suite.mesh, workers=args.workers, what=f"{len(pending)} pending runs")
 
     if args.dry_run:
-        from bench.runner import pending_runs
-
-        runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
         print(f"suite {suite.name!r}: {len(suite.cases)} cases x {len(suite.methods)} methods x "
               f"{len(suite.budgets)} budgets x {len(suite.seeds)} seeds x starts {list(suite.starts)}"
               + (f" ({suite.random_starts} random per seed)" if "random" in suite.starts else ""))
@@ -50,7 +49,7 @@ def main(args) -> int:
 
     try:
         summary = run_suite(suite, out, workers=args.workers, scheduler=args.scheduler, force=args.force,
-                            retry_failed=args.retry_failed, progress=not args.quiet, fan_out=args.fan_out)
+                            retry_failed=args.retry_failed, progress=enabled(args.quiet), fan_out=args.fan_out)
     except KeyboardInterrupt:
         print("interrupted; finished runs are kept, rerun the same command to resume", file=sys.stderr)
         return 130

@@ -6,16 +6,27 @@ HELP = ("local sensitivities s_ux, s_uy, s_r of the front-face displacements and
         "parameter (relative perturbation delta about the reference; the paper's eqs. 16-18, Fig. 5)")
 
 
+def _delta(text: str) -> float:
+    from bench.commands._args import ArgumentTypeError, float_in
+
+    value = float_in(-1.0, 1.0, low_open=True, high_open=True)(text)
+    if value == 0:
+        raise ArgumentTypeError("0 is out of range: the relative perturbation must satisfy 0 < |delta| < 1")
+    return value
+
+
 def add_arguments(p) -> None:
+    from bench.commands._args import add_cluster_arguments, add_mesh_argument, add_quiet_argument, output_dir
+
     p.add_argument("cases", nargs="+", metavar="CASE", help="FE case name(s), or all")
-    p.add_argument("--mesh", default="coarse", help="coarse | paper | fine | NX,NY,NZ (default: coarse)")
-    p.add_argument("--delta", type=float, default=0.01, help="relative perturbation (default 0.01)")
-    p.add_argument("--out", metavar="DIR", help="output directory (default results/studies/sensitivity/<case> in the "
-                                                "results root, see docs/sensitivity.md; with several cases DIR/<case>)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=1, metavar="N",
-                       help="Dask worker processes for the 1 + n FE runs of a case (default 1: in-process)")
-    where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
+    add_mesh_argument(p, "coarse")
+    p.add_argument("--delta", type=_delta, default=0.01, help="relative perturbation, 0 < |delta| < 1 (default 0.01)")
+    p.add_argument("--out", metavar="DIR", type=output_dir,
+                   help="output directory (default results/studies/sensitivity/<case> in the "
+                        "results root, see docs/sensitivity.md; with several cases DIR/<case>)")
+    add_cluster_arguments(p, default_workers=1, workers_help="Dask worker processes for the 1 + n FE runs of a case "
+                                                             "(default 1: in-process)")
+    add_quiet_argument(p)
     figures = p.add_mutually_exclusive_group()
     figures.add_argument("--no-figures", action="store_true", help="write CSV/markdown/JSON only")
     figures.add_argument("--render", action="store_true",
@@ -25,23 +36,29 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     from pathlib import Path
 
+    from tqdm import tqdm
+
     from bench.parallel import mapper
+    from bench.progress import enabled, warn_if_long
     from bench.studies import case_names, existing_dir
     from bench.studies.sensitivity import render_sensitivity, run_sensitivity
+    from problems.inverse.cases import get_case
 
-    if not (0 < abs(args.delta) < 1):
-        raise ValueError(f"--delta {args.delta} is out of range: 0 < |delta| < 1")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
     cases = case_names(args.cases)
+    analytic = [c for c in cases if get_case(c).is_analytic]
+    if analytic:
+        raise ValueError(f"case {analytic[0]}: local sensitivities need the FE measurement layout [u_h, u_v, r]; "
+                         "analytic cases do not have it")
     outs = {name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name for name in cases}
     if args.render:
         for name in cases:
             for path in render_sensitivity(existing_dir(NAME, name, outs[name])):
                 print(f"wrote {path}")
         return 0
+    warn_if_long(NAME, sum(1 + len(get_case(c).names) for c in cases), args.mesh, workers=args.workers,
+                 what=f"{len(cases)} case(s)")
     with mapper(args.workers, args.scheduler) as m:
-        for name in cases:
+        for name in tqdm(cases, desc="sensitivity", unit="case", disable=len(cases) < 2 or not enabled(args.quiet)):
             res = run_sensitivity(name, mesh=args.mesh, delta=args.delta, mapper=m, out=outs[name])
             if not args.no_figures:
                 res.paths += render_sensitivity(res.dir)

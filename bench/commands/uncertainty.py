@@ -7,26 +7,30 @@ HELP = ("sample the posterior with the mcmc solver and compare it with the Lapla
 
 
 def add_arguments(p) -> None:
+    from bench.commands._args import (
+        add_cluster_arguments, add_mesh_argument, add_quiet_argument, int_at_least, nonneg_int, output_dir,
+        positive_int, study_data,
+    )
     from bench.studies import DATA_HELP
 
     p.add_argument("case", metavar="CASE", help="case name (FE or analytic-*)")
-    p.add_argument("--mesh", default="coarse", help="coarse | paper | fine | NX,NY,NZ (default: coarse)")
-    p.add_argument("--data", default="auto", help=DATA_HELP)
-    p.add_argument("--budget", type=int, default=2000, metavar="N", help="MCMC forward evaluations (default 2000)")
-    p.add_argument("--seed", type=int, default=0)
+    add_mesh_argument(p, "coarse")
+    p.add_argument("--data", default="auto", type=study_data, help=DATA_HELP)
+    p.add_argument("--budget", type=positive_int, default=2000, metavar="N", help="MCMC forward evaluations (default 2000)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the sampler, >= 0 (default 0)")
     p.add_argument("--x", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
                    help="start from this point (physical units, e.g. an identified one) instead of the reference")
-    p.add_argument("--refine", type=int, default=10, metavar="K",
+    p.add_argument("--refine", type=nonneg_int, default=10, metavar="K",
                    help="at most K Gauss-Newton steps polishing the start to the mode before Laplace and MCMC "
                         "(default 10; 0: none)")
-    p.add_argument("--walkers", type=int, default=None, metavar="W", help="MCMC walkers (default max(16, 4 n))")
-    p.add_argument("--out", metavar="DIR",
+    p.add_argument("--walkers", type=int_at_least(2), default=None, metavar="W",
+                   help="MCMC walkers, at least twice the number n of parameters, odd numbers made even "
+                        "(default max(16, 4 n))")
+    p.add_argument("--out", metavar="DIR", type=output_dir,
                    help="output directory (default results/studies/uncertainty/<case> in the results root, "
                         "see docs/sensitivity.md)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="local Dask worker processes (default: one per core); 1 runs in-process")
-    where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
+    add_cluster_arguments(p)
+    add_quiet_argument(p)
     figures = p.add_mutually_exclusive_group()
     figures.add_argument("--no-figures", action="store_true", help="write the tables, JSON and chain only")
     figures.add_argument("--render", action="store_true",
@@ -37,8 +41,10 @@ def main(args) -> int:
     import os
     import warnings
 
+    from bench.commands._args import assignments
     from bench.parallel import mapper
-    from bench.studies import existing_dir, parse_assignments
+    from bench.progress import EvaluationProgress, enabled, warn_if_long
+    from bench.studies import existing_dir
     from bench.studies.uncertainty import render_uncertainty, run_uncertainty
     from problems.inverse.cases import get_case
 
@@ -47,19 +53,29 @@ def main(args) -> int:
         for path in render_uncertainty(existing_dir(NAME, case.name, args.out)):
             print(f"wrote {path}")
         return 0
-    x = parse_assignments(args.x, case.names)
-    if args.budget < 1:
-        raise ValueError(f"--budget {args.budget} is out of range: must be >= 1")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    x = assignments(args.x, "--x", case.names)
+    n = len(case.names)
+    if args.walkers is not None and args.walkers < 2 * n:
+        raise ValueError(f"--walkers {args.walkers} is out of range: must be >= {2 * n} "
+                         f"(twice the {n} parameters of {case.name})")
+    walkers = args.walkers or max(16, 4 * n)
+    walkers += walkers % 2  # the mcmc solver makes it even
+    if args.budget < 2 * walkers:
+        raise ValueError(f"--budget {args.budget} is out of range: MCMC needs at least 2 steps of the {walkers} "
+                         f"walkers, i.e. >= {2 * walkers} evaluations")
     analytic = case.is_analytic
     workers = 1 if analytic else (args.workers or os.cpu_count() or 1)
+    if not analytic:
+        warn_if_long(NAME, args.budget + (args.refine + 1) * (n + 1), args.mesh, workers=workers,
+                     what=f"budget {args.budget} and --refine {args.refine}")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # the short-chain warning is reported below
         with mapper(1 if analytic else args.workers, args.scheduler) as m:
-            res = run_uncertainty(case.name, mesh=args.mesh, data=args.data, budget=args.budget, seed=args.seed, x=x,
-                                  refine=args.refine, n_walkers=args.walkers, mapper=m, out=args.out,
-                                  workers=workers)
+            with EvaluationProgress(desc=f"uncertainty {case.name}",  # total: the MCMC budget, once set
+                                    disable=not enabled(args.quiet)) as progress:
+                res = run_uncertainty(case.name, mesh=args.mesh, data=args.data, budget=args.budget, seed=args.seed,
+                                      x=x, refine=args.refine, n_walkers=args.walkers, mapper=m, out=args.out,
+                                      workers=workers, observers=[progress])
     if not args.no_figures:
         res.paths += render_uncertainty(res.dir)
     print(f"{'parameter':>10} {'MCMC mean':>12} {'MCMC sd':>10} {'Laplace mean':>12} {'Laplace sd':>10}  verdict")

@@ -29,12 +29,13 @@ TABLE_FORMATS = ("md", "csv", "tex")
 
 
 def write_report(out_dir: str | Path, formats=("md", "csv", "tex"), *, tol: float = 1.0,
-                 figures: bool = True) -> Path:
+                 figures: bool = True, progress: bool = False) -> Path:
     """Write the report of ``out_dir`` into ``out_dir/report``; return the path of report.md.
 
     ``formats``: any of md, csv, tex (tables), pdf (figures also as PDF), parquet (the tidy
     DataFrames ``runs.parquet`` and ``history.parquet``). ``tol``: success tolerance in percent.
-    Every record file that could not be read is named on stderr and in report.md.
+    Every record file that could not be read is named on stderr and in report.md. ``progress``: a
+    progress bar (stderr) over the figures.
     """
     from bench import store
 
@@ -53,7 +54,7 @@ def write_report(out_dir: str | Path, formats=("md", "csv", "tex"), *, tol: floa
     tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".report-"))
     try:
         build_report(runs, history, tmp, formats, tol=tol, figures=figures, source=out_dir,
-                     unreadable=unreadable, set_aside=set_aside)
+                     unreadable=unreadable, set_aside=set_aside, progress=progress)
         old = None
         if final.exists():
             old = out_dir / f".report-old-{os.getpid()}"
@@ -80,7 +81,7 @@ def unreadable_lines(unreadable, set_aside, base: Path | None = None) -> list[st
 
 
 def build_report(runs, history, dest: Path, formats, *, tol: float, figures: bool, source: Path,
-                 unreadable=(), set_aside=()) -> Path:
+                 unreadable=(), set_aside=(), progress: bool = False) -> Path:
     """Write the tables, figures and report.md of ``runs``/``history`` into ``dest``.
 
     ``unreadable``: ``(path, reason)`` of the record files that could not be read; ``set_aside``:
@@ -120,14 +121,18 @@ def build_report(runs, history, dest: Path, formats, *, tol: float, figures: boo
             nrun = sorted(set(t.attrs["n_identified"].values()))
             per = f"{nrun[0]}" if len(nrun) == 1 else f"{min(nrun)}–{max(nrun)}"
             btxt = f", budget {budget}" if budget is not None else ""
+            note = T.bound_note(t)
             caption = (f"Table 1 ({method}{btxt}): residual error of the identified parameters in percent, "
-                       f"median over {per} run(s) per case; {T.DASH} = inactive parameter.")
+                       f"median over {per} run(s) per case; {T.DASH} = inactive parameter."
+                       + (f" {note}" if note else ""))
             disp = T.table1_display(t)
             paths = T.write_table(stem, tfmt, display=disp, raw=t, caption=caption,
                                   label=f"tab:table1-{_safe(method)}{suffix}", index_label="parameter",
                                   tex_display=T.tex_param_index(disp), raw_index_tex=True)
             md.append(f"### {method}{btxt}\n")
             md.append(T.to_markdown(disp, index_label="parameter"))
+            if note:
+                md.append(note + "\n")
             md.append(_links(paths, dest) + "\n")
 
     # --- comparison -------------------------------------------------------------------------
@@ -156,7 +161,7 @@ def build_report(runs, history, dest: Path, formats, *, tol: float, figures: boo
     if figures:
         from bench.report.figures import COST_KS, ERR_TARGETS, write_figures
 
-        figs = write_figures(runs, history, dest / "figures", pdf="pdf" in formats)
+        figs = write_figures(runs, history, dest / "figures", pdf="pdf" in formats, progress=progress)
         md.append("## Figures\n")
         md.append("Line styles and markers distinguish methods and parameters (greys only)."
                   + (" PDF versions sit next to the PNGs." if "pdf" in formats else "") + "\n")
@@ -176,7 +181,9 @@ def build_report(runs, history, dest: Path, formats, *, tol: float, figures: boo
                 md.append(f"![{case}: runtime ECDF]({_rel(figs['ecdf'][case], dest)})\n")
         md.append("### Iteration histories (like the paper's Figs 6–14)\n")
         md.append("For each case and method, the run with the median final cost: (a) normalised parameters "
-                  "x_i/x_i^REF against iteration, (b) cost against iteration (log scale).\n")
+                  "x_i/x_i^REF against iteration, with each parameter's box [lower, upper]/x_i^REF as a bracket "
+                  "of the same line style right of the last iteration and a ring where a final parameter lies on "
+                  "a bound, (b) cost against iteration (log scale).\n")
         hist = figs["history"]
         cols = [(m, b) for m in methods for b in budgets if any((c, m, b) in hist for c in cases)]
         head = ["case"] + [m + (f" (b{b})" if len(budgets) > 1 else "") for m, b in cols]

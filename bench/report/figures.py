@@ -1,8 +1,10 @@
 """Report figures from the tidy DataFrames (matplotlib Agg, readable in black and white).
 
 * :func:`history_figure` — like the paper's Figs 6–14 for one case and method: (a) normalised
-  parameters x_i/x_i^REF against iteration, (b) cost against iteration (log scale), for the
-  representative run (median final cost over seeds and starts).
+  parameters x_i/x_i^REF against iteration, each parameter's box [lower, upper]/x_i^REF drawn as
+  a bracket in the parameter's line style right of the last iteration, and a ring around a final
+  value that lies on a bound (within ``BOUND_TOL`` of the box width), (b) cost against iteration
+  (log scale), for the representative run (median final cost over seeds and starts).
 * :func:`convergence_figure` — per case, across methods: best cost so far against forward
   evaluations (median over runs), log-log.
 * :func:`ecdf_figure` — COCO-style empirical cumulative distribution of the forward
@@ -27,7 +29,7 @@ import pandas as pd
 from bench.plotting import (
     DOUBLE, REFERENCE_LINE, SINGLE, integer_axis, line_style, log_axis, normalised_label, pyplot, save,
 )
-from bench.report.tables import case_order, identified, method_order
+from bench.report.tables import bound_side, case_order, identified, method_order, normalised_box
 
 COST_KS = (1, 2, 3, 4, 6, 8)
 ERR_TARGETS = (10.0, 1.0, 0.1)
@@ -58,18 +60,51 @@ def representative(runs: pd.DataFrame) -> pd.Series | None:
 
 
 def history_figure(run: pd.Series, hist: pd.DataFrame, params: list[str], path: Path, *,
-                   n_runs: int = 1, pdf: bool = False) -> list[Path]:
-    """(a) x_i/x_i^REF and (b) cost against iteration for one run."""
+                   n_runs: int = 1, pdf: bool = False, bounds: dict | None = None) -> list[Path]:
+    """(a) x_i/x_i^REF and (b) cost against iteration for one run.
+
+    ``bounds``: ``{parameter: (lower, upper)}`` divided by the reference (default: the box of the
+    run's case, :func:`bench.report.tables.normalised_box`); each is drawn as a bracket right of
+    the last iteration, and a final value on a bound is ringed.
+    """
     plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(DOUBLE[0], 3.4), constrained_layout=True)
     active = [p for p in params if f"xn.{p}" in hist and hist[f"xn.{p}"].notna().any()]
     it = hist["iteration"].to_numpy()
+    bounds = normalised_box(str(run["case"])) if bounds is None else bounds
+    x_end = float(np.nanmax(it)) if len(it) else 0.0
+    dx = 0.035 * max(x_end - (float(np.nanmin(it)) if len(it) else 0.0), 1.0)
+    ringed = []  # (iteration, value) of final values on a bound
     for i, p in enumerate(active):
-        y = hist[f"xn.{p}"].to_numpy()
-        ax1.plot(it, y, label=normalised_label(p), markevery=_markevery(len(it)), **line_style(i))
+        y = hist[f"xn.{p}"].to_numpy(float)
+        style = line_style(i)
+        ax1.plot(it, y, label=normalised_label(p), markevery=_markevery(len(it)), **style)
+        if p not in bounds:
+            continue
+        lo, hi = bounds[p]
+        xb = x_end + (i + 1) * dx  # the box of parameter i: a bracket in its own line style
+        ax1.plot([xb, xb], [lo, hi], color=style["color"], linestyle=style["linestyle"], linewidth=0.8)
+        ax1.plot([xb, xb], [lo, hi], color=style["color"], linestyle="none", marker=style["marker"], markersize=3)
+        ax1.plot([xb - 0.4 * dx, xb + 0.4 * dx] * 2, [lo, lo, hi, hi], color=style["color"], linestyle="none",
+                 marker="_", markersize=6)
+        finite = np.flatnonzero(np.isfinite(y))
+        if len(finite) and bound_side(float(y[finite[-1]]), lo, hi):
+            ringed.append((it[finite[-1]], y[finite[-1]]))
+    if ringed:
+        ax1.plot(*zip(*ringed), linestyle="none", marker="o", markersize=10, markerfacecolor="none",
+                 markeredgecolor="0.0", markeredgewidth=0.8, label="on a bound")
+    if bounds and active:
+        from matplotlib.lines import Line2D
+
+        ax1.add_line(Line2D([], [], color="0.0", linestyle="-", marker="_", markersize=6, linewidth=0.8,
+                            label="box [lower, upper]"))  # legend proxy of the brackets
     ax1.axhline(1.0, **REFERENCE_LINE)
     ax1.set_xlabel("iteration (-)")
     integer_axis(ax1, "x")
+    if bounds and active:  # the brackets sit right of the last iteration: no iteration ticks there
+        ax1.axvline(x_end + 0.5 * dx, color="0.8", linewidth=0.6)
+        ticks = [t for t in ax1.get_xticks() if t <= x_end + 1e-9 and t >= ax1.get_xlim()[0]]
+        ax1.set_xticks(ticks)
     ax1.set_ylabel(r"normalised parameter $x_i/x_i^{\mathrm{REF}}$ (-)")
     ax1.set_title("(a) parameters", loc="left")
     if active:
@@ -229,14 +264,23 @@ def ecdf_figure(title: str, runs: pd.DataFrame, history: pd.DataFrame, path: Pat
     return _save(fig, path, pdf)
 
 
-def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, pdf: bool = False) -> dict:
+def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, pdf: bool = False,
+                  progress: bool = False) -> dict:
     """All figures; returns ``{"history": {(case, method, budget): path}, "convergence": {case: path},
-    "ecdf": {case: path}, "ecdf_all": path}`` (PNG paths)."""
+    "ecdf": {case: path}, "ecdf_all": path}`` (PNG paths). ``progress``: a tqdm bar on stderr."""
+    import sys
+
+    from tqdm import tqdm
+
     params = runs.attrs.get("parameters") or []
     cases, methods = case_order(runs["case"].unique()), method_order(runs["method"].unique())
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
     out: dict = {"history": {}, "convergence": {}, "ecdf": {}, "ecdf_all": None}
-    for (case, method, budget), g in runs.groupby(["case", "method", "budget"], sort=False):
+    groups = list(runs.groupby(["case", "method", "budget"], sort=False))
+    bar = tqdm(total=len(groups) + 2 * len(cases) + (len(cases) > 1), desc="report figures", unit="fig",
+               file=sys.stderr, disable=not progress, leave=False)
+    for (case, method, budget), g in groups:
+        bar.update()
         rep = representative(g)
         if rep is None:
             continue
@@ -248,6 +292,7 @@ def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, p
         p = history_figure(rep, h, params, fig_dir / "history" / name, n_runs=len(g), pdf=pdf)
         out["history"][(case, method, int(budget))] = p[0]
     for case in cases:
+        bar.update(2)
         rc = runs[runs["case"] == case]
         hc = history[history["case"] == case] if len(history) else history
         ms = [m for m in methods if m in set(rc["method"])]
@@ -256,6 +301,8 @@ def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, p
         out["ecdf"][case] = ecdf_figure(f"{case}: runtime ECDF over {len(rc)} runs", rc, hc,
                                         fig_dir / f"{safe(case)}__ecdf", methods=ms, pdf=pdf)[0]
     if len(cases) > 1:
+        bar.update()
         out["ecdf_all"] = ecdf_figure(f"all {len(cases)} cases: runtime ECDF over {len(runs)} runs", runs, history,
                                       fig_dir / "all__ecdf", methods=methods, pdf=pdf)[0]
+    bar.close()
     return out

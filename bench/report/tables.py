@@ -3,7 +3,9 @@
 * :func:`table1` — the paper's Table 1 for one method: signed residual error of every
   identified parameter with respect to its reference, in percent (median over seeds and
   starts), rows = parameters, columns = cases, NaN (printed ``–``) where a parameter is not
-  active in a case.
+  active in a case. A cell whose final parameter lies on a bound of the case's box (within
+  :data:`BOUND_TOL` of the box width, in at least one of its runs) is flagged with
+  :data:`BOUND_MARK`: its error then measures the box, not the identification.
 * :func:`comparison` — per case x method: runs, success rate (every |error| <= tol), median
   and interquartile range of forward evaluations, median final cost, median wall time.
 * :func:`success_matrix` — success rate (%) per method (rows) and case (columns).
@@ -23,6 +25,54 @@ from bench.store import PARAMETER_ORDER, parameter_order
 from problems.inverse.cases import LABELS
 
 DASH = "–"  # en dash: inactive parameter
+BOUND_MARK = "†"  # a final parameter on a bound of its box
+BOUND_TOL = 1e-6  # "on a bound": within this fraction of the box width (upper - lower)
+
+
+def case_box(case: str) -> dict[str, tuple[float, float, float]]:
+    """``{parameter: (lower, upper, reference)}`` of a case (physical units); empty for an unknown case."""
+    from problems.inverse.cases import all_cases
+
+    c = all_cases().get(case)
+    return {} if c is None else {p.name: (float(p.lower), float(p.upper), float(p.reference)) for p in c.parameters}
+
+
+def normalised_box(case: str) -> dict[str, tuple[float, float]]:
+    """``{parameter: (lower, upper)}`` of a case divided by the reference (as x / x_REF; sorted)."""
+    out = {}
+    for name, (lo, hi, ref) in case_box(case).items():
+        if ref != 0:
+            a, b = sorted((lo / ref, hi / ref))
+            out[name] = (a, b)
+    return out
+
+
+def bound_side(x: float, lower: float, upper: float, tol: float = BOUND_TOL) -> int:
+    """-1 when ``x`` lies on the lower bound, +1 on the upper (within ``tol`` of the box width), else 0
+    (also for NaN or a degenerate box)."""
+    width = upper - lower
+    if not (math.isfinite(x) and width > 0):
+        return 0
+    if x - lower <= tol * width:
+        return -1
+    if upper - x <= tol * width:
+        return 1
+    return 0
+
+
+def bound_hits(runs: pd.DataFrame) -> pd.DataFrame:
+    """Per run (rows as ``runs``) and parameter (columns): -1 final value on the lower bound of the
+    case's box, +1 on the upper, 0 inside, NaN where inactive or the case is unknown."""
+    params = runs.attrs.get("parameters") or parameter_order(c[2:] for c in runs.columns if c.startswith("x."))
+    out = pd.DataFrame(np.nan, index=runs.index, columns=list(params))
+    boxes: dict[str, dict] = {}
+    for idx, r in runs.iterrows():
+        box = boxes.setdefault(r["case"], case_box(r["case"]))
+        for p in params:
+            x = r.get(f"x.{p}", math.nan)
+            if p in box and isinstance(x, (int, float)) and math.isfinite(x):
+                out.loc[idx, p] = bound_side(float(x), box[p][0], box[p][1])
+    return out
 
 
 
@@ -43,9 +93,10 @@ def method_order(methods) -> list[str]:
     canon = list(METHODS)  # registration order
 
     def key(m):
-        info = find_method(m)
+        info = find_method(m.split(" (")[0])  # labels carry the data tier: "lm (consistent)"
         fam = rank.get(getattr(info, "family", None), 3)
-        return fam, canon.index(m) if m in canon else len(canon), m
+        base = m.split(" (")[0]
+        return fam, canon.index(base) if base in canon else len(canon), m
 
     return sorted(dict.fromkeys(methods), key=key)
 
@@ -84,14 +135,21 @@ def table1(runs: pd.DataFrame, method: str, *, budget: int | None = None) -> pd.
     # canonical study parameters always appear (the paper's rows), others only when used
     rows = [p for p in PARAMETER_ORDER if p in params] + [p for p in params if p not in PARAMETER_ORDER]
     ok = identified(sel)
+    hits = bound_hits(ok) if len(ok) else pd.DataFrame()
     out = pd.DataFrame(index=pd.Index(rows, name="parameter"), columns=cases, dtype=float)
+    on_bound: dict[tuple[str, str], tuple[int, int]] = {}
     for case in cases:
         part = ok[ok["case"] == case]
         for p in rows:
             col = part[f"err.{p}"] if f"err.{p}" in part else pd.Series(dtype=float)
             out.loc[p, case] = float(col.median()) if col.notna().any() else math.nan
+            if p in hits and col.notna().any():
+                h = hits.loc[part.index, p].dropna()
+                if (h != 0).any():
+                    on_bound[(p, case)] = (int((h != 0).sum()), int(len(h)))
     out.attrs["n_runs"] = {c: int((sel["case"] == c).sum()) for c in cases}
     out.attrs["n_identified"] = {c: int((ok["case"] == c).sum()) for c in cases}
+    out.attrs["on_bound"] = on_bound  # (parameter, case) -> (runs on a bound, runs)
     return out
 
 
@@ -109,6 +167,7 @@ def comparison(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
             "runs": len(g), "success_pct": 100.0 * float(ok.loc[g.index].mean()),
             "evals_median": float(ev.median()), "evals_q25": float(ev.quantile(0.25)),
             "evals_q75": float(ev.quantile(0.75)),
+            "fe_median": float(g["total_equivalents"].median()) if "total_equivalents" in g else math.nan,
             "cost_median": float(gi["cost"].median()) if len(gi) else math.nan,
             "max_err_median_pct": float(gi["max_abs_err"].median()) if len(gi) else math.nan,
             "wall_median_s": float(g["wall_s"].median()), "crashed": int(g["crashed"].sum()),
@@ -162,7 +221,22 @@ def fmt_num(v: float, digits: int = 3) -> str:
 
 
 def table1_display(t: pd.DataFrame) -> pd.DataFrame:
-    return t.apply(lambda col: col.map(fmt_pct)).astype(str)
+    """Table 1 as strings; cells with a final parameter on a bound carry :data:`BOUND_MARK`
+    (followed by ``k/n`` when only k of the n runs of the cell ended there)."""
+    out = t.apply(lambda col: col.map(fmt_pct)).astype(str)
+    for (p, case), (k, n) in t.attrs.get("on_bound", {}).items():
+        if p in out.index and case in out.columns:
+            out.loc[p, case] = f"{out.loc[p, case]} {BOUND_MARK}" + (f"{k}/{n}" if k < n else "")
+    return out
+
+
+def bound_note(t: pd.DataFrame) -> str:
+    """The footnote of the bound marks of a Table 1 (empty when no cell is marked)."""
+    if not t.attrs.get("on_bound"):
+        return ""
+    return (f"{BOUND_MARK} the identified parameter ended on a bound of the case's box (within {BOUND_TOL:g} of the "
+            f"box width; {BOUND_MARK}k/n: in k of the n runs): the error then measures the box, not the "
+            "identification.")
 
 
 def comparison_display(df: pd.DataFrame) -> pd.DataFrame:
@@ -174,6 +248,7 @@ def comparison_display(df: pd.DataFrame) -> pd.DataFrame:
     out[f"success (|err| ≤ {tol:g} %)"] = df["success_pct"].map(lambda v: f"{v:.0f} %")
     out["evals median"] = df["evals_median"].map(lambda v: f"{v:.0f}")
     out["evals IQR"] = [f"{a:.0f}–{b:.0f}" for a, b in zip(df["evals_q25"], df["evals_q75"])]
+    out["forward-equivalents median"] = df["fe_median"].map(lambda v: fmt_num(v))
     out["final cost median"] = df["cost_median"].map(lambda v: fmt_num(v))
     out["max |err| median (%)"] = df["max_err_median_pct"].map(fmt_pct)
     out["wall median (s)"] = df["wall_median_s"].map(lambda v: fmt_num(v, 2))
@@ -201,7 +276,7 @@ def to_markdown(df: pd.DataFrame, *, index: bool = True, index_label: str | None
 
 _TEX_ESC = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}",
             "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "\\": r"\textbackslash{}",
-            "–": "--", "≤": r"$\leq$", "|": r"$|$"}
+            "–": "--", "≤": r"$\leq$", "|": r"$|$", BOUND_MARK: r"\textsuperscript{\dag}"}
 
 
 def tex_escape(s: str) -> str:

@@ -90,21 +90,28 @@ class UncertaintyRun:
 
 def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto", budget: int = 2000, seed: int = 0,
                     x: dict | None = None, refine: int = 10, n_walkers: int | None = None, mapper=None, out=None,
-                    workers: int = 1, scheme: str = "forward") -> UncertaintyRun:
+                    workers: int = 1, scheme: str = "forward", observers=()) -> UncertaintyRun:
     """Laplace at the polished mode, then MCMC from there (chain kept in ``chain.npz`` of the output
-    folder); write the comparison table, markdown and JSON."""
+    folder); write the comparison table, markdown and JSON. ``observers`` are added to the
+    objective's observers (progress bars, :class:`bench.progress.EvaluationProgress`)."""
     from problems.analysis.identifiability import analyse_jacobian, refine_mode
     from problems.inverse.cases import get_case
     from solvers import solve
 
     t_start = time.perf_counter()
     obj, text = study_objective(case_name, mesh=mesh, data=data, mapper=mapper)
+    obj.observers.extend(observers)
     names, ref = obj.names, obj.reference
     z0 = np.ones(obj.n_params)
     for name, value in (x or {}).items():
         z0[names.index(name)] = value / ref[names.index(name)]
-    if np.any(z0 < obj.lower_z) or np.any(z0 > obj.upper_z):
-        raise ValueError(f"start point {dict(zip(names, obj.to_physical(z0)))} lies outside the case's bounds")
+    outside = [i for i in range(obj.n_params) if not obj.lower_z[i] <= z0[i] <= obj.upper_z[i]]
+    if outside:
+        units = {p.name: p.unit for p in get_case(case_name).parameters}
+        x0 = obj.to_physical(z0)
+        raise ValueError("start point outside the case's bounds: " + "; ".join(
+            f"{names[i]} = {x0[i]:g} is outside [{obj.lower[i]:g}, {obj.upper[i]:g}] {units.get(names[i], '')}".rstrip()
+            for i in outside))
     start_usable = obj.evaluate(z0)
     if not start_usable.usable:
         raise ValueError(f"the start point cannot be evaluated: {start_usable.message}")

@@ -68,6 +68,8 @@ def read_image(path: str | Path) -> np.ndarray:
                 mode = im.mode
         except UnidentifiedImageError as exc:
             raise ValueError(f"{path}: not a readable {suffix[1:].upper()} image") from exc
+        except Exception as exc:  # truncated or corrupt data (Pillow raises OSError, SyntaxError, ...)
+            raise ValueError(f"{path}: cannot read {suffix[1:].upper()} image ({' '.join(str(exc).split())})") from exc
         if mode == "I":  # 16-bit PNGs open as 32-bit integers
             a = a.astype(np.int64)
     return _to_grey(a, path)

@@ -103,6 +103,8 @@ class DataSettings:
                 raise ValueError(f"{name} = {v!r} is out of range: must be >= 0")
         if self.route not in ("fe", "dic"):
             raise ValueError(f"route = {self.route!r} is unknown; allowed: fe, dic")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed = {self.seed!r} is out of range: a whole number >= 0")
         if self.tier not in TIERS:
             raise ValueError(f"tier = {self.tier!r} is unknown; allowed: {', '.join(TIERS)}")
         from problems.fe.mesh import parse_mesh_spec
@@ -304,6 +306,12 @@ def _dataset_from_doc(doc: dict) -> Dataset:
         if arrays[name].shape != shape:
             raise ValueError(f"field {name} has shape {arrays[name].shape}, expected {shape} "
                              f"({n} snapshots, {m} points)")
+    for name in ("points", "snapshots_mm", "u_h", "u_v", "reaction_kN"):
+        if not np.all(np.isfinite(arrays[name])):
+            raise ValueError(f"field {name} holds non-finite numbers (NaN or infinite)")
+    std = arrays["std_u_mm"]
+    if np.any(np.isnan(std)) or np.any(std <= 0):
+        raise ValueError("field std_u_mm must hold standard deviations > 0 mm (infinite: a point not measured)")
     meta = doc.get("meta", {})
     if not isinstance(meta, dict):
         raise ValueError("field meta must be a JSON object")
