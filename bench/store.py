@@ -238,11 +238,26 @@ def _num(v) -> float:
         return math.nan
 
 
+def method_label(config: dict) -> str:
+    """How a run's method is shown in tables and figures: the solver with its data tier and, when
+    there is one, its model-error treatment, e.g. ``lm (model-error, iterated)``."""
+    from problems.inverse.cases import all_cases
+
+    case = all_cases().get(config["case"])
+    if case is None or case.is_analytic:  # analytic problems have no data tiers
+        return config["method"]
+    tier = config.get("tier", "model-error")
+    treatment = config.get("treatment", "none")
+    return f"{config['method']} ({tier}{'' if treatment == 'none' else ', ' + treatment})"
+
+
 def to_frames(out_dir: str | Path, records: list[dict] | None = None):
     """Load a results directory into two tidy DataFrames ``(runs, history)``.
 
-    ``runs``: one row per run — configuration columns (case, method, seed, start, start_index,
-    budget, mesh, ``data.<key>``, options as JSON), outcome (status, success, cost, n_evals, ...,
+    ``runs``: one row per run — configuration columns (case, ``method`` = :func:`method_label`,
+    ``solver``, ``tier``, ``treatment``, seed, start, start_index, budget, mesh, ``data.<key>``,
+    options as JSON), outcome (``forward_equivalents`` of the solver's evaluations,
+    ``charged_equivalents`` of the runs made for it, ``total_equivalents``) (status, success, cost, n_evals, ...,
     wall_s), per parameter ``x.<p>`` (physical), ``xn.<p>`` (x / reference), ``err.<p>`` (signed
     error in percent; NaN where the parameter is inactive) and ``x0.<p>``, plus provenance
     (data_hash, hostname, started, finished, crashed).
@@ -269,11 +284,18 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
         x0 = np.array([_num(v) for v in res.get("x0", [])], float)
         key = {
             "config_hash": rec["config_hash"], "suite": rec.get("suite"), "case": cfg["case"],
-            "method": cfg["method"], "seed": int(cfg["seed"]), "start": cfg["start"],
+            "method": method_label(cfg), "seed": int(cfg["seed"]), "start": cfg["start"],
             "start_index": int(cfg["start_index"]), "budget": int(cfg["budget"]),
         }
         row = dict(key)
+        row["solver"] = cfg["method"]
+        row["tier"] = cfg.get("tier", "model-error")
+        row["treatment"] = cfg.get("treatment", "none")
         row["mesh"] = cfg.get("mesh")
+        charges = res.get("charges") or {}
+        row["forward_equivalents"] = _num(res.get("forward_equivalents"))
+        row["charged_equivalents"] = sum(_num(c.get("forward_equivalents")) for c in charges.values())
+        row["total_equivalents"] = row["forward_equivalents"] + row["charged_equivalents"]
         for k, v in sorted((cfg.get("data") or {}).items()):
             row[f"data.{k}"] = v
         row["options"] = json.dumps(cfg.get("options") or {}, sort_keys=True)

@@ -138,8 +138,10 @@ def build_report(runs, history, dest: Path, formats, *, tol: float, figures: boo
     # --- comparison -------------------------------------------------------------------------
     comp = T.comparison(runs, tol)
     cdisp = T.comparison_display(comp)
-    ccap = (f"Comparison per case and method: success = every |parameter error| ≤ {tol:g} %; "
-            "forward evaluations (median and interquartile range), median final cost, "
+    ccap = (f"Comparison per case and method (with its data tier and model-error treatment): success = every "
+            f"|parameter error| ≤ {tol:g} %; forward evaluations (median and interquartile range) and "
+            "forward-equivalents (a run with exact sensitivities weighs its wall time over a plain run's; "
+            "high-fidelity runs of a correction included), median final cost, "
             "median max |error|, median wall time per run.")
     paths = T.write_table(tdir / "comparison", tfmt, display=cdisp, raw=comp, caption=ccap,
                           label="tab:comparison", index=False)

@@ -1,0 +1,73 @@
+"""Robustness of the forward model over the whole box (a benchmark, not a test).
+
+    python -m bench.perf.robustness [--mesh coarse] [--points 200] [--cases all] [--seed 0] [--out FILE]
+
+For each case, ``--points`` seeded Latin-hypercube points in the bounds; the infeasible ones (not a
+well-posed material) are skipped and counted; every feasible point runs the FE model (10 snapshots
+to 1.5 mm). Prints per case: feasible points, failures (with their messages), cuts, Newton
+iterations and wall time; appends one JSON line per point to ``--out`` (resumable: points already
+in the file are not rerun).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def main(argv=None) -> None:
+    from problems.inverse.cases import CASES
+    from problems.inverse.forward import FEForwardModel
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--mesh", default="coarse")
+    ap.add_argument("--points", type=int, default=200)
+    ap.add_argument("--cases", default="all")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=None, help="JSON-lines file of the points (resumable)")
+    args = ap.parse_args(argv)
+    names = list(CASES) if args.cases == "all" else args.cases.split(",")
+    done = {}
+    if args.out and args.out.exists():
+        for line in args.out.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # a torn last line: that point is rerun
+            done[(rec["case"], rec["index"])] = rec
+    print(f"{'case':24} {'feasible':>8} {'failed':>6} {'cuts':>5} {'iters/run':>9} {'s/run':>7}")
+    total_failed = 0
+    for name in names:
+        case = CASES[name]
+        model = FEForwardModel(case, args.mesh)
+        X = case.random_starts(args.points, seed=args.seed)
+        recs = []
+        for i, x in enumerate(X):
+            rec = done.get((name, i))
+            if rec is None:
+                why = model.check(x)
+                rec = {"case": name, "index": i, "x": x.tolist(), "feasible": why is None}
+                if why is None:
+                    t = time.perf_counter()
+                    r = model.response(x)
+                    rec |= {"converged": bool(r.converged), "message": r.message, "cuts": r.cuts,
+                            "iterations": r.iterations, "wall_s": time.perf_counter() - t}
+                if args.out:
+                    with args.out.open("a") as fh:
+                        fh.write(json.dumps(rec) + "\n")
+            recs.append(rec)
+        feas = [r for r in recs if r["feasible"]]
+        failed = [r for r in feas if not r["converged"]]
+        total_failed += len(failed)
+        print(f"{name:24} {len(feas):8d} {len(failed):6d} {sum(r['cuts'] for r in feas):5d} "
+              f"{np.mean([r['iterations'] for r in feas]):9.1f} {np.mean([r['wall_s'] for r in feas]):7.2f}", flush=True)
+        for r in failed:
+            print(f"    failed at x = {np.round(r['x'], 5).tolist()}: {r['message']}")
+    print(f"mesh {args.mesh}: {total_failed} failures in all")
+
+
+if __name__ == "__main__":
+    main()
