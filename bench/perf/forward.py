@@ -18,6 +18,7 @@ one-core figures.
 from __future__ import annotations
 
 import argparse
+import re
 import dataclasses
 import time
 
@@ -28,6 +29,14 @@ from problems.fe.newton import Loading, discretise, run
 from problems.inverse.forward import FORWARD_SETTINGS, case_material
 from problems.materials import LinearElastic
 from problems.fe.mesh import parse_mesh_spec
+
+
+def split_specs(text: str) -> list[str]:
+    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay whole."""
+    specs = re.findall(r"\d+\s*,\s*\d+\s*,\s*\d+(?::\w+)?|[A-Za-z]\w*(?::\w+)?", text)
+    if not specs:
+        raise SystemExit(f"no mesh spec in {text!r}")
+    return specs
 
 #: the code path before the fused assembly and the CHOLMOD-preconditioned Krylov solver
 BASELINE = dict(linear_solver="superlu", assembly="numpy")
@@ -51,7 +60,7 @@ def main(argv=None) -> None:
     if not args.no_baseline:
         head += f" | {'old s':>7} {'speed-up':>8} {'max dF/F':>8}"
     print(head)
-    for spec in args.meshes.split(","):
+    for spec in split_specs(args.meshes):
         t = time.perf_counter()
         ms = parse_mesh_spec(spec)
         disc = discretise(ms.mesh, symmetry=ms.symmetry)

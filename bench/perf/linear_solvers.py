@@ -28,6 +28,7 @@ seven right-hand sides, measured in the same run. Times in seconds, one core whe
 from __future__ import annotations
 
 import argparse
+import re
 import time
 from contextlib import contextmanager
 
@@ -38,6 +39,14 @@ from problems.fe.linear_solver import CholmodGmresSolver, cholmod_available, gmr
 from problems.fe.mesh import parse_mesh_spec
 from problems.inverse.cases import CASES
 from problems.inverse.forward import FORWARD_SETTINGS, case_material
+
+
+def split_specs(text: str) -> list[str]:
+    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay whole."""
+    specs = re.findall(r"\d+\s*,\s*\d+\s*,\s*\d+(?::\w+)?|[A-Za-z]\w*(?::\w+)?", text)
+    if not specs:
+        raise SystemExit(f"no mesh spec in {text!r}")
+    return specs
 
 
 @contextmanager
@@ -192,7 +201,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     if args.case not in CASES:
         raise SystemExit(f"case {args.case!r} is unknown; allowed: {', '.join(CASES)}")
-    for spec in args.meshes.split(","):
+    for spec in split_specs(args.meshes):
         measure(spec, args.case, args.repeat)
 
 
