@@ -56,21 +56,22 @@ class EvaluationProgress:
         self.evaluator = evaluator
         self.bar = tqdm(total=total, desc=desc, unit="eval", file=sys.stderr, disable=disable, dynamic_ncols=True,
                         leave=False)
-        self._last: dict[int, int] = {}
+        self._last: dict[int, tuple[int, int]] = {}  # id(evaluator) -> (id of its log, n_evals seen)
         self._best = math.inf
         self._t_postfix = 0.0
 
     def __call__(self, evaluator, evaluation) -> None:
         try:
-            key = id(evaluator)
-            n, last = evaluator.n_evals, self._last.get(key, 0)
-            if n < last:  # counters reset: a new phase
+            key, log = id(evaluator), id(evaluator.log)
+            seen_log, last = self._last.get(key, (log, 0))
+            n = evaluator.n_evals
+            if log != seen_log or n < last:  # counters reset (reset() makes a new log): a new phase
                 last = 0
             if self.bar.total is None and evaluator.budget is not None:
                 self.bar.total = evaluator.budget + self.bar.n
             if n > last:
                 self.bar.update(n - last)
-            self._last[key] = n
+            self._last[key] = (log, n)
             best = evaluator.best
             now = time.monotonic()
             if best is not None and best.cost < self._best and now - self._t_postfix > 0.5:
@@ -132,7 +133,7 @@ def warn_if_long(command: str, n_runs: float, mesh: str, *, workers: int | None 
     est = time_estimate(n_runs, mesh, w)
     if est > WARN_ABOVE_S:
         per = forward_run_s(mesh)
-        print(f"femubench {command}: warning: {what or 'these settings'} imply up to {n_runs:.0f} forward runs on mesh "
-              f"{mesh} (~{format_duration(per)} each) on {w} worker(s): about {format_duration(est)} "
+        print(f"femubench {command}: warning: {what or 'these settings'}: up to {n_runs:.0f} forward run(s) on mesh "
+              f"{mesh} at ~{format_duration(per)} each on {w} worker(s) take about {format_duration(est)} "
               "(rough estimate: 1 s per coarse run, scaled by solved dofs^1.6)", file=stream or sys.stderr, flush=True)
     return est

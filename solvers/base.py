@@ -204,9 +204,23 @@ class Run:
 COUNT_OPTIONS = frozenset({
     "pop_size", "popsize", "n_particles", "n_starts", "n_walkers", "n_steps", "n_initial", "n_points", "n_restarts",
     "num_workers", "max_generations", "max_iterations", "maxiter", "maxeval", "max_nfev", "max_backtracks",
-    "max_evals", "ftol_iter"})
-#: options that are probabilities or fractions: numbers in [0, 1]
+    "max_evals", "ftol_iter", "incpopsize"})
+#: options that are probabilities or fractions: numbers in [0, 1] (burn_fraction below 1)
 FRACTION_OPTIONS = frozenset({"crossover_prob", "mutation_prob", "CR", "burn_fraction", "global_fraction"})
+#: step sizes and scales: numbers > 0
+POSITIVE_OPTIONS = frozenset({"initial_step", "ball_size", "sigma0", "rel_step", "velocity_clamp", "min_tau_multiple"})
+#: tolerances and distribution indices: numbers >= 0
+NONNEGATIVE_OPTIONS = frozenset({"xtol", "gtol", "xtol_rel", "ftol_rel", "ftol_abs", "tolfun", "tolx", "local_xtol_rel",
+                                 "local_ftol_rel", "crossover_eta", "mutation_eta", "c1", "max_asks_factor"})
+
+
+def option_choices(description: str) -> tuple[str, ...]:
+    """The names an option's description offers as ``name (...) | name | ...`` (after its last colon)."""
+    text = description.rsplit(":", 1)[-1]
+    alternatives = [a.strip() for a in text.split(" | ")]
+    if len(alternatives) < 2:
+        return ()
+    return tuple(a.replace("=", " ").replace("(", " ").split()[0] for a in alternatives if a.split())
 
 
 def option_value_error(name: str, value: Any, default: Any, description: str = "") -> str | None:
@@ -215,7 +229,9 @@ def option_value_error(name: str, value: Any, default: Any, description: str = "
     The default's type is the option's type: a bool takes a bool; a number takes a number (an
     integer default a whole number), finite unless the default is not, or a string quoted in the
     description (``x_scale``: ``'jac'``); counts (:data:`COUNT_OPTIONS`) are >= 1, fractions
-    (:data:`FRACTION_OPTIONS`) in [0, 1]. A None default takes anything (the method checks).
+    (:data:`FRACTION_OPTIONS`) in [0, 1], step sizes (:data:`POSITIVE_OPTIONS`) > 0, tolerances
+    (:data:`NONNEGATIVE_OPTIONS`) >= 0; a string default takes the names its description offers as
+    ``a | b | c`` (:func:`option_choices`). A None default takes anything (the method checks).
     """
     if value is None:
         return None if default is None else f"{value!r} is not allowed (default {default!r})"
@@ -235,10 +251,18 @@ def option_value_error(name: str, value: Any, default: Any, description: str = "
             return f"{value!r} is not a whole number"
         if name in COUNT_OPTIONS and (float(value) != int(value) or value < 1):
             return f"{value!r} is out of range: a whole number >= 1"
-        if name in FRACTION_OPTIONS and not 0 <= value <= 1:
-            return f"{value!r} is out of range: must be in [0, 1]"
+        if name in FRACTION_OPTIONS and not (0 <= value < 1 if name == "burn_fraction" else 0 <= value <= 1):
+            return f"{value!r} is out of range: must be in [0, 1{')' if name == 'burn_fraction' else ']'}"
+        if name in POSITIVE_OPTIONS and not value > 0:
+            return f"{value!r} is out of range: must be > 0"
+        if name in NONNEGATIVE_OPTIONS and not value >= 0:
+            return f"{value!r} is out of range: must be >= 0"
         return None
-    return None  # a string default (the method checks the name; bo's noise also takes a number)
+    if isinstance(default, str) and isinstance(value, str):
+        choices = option_choices(description)
+        if default in choices and value not in choices:  # (only a description that offers its default)
+            return f"{value!r} is unknown; allowed: {', '.join(choices)}"
+    return None  # otherwise the method checks (bo's noise takes a name or a number)
 
 
 def resolve_options(info: MethodInfo, options: dict[str, Any], strict: bool = True) -> dict[str, Any]:
@@ -292,7 +316,9 @@ def solve(objective: Evaluator, method: str, *, budget: int, seed: int | None = 
         raise ValueError(f"x0 has {x0.size} values, expected {obj.n_params} ({', '.join(obj.names)})")
     span = obj.upper - obj.lower
     if np.any(x0 < obj.lower - 1e-9 * span) or np.any(x0 > obj.upper + 1e-9 * span):
-        raise ValueError(f"x0 = {x0.tolist()} lies outside the bounds [{obj.lower.tolist()}, {obj.upper.tolist()}]")
+        raise ValueError("x0 lies outside the bounds: " + "; ".join(
+            f"{n} = {v:g} is outside [{lo:g}, {hi:g}]" for n, v, lo, hi, w in zip(obj.names, x0, obj.lower, obj.upper, span)
+            if not lo - 1e-9 * w <= v <= hi + 1e-9 * w))
     x0 = np.clip(x0, obj.lower, obj.upper)
 
     obj.reset()

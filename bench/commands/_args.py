@@ -264,8 +264,10 @@ BY_NAME = {
     "seed": nonneg_int, "budget": positive_int, "workers": positive_int, "samples": positive_int,
     "steps": positive_int, "snapshots": positive_int, "batch": positive_int, "walkers": positive_int,
     "mesh": mesh_spec, "hifi_mesh": mesh_spec, "scheduler": scheduler_address, "data": input_file,
-    "json": output_file,
+    "json": output_file, "plate_margin_mm": nonneg_float,
 }
+_INT_TYPES = (nonneg_int, positive_int)
+_FLOAT_TYPES = (nonneg_float, positive_float)
 
 
 def harden(parser: argparse.ArgumentParser) -> None:
@@ -278,8 +280,8 @@ def harden(parser: argparse.ArgumentParser) -> None:
             continue
         checked = BY_NAME.get(action.dest)
         if action.type is int:
-            action.type = checked if checked in (nonneg_int, positive_int) else integer
+            action.type = checked if checked in _INT_TYPES else integer
         elif action.type is float:
-            action.type = finite_float
-        elif action.type is None and checked is not None and checked not in (nonneg_int, positive_int):
+            action.type = checked if checked in _FLOAT_TYPES else finite_float
+        elif action.type is None and checked is not None and checked not in _INT_TYPES + _FLOAT_TYPES:
             action.type = checked

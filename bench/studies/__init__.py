@@ -97,6 +97,22 @@ def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto",
     return build_objective(case, mesh=mesh, data=ds, mapper=mapper), text
 
 
+def outside_bounds(what: str, case_name: str, obj, z) -> str | None:
+    """``"<what> outside the case's bounds: E = 1e+06 is outside [15000, 45000] MPa; ..."`` for the
+    scaled point ``z`` of ``obj``, or None when it lies in the box."""
+    from problems.inverse.cases import get_case
+
+    z = np.asarray(z, float)
+    bad = [i for i in range(obj.n_params) if not obj.lower_z[i] <= z[i] <= obj.upper_z[i]]
+    if not bad:
+        return None
+    units = {p.name: p.unit for p in get_case(case_name).parameters if p.unit not in ("", "-")}
+    x = obj.to_physical(z)
+    return f"{what} outside the case's bounds: " + "; ".join(
+        f"{obj.names[i]} = {x[i]:g} is outside [{obj.lower[i]:g}, {obj.upper[i]:g}] {units.get(obj.names[i], '')}".rstrip()
+        for i in bad)
+
+
 def parse_assignments(items: list[str] | None, names: tuple[str, ...]) -> dict[str, float]:
     """``["E=3e4", "psi=14"]`` -> dict; unknown names or malformed items raise ValueError."""
     out: dict[str, float] = {}

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.studies import as_float, markdown_table, output_dir, read_json, study_objective, write_csv, write_json
+from bench.studies import (
+    as_float, markdown_table, outside_bounds, output_dir, read_json, study_objective, write_csv, write_json,
+)
 
 
 @dataclass
@@ -36,8 +38,9 @@ def case_identifiability(case_name: str, *, mesh: str = "coarse", data: str = "a
     z = np.ones(obj.n_params)
     for name, value in (x or {}).items():
         z[obj.names.index(name)] = value / obj.reference[obj.names.index(name)]
-    if np.any(z < obj.lower_z) or np.any(z > obj.upper_z):
-        raise ValueError(f"the point {dict(zip(obj.names, obj.to_physical(z)))} lies outside the case's bounds")
+    why = outside_bounds("the point", case_name, obj, z)
+    if why:
+        raise ValueError(why)
     return identifiability(obj, z, scheme=scheme, rel_step=rel_step), obj, text
 
 

@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.studies import as_float, markdown_table, output_dir, read_json, study_objective, write_csv, write_json
+from bench.studies import (
+    as_float, markdown_table, outside_bounds, output_dir, read_json, study_objective, write_csv, write_json,
+)
 
 CHAIN_FILE = "chain.npz"
 
@@ -105,13 +107,9 @@ def run_uncertainty(case_name: str, *, mesh: str = "coarse", data: str = "auto",
     z0 = np.ones(obj.n_params)
     for name, value in (x or {}).items():
         z0[names.index(name)] = value / ref[names.index(name)]
-    outside = [i for i in range(obj.n_params) if not obj.lower_z[i] <= z0[i] <= obj.upper_z[i]]
-    if outside:
-        units = {p.name: p.unit for p in get_case(case_name).parameters}
-        x0 = obj.to_physical(z0)
-        raise ValueError("start point outside the case's bounds: " + "; ".join(
-            f"{names[i]} = {x0[i]:g} is outside [{obj.lower[i]:g}, {obj.upper[i]:g}] {units.get(names[i], '')}".rstrip()
-            for i in outside))
+    why = outside_bounds("start point", case_name, obj, z0)
+    if why:
+        raise ValueError(why)
     start_usable = obj.evaluate(z0)
     if not start_usable.usable:
         raise ValueError(f"the start point cannot be evaluated: {start_usable.message}")

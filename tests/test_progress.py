@@ -1,0 +1,61 @@
+"""Progress bars fed by the evaluator's observer hook, and the running-time warning."""
+from __future__ import annotations
+
+import io
+from contextlib import redirect_stderr
+
+import pytest
+
+from bench import progress as P
+from bench.cli import main
+
+
+def test_the_bar_counts_every_evaluation_and_shows_the_best_cost():
+    from problems.inverse.analytic import analytic_objective
+    from solvers import solve
+
+    obj = analytic_objective("analytic-linear")
+    err = io.StringIO()
+    with redirect_stderr(err):
+        with P.EvaluationProgress(obj, desc="t") as bar:
+            obj.evaluate([1.1, 1.0, 1.0])  # a phase without budget (e.g. the Laplace step) ...
+            solve(obj, "lm", budget=40)  # ... then a budgeted solve (which resets the counters)
+            n, total, postfix = bar.bar.n, bar.bar.total, bar.bar.postfix
+    assert n == 1 + obj.n_evals and total == 1 + 40  # the total follows the budget once it is set
+    assert bar not in obj.observers  # detached on exit
+    assert postfix.startswith("best cost")
+
+
+def test_one_bar_over_several_evaluators():
+    from problems.inverse.analytic import analytic_objective
+
+    a, b = analytic_objective("analytic-linear"), analytic_objective("analytic-smooth")
+    with redirect_stderr(io.StringIO()):
+        with P.EvaluationProgress(total=10) as bar:
+            a.observers.append(bar)
+            b.observers.append(bar)
+            a.evaluate([1.0, 1.0, 1.0])
+            b.evaluate(b.to_scaled(b.reference))
+            a.evaluate([1.0, 1.0, 1.0])  # a cache hit: not an evaluation
+            assert bar.bar.n == 2
+
+
+def test_no_bar_without_a_terminal_or_with_quiet(capsys):
+    assert not P.enabled(stream=io.StringIO()) and not P.enabled(quiet=True)
+    assert main(["identify", "analytic-linear", "--solver", "lm", "--budget", "30"]) == 0
+    assert capsys.readouterr().err == ""  # stderr is not a terminal under pytest
+
+
+def test_run_time_estimate_and_the_one_line_warning():
+    assert P.solved_dofs("coarse") == 1029 and P.forward_run_s("coarse") == pytest.approx(P.COARSE_RUN_S)
+    # the documented growth: paper (9 450 dofs) ~ 35 s per run, fine ~ 3 min, the quarter model costs more
+    assert 25 < P.forward_run_s("paper") < 45 and 120 < P.forward_run_s("fine") < 300
+    assert P.forward_run_s("coarse:quarter") > P.forward_run_s("coarse")
+    quiet = io.StringIO()
+    assert P.warn_if_long("identify", 300, "coarse", stream=quiet) < 3600 and quiet.getvalue() == ""
+    loud = io.StringIO()
+    est = P.warn_if_long("identify", 1000, "paper", workers=2, what="budget 1000", stream=loud)
+    line = loud.getvalue()
+    assert est > 3600 and line.count("\n") == 1 and line.startswith("femubench identify: warning: budget 1000")
+    assert "h" in line and "paper" in line
+    assert P.format_duration(30) == "30 s" and P.format_duration(3 * 3600) == "3.0 h"
