@@ -111,11 +111,13 @@ def run(argv: list[str] | None = None) -> int:
 
 
 def one_line(exc: BaseException) -> str:
-    """The message of ``exc`` on one line (an OSError without text: its class and file name)."""
-    text = " ".join(str(exc).split())
-    if not text:
-        text = type(exc).__name__
-    return text
+    """The message of ``exc`` on one line (its class name if it has none). A deliberate list of
+    problems (lines starting ``  - ``, e.g. every error of a suite file) keeps one line per problem."""
+    text = str(exc).strip()
+    if "\n  - " in text:
+        return "\n".join(("  " if line.startswith("  - ") else "") + " ".join(line.split())
+                         for line in text.splitlines())
+    return " ".join(text.split()) or type(exc).__name__
 
 
 def silence_stdout() -> None:

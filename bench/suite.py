@@ -277,6 +277,7 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     # cases
     from problems.inverse.cases import CASES, all_cases
     from solvers import METHODS, find_method
+    from solvers.base import option_value_error
 
     known_cases = all_cases()
     cases = s.get("cases")
@@ -400,6 +401,10 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
                         f"({type(default).__name__}), got {value!r}")
                     continue
                 value = value2
+                why = option_value_error(key, value, default, table[key][1] if isinstance(table[key], tuple) else "")
+                if why:
+                    err(f"[options.{_q(m)}] {key} = {why}")
+                    continue
             if isinstance(value, float) and not math.isfinite(value):
                 err(f"[options.{_q(m)}] {key} must be finite (leave it out to use its default), got {value!r}")
                 continue

@@ -218,7 +218,7 @@ def test_random_suite_files_are_a_suite_or_one_clear_error(tmp_path):
         outcomes["ok"] += 1
         assert all(b >= 1 for b in suite.budgets) and all(s >= 0 for s in suite.seeds) and suite.random_starts >= 1
         assert len(suite.runs()) == len(suite) > 0
-    assert outcomes["ok"] > 10 and outcomes["error"] > 100
+    assert outcomes["ok"] >= 5 and outcomes["error"] > 100
     (tmp_path / "dir.toml").mkdir()
     for bad in (tmp_path / "dir.toml", tmp_path / "missing.toml"):
         with pytest.raises((ValueError, OSError)):
