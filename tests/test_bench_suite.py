@@ -162,7 +162,10 @@ def test_default_and_paper_suites_have_the_documented_shape():
 
     d = load_suite(ROOT / "suites" / "default.toml")
     assert set(d.cases) == set(CASES) and set(d.methods) == {"lm", "gauss-newton"}
-    assert d.starts == ("default",) and d.mesh == "coarse" and len(d) == 18
+    assert d.starts == ("default",) and d.mesh == "coarse" and d.tiers == ("model-error", "consistent")
+    # 9 cases x 2 methods x (consistent, model-error untreated, model-error one-point)
+    assert len(d) == 54 and {(r.tier, r.treatment) for r in d.runs()} == {
+        ("consistent", "none"), ("model-error", "none"), ("model-error", "one-point")}
     p = load_suite(ROOT / "suites" / "paper.toml")
     assert set(p.cases) == set(CASES) and len(p.budgets) == 1 and "random" in p.starts and len(p.seeds) > 1
     for m in ("lm", "gauss-newton", "ga", "pso", "sa", "mcmc"):
