@@ -28,7 +28,8 @@ WARN_ABOVE_S = 3600.0    #: warn when an estimate exceeds this, s
 
 
 def enabled(quiet: bool = False, stream=None) -> bool:
-    """True when a progress bar should be drawn: not ``quiet`` and ``stream`` (stderr) is a terminal."""
+    """True when a progress bar should be drawn: not ``quiet``, and ``stream`` (default stderr) is
+    a terminal."""
     stream = sys.stderr if stream is None else stream
     try:
         return not quiet and bool(stream.isatty())
@@ -50,13 +51,15 @@ class EvaluationProgress:
     or handed to code that builds its evaluators (``identify(spec, observers=[bar])``).
     """
 
-    def __init__(self, evaluator=None, *, total: int | None = None, desc: str = "", disable: bool = False):
+    def __init__(self, evaluator=None, *, total: int | None = None, desc: str = "",
+                 disable: bool = False):
         from tqdm import tqdm
 
         self.evaluator = evaluator
-        self.bar = tqdm(total=total, desc=desc, unit="eval", file=sys.stderr, disable=disable, dynamic_ncols=True,
-                        leave=False)
-        self._last: dict[int, tuple[int, int]] = {}  # id(evaluator) -> (id of its log, n_evals seen)
+        self.bar = tqdm(total=total, desc=desc, unit="eval", file=sys.stderr, disable=disable,
+                        dynamic_ncols=True, leave=False)
+        # id(evaluator) -> (id of its log, n_evals seen)
+        self._last: dict[int, tuple[int, int]] = {}
         self._best = math.inf
         self._t_postfix = 0.0
 
@@ -119,7 +122,7 @@ def format_duration(seconds: float) -> str:
 
 
 def time_estimate(n_runs: float, mesh: str, workers: int = 1) -> float:
-    """Rough wall time, s, of ``n_runs`` forward runs on ``mesh`` spread over ``workers`` processes."""
+    """Rough wall time, s, of ``n_runs`` forward runs on ``mesh`` over ``workers`` processes."""
     return n_runs * forward_run_s(mesh) / max(1, workers)
 
 
@@ -133,7 +136,8 @@ def warn_if_long(command: str, n_runs: float, mesh: str, *, workers: int | None 
     est = time_estimate(n_runs, mesh, w)
     if est > WARN_ABOVE_S:
         per = forward_run_s(mesh)
-        print(f"femubench {command}: warning: {what or 'these settings'}: up to {n_runs:.0f} forward run(s) on mesh "
-              f"{mesh} at ~{format_duration(per)} each on {w} worker(s) take about {format_duration(est)} "
-              "(rough estimate: 1 s per coarse run, scaled by solved dofs^1.6)", file=stream or sys.stderr, flush=True)
+        print(f"femubench {command}: warning: {what or 'these settings'}: up to {n_runs:.0f} "
+              f"forward run(s) on mesh {mesh} at ~{format_duration(per)} each on {w} worker(s) "
+              f"take about {format_duration(est)} (rough estimate: 1 s per coarse run, scaled by "
+              "solved dofs^1.6)", file=stream or sys.stderr, flush=True)
     return est

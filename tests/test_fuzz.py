@@ -1,4 +1,5 @@
-"""Fuzz tests (seeded, reproducible): random inputs never raise, they are flagged or rejected in one line.
+"""Fuzz tests (seeded, reproducible): random inputs never raise; they are flagged or rejected in
+one line.
 
 * evaluators: >= 1000 random parameter vectors inside and outside the box (NaN, inf, huge,
   negative) through an FE objective on a tiny mesh and through every analytic objective: no
@@ -31,11 +32,13 @@ SEED = 20240611
 
 # --------------------------------------------------------------------------- evaluators
 
-def _random_vectors(rng: np.random.Generator, lower, upper, reference, n: int, pool=None) -> list[np.ndarray]:
-    """``n`` scaled points z = x / reference: special values, far outside, slightly outside, and (from
-    ``pool``, if given, so that the model runs only a few times) inside the box."""
+def _random_vectors(rng: np.random.Generator, lower, upper, reference, n: int,
+                    pool=None) -> list[np.ndarray]:
+    """``n`` scaled points z = x / reference: special values, far outside, slightly outside and
+    (from ``pool``, if given, so that the model runs only a few times) inside the box."""
     d = len(reference)
-    lz, uz = np.minimum(lower / reference, upper / reference), np.maximum(lower / reference, upper / reference)
+    zl, zu = lower / reference, upper / reference
+    lz, uz = np.minimum(zl, zu), np.maximum(zl, zu)
     specials = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e308, -1e308, 1e-308, -1.0, 1e6, -1e6]
     out = []
     for k in range(n):
@@ -96,15 +99,17 @@ def test_fe_evaluator_flags_every_bad_point(fe_objective):
         evs += obj.evaluate_many(np.array(points[k:k + 50]))
     assert len(evs) == 1200
     _check_flagged(evs)
-    assert obj.n_infeasible > 600 and obj.n_evals - obj.n_infeasible <= len(pool)  # the model ran only at the pool
+    # the model ran only at the pool points
+    assert obj.n_infeasible > 600 and obj.n_evals - obj.n_infeasible <= len(pool)
     assert all(e.feasible for e in evs if e.cached) and obj.best is not None and obj.best.usable
     split = obj.cost_split(np.full(obj.n_params, np.nan))
-    assert split["total"] == FAILURE_COST and all(math.isnan(v) for k, v in split.items() if k != "total")
+    assert split["total"] == FAILURE_COST
+    assert all(math.isnan(v) for k, v in split.items() if k != "total")
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-@pytest.mark.parametrize("name", ["analytic-smooth", "analytic-multimodal", "analytic-rastrigin", "analytic-linear",
-                                  "analytic-infeasible", "analytic-failing"])
+@pytest.mark.parametrize("name", ["analytic-smooth", "analytic-multimodal", "analytic-rastrigin",
+                                  "analytic-linear", "analytic-infeasible", "analytic-failing"])
 def test_analytic_evaluators_flag_every_bad_point(name):
     from problems.inverse.analytic import analytic_objective
 
@@ -115,7 +120,8 @@ def test_analytic_evaluators_flag_every_bad_point(name):
     _check_flagged(evs)
     costs = obj.costs(np.array(points[:200]))
     assert np.all(np.isfinite(costs)) and np.all(costs <= FAILURE_COST)
-    inside = [z for z in points if np.all(np.isfinite(z)) and np.all((obj.lower_z <= z) & (z <= obj.upper_z))]
+    inside = [z for z in points
+              if np.all(np.isfinite(z)) and np.all((obj.lower_z <= z) & (z <= obj.upper_z))]
     for z in inside[:5]:
         J = obj.jacobian(z)
         assert J.shape == (obj.n_residuals, obj.n_params) and np.all(np.isfinite(J))
@@ -125,12 +131,14 @@ def test_analytic_evaluators_flag_every_bad_point(name):
 
 # --------------------------------------------------------------------------- suite files
 
-VALID_SUITE = {"suite": {"name": "fz", "cases": ["analytic-linear"], "methods": ["lm"], "budgets": [10],
-                         "seeds": [0, 1], "starts": ["default", "random"], "random_starts": 2, "mesh": "coarse"},
+VALID_SUITE = {"suite": {"name": "fz", "cases": ["analytic-linear"], "methods": ["lm"],
+                         "budgets": [10], "seeds": [0, 1], "starts": ["default", "random"],
+                         "random_starts": 2, "mesh": "coarse"},
                "data": {"noise_um": 0.5}, "options": {"lm": {"xtol": 1e-8}}}
 
-JUNK = [0, -1, 1, 2**70, -2**70, 1.5, float("nan"), float("inf"), -float("inf"), "", "x", "all", "coarse", "0,0,0",
-        True, False, [], [1, -1], ["lm", "lm"], ["analytic-linear", 3], [[1]], {}, {"a": 1}, [{"b": 2}], "lm",
+JUNK = [0, -1, 1, 2**70, -2**70, 1.5, float("nan"), float("inf"), -float("inf"), "", "x", "all",
+        "coarse", "0,0,0", True, False, [], [1, -1], ["lm", "lm"], ["analytic-linear", 3], [[1]],
+        {}, {"a": 1}, [{"b": 2}], "lm",
         "nlopt:NOPE", "paper:eighth", "2,2,3:eighth", [0.5], ["random"]]
 
 
@@ -140,7 +148,9 @@ def _toml_value(v) -> str:
     if isinstance(v, int):
         return str(v)
     if isinstance(v, float):
-        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+        if math.isnan(v):
+            return "nan"
+        return ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, list):
@@ -178,8 +188,8 @@ def _mutate_suite(rng: random.Random) -> dict:
             body = body.setdefault(rng.choice(["lm", "de", "nope"]), {})
             keys = ["xtol", "ftol", "scheme", "max_nfev", "x_scale", "bogus"]
         elif table == "data":
-            keys = ["noise_um", "resolution_um", "seed", "mesh", "tier", "snapshots", "displacement_mm", "route",
-                    "bogus"]
+            keys = ["noise_um", "resolution_um", "seed", "mesh", "tier", "snapshots",
+                    "displacement_mm", "route", "bogus"]
         else:
             keys = list(VALID_SUITE["suite"]) + ["description", "bogus"]
         key = rng.choice(keys)
@@ -204,8 +214,10 @@ def test_random_suite_files_are_a_suite_or_one_clear_error(tmp_path):
             text = list(base)
             for _ in range(rng.randint(1, 6)):
                 i = rng.randrange(len(text))
-                text[i] = rng.choice(['"', "[", "]", "=", "\n", "\x00", "é", "#", ",", "{", "1", "-"])
-            text = "".join(text)[: rng.randint(0, len(base))] if rng.random() < 0.3 else "".join(text)
+                text[i] = rng.choice(['"', "[", "]", "=", "\n", "\x00", "é", "#", ",", "{", "1"])
+            text = "".join(text)
+            if rng.random() < 0.3:
+                text = text[: rng.randint(0, len(base))]
         else:
             text = _toml(_mutate_suite(rng))
         path.write_text(text, encoding="utf-8")
@@ -216,7 +228,8 @@ def test_random_suite_files_are_a_suite_or_one_clear_error(tmp_path):
             assert str(exc).strip()
             continue
         outcomes["ok"] += 1
-        assert all(b >= 1 for b in suite.budgets) and all(s >= 0 for s in suite.seeds) and suite.random_starts >= 1
+        assert all(b >= 1 for b in suite.budgets) and all(s >= 0 for s in suite.seeds)
+        assert suite.random_starts >= 1
         assert len(suite.runs()) == len(suite) > 0
     assert outcomes["ok"] >= 5 and outcomes["error"] > 100
     (tmp_path / "dir.toml").mkdir()
@@ -251,8 +264,8 @@ def test_garbled_and_mutated_data_files_are_loaded_or_rejected_in_one_line(tmp_p
     rng = random.Random(SEED)
     good = json.loads(data_text)
     path = tmp_path / "d.json"
-    fields = ["case", "settings", "parameters", "points", "snapshots_mm", "u_h", "u_v", "reaction_kN", "std_u_mm",
-              "meta", "format"]
+    fields = ["case", "settings", "parameters", "points", "snapshots_mm", "u_h", "u_v",
+              "reaction_kN", "std_u_mm", "meta", "format"]
     values = JUNK + [[[1.0, float("nan")]], [[float("inf")] * 2] * 3, "linear-shear", None]
     accepted = rejected = 0
     for k in range(300):
@@ -261,14 +274,15 @@ def test_garbled_and_mutated_data_files_are_loaded_or_rejected_in_one_line(tmp_p
             for _ in range(rng.randint(1, 4)):
                 raw[rng.randrange(len(raw))] = rng.randrange(256)
             path.write_bytes(bytes(raw[: rng.randint(0, len(raw))] if rng.random() < 0.3 else raw))
-        else:  # structure: wrong types, shapes, non-finite values, settings; hash recomputed so that it gets checked
+        else:  # structure: wrong types, shapes, non-finite values, settings; hash recomputed
             doc = json.loads(data_text)
             name = rng.choice(fields)
             if name == "settings" and rng.random() < 0.7:
                 doc["settings"][rng.choice(list(doc["settings"]) + ["bogus"])] = rng.choice(values)
             elif name in ("u_h", "u_v", "std_u_mm", "points") and rng.random() < 0.6:
                 arr = np.array(doc[name], float)
-                arr.flat[rng.randrange(arr.size)] = rng.choice([float("nan"), float("inf"), -1.0, 0.0, 1e300])
+                bad = rng.choice([float("nan"), float("inf"), -1.0, 0.0, 1e300])
+                arr.flat[rng.randrange(arr.size)] = bad
                 doc[name] = arr.tolist()
             elif rng.random() < 0.1:
                 doc.pop(name, None)
@@ -282,8 +296,9 @@ def test_garbled_and_mutated_data_files_are_loaded_or_rejected_in_one_line(tmp_p
             assert str(exc).startswith(f"data file {path}") and "\n" not in str(exc), exc
             continue
         accepted += 1
-        assert isinstance(ds, Dataset) and np.all(np.isfinite(ds.values)) and np.all(ds.std_u_mm > 0)
-        assert np.all(np.isfinite(ds.points)) and ds.u_h.shape == ds.u_v.shape == (len(ds.snapshots_mm), len(ds.points))
+        assert isinstance(ds, Dataset) and np.all(np.isfinite(ds.values))
+        assert np.all(ds.std_u_mm > 0) and np.all(np.isfinite(ds.points))
+        assert ds.u_h.shape == ds.u_v.shape == (len(ds.snapshots_mm), len(ds.points))
     assert rejected > 150 and accepted >= 1
     path.write_text(json.dumps(_rehash(json.loads(json.dumps(good)))))
     assert load(path).hash == good["hash"]
@@ -316,9 +331,10 @@ def _subparsers():
     return sub.choices
 
 
-CANDIDATES = ["0", "-1", "-0", "1", "2", "3", "1.5", "0.5", "-0.5", "nan", "NaN", "inf", "-inf", "1e999", "1e-320",
-              "abc", "", " ", "99999999999999999999", "0x10", "1,2", "1,,2", ",", "2,2,3:eighth", "bogus:quarter",
-              "0,1,1", "coarse", "tcp://", "tcp://host:0", "host:99999", "/", "/nonexistent/file.json",
+CANDIDATES = ["0", "-1", "-0", "1", "2", "3", "1.5", "0.5", "-0.5", "nan", "NaN", "inf", "-inf",
+              "1e999", "1e-320", "abc", "", " ", "99999999999999999999", "0x10", "1,2", "1,,2", ",",
+              "2,2,3:eighth", "bogus:quarter", "0,1,1", "coarse", "tcp://", "tcp://host:0",
+              "host:99999", "/", "/nonexistent/file.json",
               "x.unknown", "out.png"]
 
 
@@ -331,7 +347,8 @@ def test_every_typed_option_rejects_each_value_its_type_rejects(tmp_path):
     n_checked = 0
     for name, sub in _subparsers().items():
         for action in sub._actions:
-            if not action.option_strings or action.nargs == 0 or action.type in (None, str) or action.choices:
+            if (not action.option_strings or action.nargs == 0 or action.type in (None, str)
+                    or action.choices):
                 continue
             flag = max(action.option_strings, key=len)
             rejected = []
@@ -349,19 +366,23 @@ def test_every_typed_option_rejects_each_value_its_type_rejects(tmp_path):
     assert n_checked > 300
 
 
-#: per command: arguments that make it stop with exit 2 before any computation, whatever else is given
+#: per command: arguments that make it stop with exit 2 before any computation, whatever else is
+#: given
 #: (commands not listed whose first positional argument is a case get "no-such-case")
 ANCHORS = {
-    "cases": [], "solvers": [], "crosscheck": ["--render"], "data": ["no-such-case"], "dic": ["/nonexistent/ref.png"],
+    "cases": [], "solvers": [], "crosscheck": ["--render"], "data": ["no-such-case"],
+    "dic": ["/nonexistent/ref.png"],
     "forward": ["no-such-case"], "gsa": ["no-such-case"], "identifiability": ["no-such-case"],
     "identify": ["no-such-case"], "material": ["no-such-case"], "model-error": ["no-such-case"],
     "objective": ["no-such-case"],
-    "report": ["/nonexistent/results"], "run": ["/nonexistent/suite.toml"], "sensitivity": ["no-such-case"],
+    "report": ["/nonexistent/results"], "run": ["/nonexistent/suite.toml"],
+    "sensitivity": ["no-such-case"],
     "surrogate": ["no-such-case"], "uncertainty": ["no-such-case"],
 }
 
-GARBAGE = ["--", "-", "--x", "-x", "=", "==", "--=1", "E=", "=3", "E=nan", "p=inf", "NAME=VALUE", "--no-such-option",
-           "\x00", "é", "' ; rm -rf", "{}", "[]", "all", "lm", "nlopt:", "nlopt:LN_NOPE", "coarse", "0", "-1", "nan"]
+GARBAGE = ["--", "-", "--x", "-x", "=", "==", "--=1", "E=", "=3", "E=nan", "p=inf", "NAME=VALUE",
+           "--no-such-option", "\x00", "é", "' ; rm -rf", "{}", "[]", "all", "lm", "nlopt:",
+           "nlopt:LN_NOPE", "coarse", "0", "-1", "nan"]
 
 
 def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
@@ -373,9 +394,10 @@ def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
     n = 0
     for name, sub in commands.items():
         positional = [a.dest for a in sub._actions if not a.option_strings]
-        anchor = ANCHORS.get(name, ["no-such-case"] if positional[:1] in (["case"], ["cases"]) else None)
+        by_case = ["no-such-case"] if positional[:1] in (["case"], ["cases"]) else None
+        anchor = ANCHORS.get(name, by_case)
         if anchor is None:
-            continue  # a command without a known cheap stop: only its typed options are fuzzed (test above)
+            continue  # no known cheap stop: only its typed options are fuzzed (test above)
         flags = [max(a.option_strings, key=len) for a in sub._actions
                  if a.option_strings and not set(a.option_strings) & {"-h", "--help", "--version"}]
         for _ in range(40):
@@ -387,7 +409,8 @@ def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
                     if rng.random() < 0.8:
                         argv.append(rng.choice(values))
                 elif r < 0.75:
-                    argv.append(rng.choice(flags) + "=" + rng.choice(values) if flags else rng.choice(values))
+                    value = rng.choice(values)
+                    argv.append(rng.choice(flags) + "=" + value if flags else value)
                 else:
                     argv.append(rng.choice(values))
             if name == "crosscheck":
@@ -399,6 +422,7 @@ def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
 
 
 def test_top_level_garbage_is_one_line():
-    for argv in (["no-such-command"], ["--no-such-option"], ["cases", "extra"], ["identify"], ["dic"], ["-"]):
+    for argv in (["no-such-command"], ["--no-such-option"], ["cases", "extra"], ["identify"],
+                 ["dic"], ["-"]):
         code, _, err = _run(argv)
         _assert_one_line_error(argv, code, err)

@@ -20,8 +20,9 @@ def _runs(values_E: list[float]) -> pd.DataFrame:
     ref = dict(zip(case.names, case.reference))
     rows = []
     for seed, e in enumerate(values_E):
-        rows.append({"case": CASE, "method": "lm", "budget": 100, "seed": seed, "start": "default", "start_index": 0,
-                     "crashed": False, "cost": 1.0, "n_evals": 10, "x.E": e, "err.E": 100.0 * (e / ref["E"] - 1),
+        rows.append({"case": CASE, "method": "lm", "budget": 100, "seed": seed, "start": "default",
+                     "start_index": 0, "crashed": False, "cost": 1.0, "n_evals": 10,
+                     "x.E": e, "err.E": 100.0 * (e / ref["E"] - 1),
                      "x.psi": ref["psi"], "err.psi": 0.0})
     runs = pd.DataFrame(rows)
     runs.attrs["parameters"] = ["E", "psi"]
@@ -47,10 +48,12 @@ def test_table1_flags_a_parameter_on_a_bound():
     assert r"\textsuperscript{\dag}" in tex
     # one of two runs on the upper bound: counted
     t2 = T.table1(_runs([upper, 0.5 * (lower + upper)]), "lm")
-    assert t2.attrs["on_bound"] == {("E", CASE): (1, 2)} and T.table1_display(t2).loc["E", CASE].endswith("†1/2")
+    assert t2.attrs["on_bound"] == {("E", CASE): (1, 2)}
+    assert T.table1_display(t2).loc["E", CASE].endswith("†1/2")
     # inside the box: nothing flagged, no footnote
     t3 = T.table1(_runs([lower + 1e-3 * (upper - lower)]), "lm")
-    assert not t3.attrs["on_bound"] and T.bound_note(t3) == "" and T.BOUND_MARK not in T.table1_display(t3).to_string()
+    assert not t3.attrs["on_bound"] and T.bound_note(t3) == ""
+    assert T.BOUND_MARK not in T.table1_display(t3).to_string()
 
 
 def test_history_figure_draws_the_box_and_rings_a_final_value_on_a_bound(monkeypatch, tmp_path):
@@ -60,14 +63,18 @@ def test_history_figure_draws_the_box_and_rings_a_final_value_on_a_bound(monkeyp
     monkeypatch.setattr(F, "save", lambda fig, path, pdf=False: figs.append(fig) or path)
     box = T.normalised_box(CASE)
     it = np.arange(1, 21)
-    hist = pd.DataFrame({"iteration": it, "cost": np.geomspace(1e4, 1.0, 20), "best_cost": np.geomspace(1e4, 1.0, 20),
-                         "xn.E": np.linspace(1.1, box["E"][0], 20), "xn.psi": np.linspace(0.9, 1.0, 20)})
-    run = pd.Series({"case": CASE, "method": "lm", "budget": 100, "seed": 0, "start": "default", "start_index": 0,
+    cost = np.geomspace(1e4, 1.0, 20)
+    hist = pd.DataFrame({"iteration": it, "cost": cost, "best_cost": cost,
+                         "xn.E": np.linspace(1.1, box["E"][0], 20),
+                         "xn.psi": np.linspace(0.9, 1.0, 20)})
+    run = pd.Series({"case": CASE, "method": "lm", "budget": 100, "seed": 0, "start": "default",
+                     "start_index": 0,
                      "n_evals": 20, "status": "converged"})
     F.history_figure(run, hist, ["E", "psi"], tmp_path / "h")
     ax = figs[0].axes[0]
     rings = [ln for ln in ax.get_lines() if ln.get_label() == "on a bound"]
-    assert len(rings) == 1 and rings[0].get_xydata().tolist() == [[20.0, pytest.approx(box["E"][0])]]
+    assert len(rings) == 1
+    assert rings[0].get_xydata().tolist() == [[20.0, pytest.approx(box["E"][0])]]
     ys = {round(float(y), 9) for ln in ax.get_lines() for y in np.atleast_1d(ln.get_ydata())}
     for p in ("E", "psi"):  # both boxes are drawn
         assert round(box[p][0], 9) in ys and round(box[p][1], 9) in ys

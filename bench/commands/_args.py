@@ -91,7 +91,8 @@ def float_in(low: float | None = None, high: float | None = None, *, low_open: b
         bad = ((low is not None and (value <= low if low_open else value < low))
                or (high is not None and (value >= high if high_open else value > high)))
         if bad:
-            raise ArgumentTypeError(f"{value:g} is out of range: must be {describe_interval(low, high, low_open, high_open)}"
+            allowed = describe_interval(low, high, low_open, high_open)
+            raise ArgumentTypeError(f"{value:g} is out of range: must be {allowed}"
                                     + (f" {unit}" if unit else ""))
         return value
     check.__name__ = "number"
@@ -118,7 +119,8 @@ def comma_list(item_type, *, what: str = "value"):
     def check(text: str) -> tuple:
         items = [s.strip() for s in str(text).split(",")]
         if not text.strip() or any(not s for s in items):
-            raise ArgumentTypeError(f"{text!r} is malformed: a comma-separated list of {what}s, none empty")
+            raise ArgumentTypeError(
+                f"{text!r} is malformed: a comma-separated list of {what}s, none empty")
         return tuple(item_type(s) for s in items)
     check.__name__ = "list"
     return check
@@ -126,7 +128,7 @@ def comma_list(item_type, *, what: str = "value"):
 
 def mesh_spec(text: str) -> str:
     """A mesh spec the FE model accepts (``coarse``, ``paper``, ``fine``, ``NX,NY,NZ``, optionally
-    ``:eighth``/``:quarter``); returned unchanged (checked with problems.fe.mesh.parse_mesh_spec)."""
+    ``:eighth``/``:quarter``); returned unchanged (checked by problems.fe.mesh.parse_mesh_spec)."""
     from problems.fe.mesh import parse_mesh_spec
 
     try:
@@ -183,7 +185,8 @@ def study_data(text: str) -> str:
     try:
         return input_file(text)
     except ArgumentTypeError as exc:
-        raise ArgumentTypeError(f"{exc}; allowed: auto, shipped, synthetic or a data file") from None
+        raise ArgumentTypeError(f"{exc}; allowed: auto, shipped, synthetic or a data file") \
+            from None
 
 
 def assignments(items, option: str, names=None, *, units: dict | None = None) -> dict[str, float]:
@@ -199,7 +202,8 @@ def assignments(items, option: str, names=None, *, units: dict | None = None) ->
         if not sep or not name:
             raise ValueError(f"{option} {item!r} is malformed: expected NAME=VALUE with a number")
         if names is not None and name not in names:
-            raise ValueError(f"{option} {item!r}: parameter {name!r} is unknown; allowed: {', '.join(names)}")
+            raise ValueError(f"{option} {item!r}: parameter {name!r} is unknown; "
+                             f"allowed: {', '.join(names)}")
         try:
             v = float(value)
         except ValueError:
@@ -223,22 +227,24 @@ def add_mesh_argument(parser, default: str = "coarse", help: str | None = None) 
                         help=help or f"FE mesh: {MESH_HELP} (default: {default})")
 
 
-def add_cluster_arguments(parser, *, default_workers: int | None = None, workers_help: str | None = None) -> None:
+def add_cluster_arguments(parser, *, default_workers: int | None = None,
+                          workers_help: str | None = None) -> None:
     """``--workers N`` (>= 1) or ``--scheduler ADDRESS`` (mutually exclusive).
 
     ``default_workers`` None means one local Dask worker process per core.
     """
     where = parser.add_mutually_exclusive_group()
+    if workers_help is None:
+        workers_help = (f"Dask worker processes (default {default_workers})" if default_workers else
+                        "local Dask worker processes (default: one per core); 1 runs in-process")
     where.add_argument("--workers", type=positive_int, default=default_workers, metavar="N",
-                       help=workers_help or ("local Dask worker processes (default: one per core); 1 runs in-process"
-                                             if default_workers is None else
-                                             f"Dask worker processes (default {default_workers})"))
+                       help=workers_help)
     where.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS",
                        help="submit to an existing Dask cluster, e.g. tcp://host:8786")
 
 
 def scheduler_address(text: str) -> str:
-    """A Dask scheduler address ``[PROTOCOL://]HOST:PORT`` (protocol tcp, tls, ucx, ws, wss or inproc)."""
+    """A Dask scheduler address ``[PROTOCOL://]HOST:PORT`` (tcp, tls, ucx, ws, wss or inproc)."""
     t = str(text).strip()
     if not t:
         raise ArgumentTypeError("empty scheduler address")
@@ -246,9 +252,11 @@ def scheduler_address(text: str) -> str:
     if not sep:
         rest, proto = t, "tcp"
     if proto not in ("tcp", "tls", "inproc", "ucx", "ws", "wss"):
-        raise ArgumentTypeError(f"{text!r}: protocol {proto!r} is unknown; allowed: tcp://HOST:PORT (or tls, ucx, ws)")
+        raise ArgumentTypeError(f"{text!r}: protocol {proto!r} is unknown; "
+                                "allowed: tcp://HOST:PORT (or tls, ucx, ws)")
     host, colon, port = rest.rpartition(":")
-    if proto != "inproc" and (not colon or not host or not port.isdigit() or not 0 < int(port) < 65536):
+    valid_port = port.isdigit() and 0 < int(port) < 65536
+    if proto != "inproc" and (not colon or not host or not valid_port):
         raise ArgumentTypeError(f"{text!r} is not a scheduler address: expected tcp://HOST:PORT")
     return t
 
@@ -262,7 +270,8 @@ def add_quiet_argument(parser) -> None:
 #: checked types of options declared without one (or with a bare int/float), by option name
 BY_NAME = {
     "seed": nonneg_int, "budget": positive_int, "workers": positive_int, "samples": positive_int,
-    "steps": positive_int, "snapshots": positive_int, "batch": positive_int, "walkers": positive_int,
+    "steps": positive_int, "snapshots": positive_int, "batch": positive_int,
+    "walkers": positive_int,
     "mesh": mesh_spec, "hifi_mesh": mesh_spec, "scheduler": scheduler_address, "data": input_file,
     "json": output_file, "plate_margin_mm": nonneg_float,
 }
@@ -273,7 +282,8 @@ _FLOAT_TYPES = (nonneg_float, positive_float)
 def harden(parser: argparse.ArgumentParser) -> None:
     """Give the options of ``parser`` that have no checked type one (see the module docstring).
 
-    Positional arguments, flags, options with ``choices`` and options with their own type are left alone.
+    Positional arguments, flags, options with ``choices`` and options with their own type are left
+    alone.
     """
     for action in parser._actions:
         if not action.option_strings or action.choices is not None or action.nargs == 0:
@@ -283,5 +293,5 @@ def harden(parser: argparse.ArgumentParser) -> None:
             action.type = checked if checked in _INT_TYPES else integer
         elif action.type is float:
             action.type = checked if checked in _FLOAT_TYPES else finite_float
-        elif action.type is None and checked is not None and checked not in _INT_TYPES + _FLOAT_TYPES:
+        elif action.type is None and checked not in (None, *_INT_TYPES, *_FLOAT_TYPES):
             action.type = checked

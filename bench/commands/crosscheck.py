@@ -41,7 +41,9 @@ def main(args) -> int:
 
         out = results_root() / "crosscheck"
     if args.render:
-        for path in render_crosscheck(out):
+        from bench.studies import render_from
+
+        for path in render_from(render_crosscheck, out):
             print(f"wrote {path}")
         return 0
     psis = tuple(args.psi)  # checked by the argument type: degrees in [0, 35]

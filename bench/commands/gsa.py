@@ -52,13 +52,13 @@ def main(args) -> int:
 
     from bench.parallel import mapper
     from bench.progress import enabled, warn_if_long
-    from bench.studies import existing_dir
+    from bench.studies import existing_dir, render_from
     from bench.studies.global_sensitivity import render_gsa, run_gsa
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
     if args.render:
-        for path in render_gsa(existing_dir(NAME, case.name, args.out), (args.method,)):
+        for path in render_from(render_gsa, existing_dir(NAME, case.name, args.out), (args.method,)):
             print(f"wrote {path}")
         return 0
     samples = args.samples if args.samples is not None else (32 if args.method == "sobol" else 10)

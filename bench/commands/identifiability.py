@@ -36,7 +36,7 @@ def main(args) -> int:
     from bench.commands._args import assignments
     from bench.parallel import mapper
     from bench.progress import enabled, warn_if_long
-    from bench.studies import case_names, existing_dir
+    from bench.studies import case_names, existing_dir, render_from
     from bench.studies.identifiability import render_identifiability, render_summary, run_identifiability
     from problems.inverse.cases import get_case
 
@@ -49,10 +49,10 @@ def main(args) -> int:
     if args.render:
         paths = []
         for name in cases:
-            paths += render_identifiability(existing_dir(NAME, name, args.out if args.out is None or len(cases) == 1
-                                                         else Path(args.out) / name))
+            paths += render_from(render_identifiability, existing_dir(
+                NAME, name, args.out if args.out is None or len(cases) == 1 else Path(args.out) / name))
         if len(cases) > 1:
-            paths += render_summary(existing_dir(NAME, "summary", args.out))
+            paths += render_from(render_summary, existing_dir(NAME, "summary", args.out))
         for path in paths:
             print(f"wrote {path}")
         return 0

@@ -40,7 +40,7 @@ def main(args) -> int:
 
     from bench.parallel import mapper
     from bench.progress import enabled, warn_if_long
-    from bench.studies import case_names, existing_dir
+    from bench.studies import case_names, existing_dir, render_from
     from bench.studies.sensitivity import render_sensitivity, run_sensitivity
     from problems.inverse.cases import get_case
 
@@ -52,7 +52,7 @@ def main(args) -> int:
     outs = {name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name for name in cases}
     if args.render:
         for name in cases:
-            for path in render_sensitivity(existing_dir(NAME, name, outs[name])):
+            for path in render_from(render_sensitivity, existing_dir(NAME, name, outs[name])):
                 print(f"wrote {path}")
         return 0
     warn_if_long(NAME, sum(1 + len(get_case(c).names) for c in cases), args.mesh, workers=args.workers,

@@ -44,13 +44,13 @@ def main(args) -> int:
     from bench.commands._args import assignments
     from bench.parallel import mapper
     from bench.progress import EvaluationProgress, enabled, warn_if_long
-    from bench.studies import existing_dir
+    from bench.studies import existing_dir, render_from
     from bench.studies.uncertainty import render_uncertainty, run_uncertainty
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
     if args.render:
-        for path in render_uncertainty(existing_dir(NAME, case.name, args.out)):
+        for path in render_from(render_uncertainty, existing_dir(NAME, case.name, args.out)):
             print(f"wrote {path}")
         return 0
     x = assignments(args.x, "--x", case.names)

@@ -164,11 +164,31 @@ def write_json(path: Path, doc: dict) -> Path:
 
 
 def read_json(path: Path) -> dict:
-    """A JSON file written by :func:`write_json` (non-finite floats were written as strings)."""
+    """A JSON file written by :func:`write_json` (non-finite floats were written as strings);
+    ValueError naming the file when it is not JSON."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path} does not exist: run the study first")
-    return json.loads(path.read_text())
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc}): run the study again") from None
+
+
+def render_from(render, folder, *args) -> list:
+    """``render(folder, *args)`` with a malformed output folder (a missing field, a corrupt chain)
+    reported as one ValueError naming the folder instead of the reader's own exception."""
+    import zipfile
+
+    try:
+        return render(folder, *args)
+    except (KeyError, IndexError, TypeError, AttributeError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{folder}: the files of an earlier run are incomplete or malformed "
+                         f"({type(exc).__name__}: {exc}); run the study again") from None
+    except ValueError as exc:
+        if str(folder) in str(exc):
+            raise
+        raise ValueError(f"{folder}: {exc}") from None
 
 
 def as_float(value) -> float:
