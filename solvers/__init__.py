@@ -5,9 +5,34 @@
 
 Importing the package registers every adapter in :data:`METHODS`.
 """
+
 from solvers.base import METHODS, MethodInfo, Outcome, Run, find_method, get_method, register, solve
 from solvers.result import RunResult
 
-from solvers import scipy_, gauss_newton, pymoo_, pyswarms_, nlopt_, emcee_, hybrid, cma_, bo_, nevergrad_  # noqa: E402,F401  (registration)
+# Importing the adapters registers their methods, in this order (the order of METHODS).
+# isort: off
+from solvers import (  # noqa: F401
+    scipy_,
+    gauss_newton,
+    pymoo_,
+    pyswarms_,
+    nlopt_,
+    emcee_,
+    hybrid,
+    cma_,
+    bo_,
+    nevergrad_,
+)
+# isort: on
 
-__all__ = ["solve", "METHODS", "RunResult", "MethodInfo", "Outcome", "Run", "get_method", "find_method", "register"]
+__all__ = [
+    "solve",
+    "METHODS",
+    "RunResult",
+    "MethodInfo",
+    "Outcome",
+    "Run",
+    "get_method",
+    "find_method",
+    "register",
+]

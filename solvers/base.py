@@ -23,6 +23,7 @@ on the analytic problems). A start outside the box raises ``ValueError``.
 ``success`` is true when the status is ``"converged"``, and also for global and sampling methods
 when they stopped at their budget or generation limit (their normal end).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -54,14 +55,23 @@ class MethodInfo:
     description: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "library": self.library, "family": self.family,
-                "stochastic": self.stochastic, "description": self.description,
-                "options": {k: {"default": jsonio.plain(d), "description": s} for k, (d, s) in self.options.items()}}
+        return {
+            "name": self.name,
+            "library": self.library,
+            "family": self.family,
+            "stochastic": self.stochastic,
+            "description": self.description,
+            "options": {
+                k: {"default": jsonio.plain(d), "description": s}
+                for k, (d, s) in self.options.items()
+            },
+        }
 
 
 @dataclass
 class Outcome:
-    """What a method reports back to :func:`solve` (counts and final point come from the objective)."""
+    """What a method reports back to :func:`solve` (counts and final point come from the
+    objective)."""
 
     status: str = "converged"
     message: str = ""
@@ -73,21 +83,31 @@ METHODS: dict[str, MethodInfo] = {}
 _RESOLVERS: list[Callable[[str], MethodInfo | None]] = []  # dynamic names, e.g. nlopt:<ANY>
 
 
-def register(name: str, *, library: str, family: str, options: dict[str, tuple[Any, str]] | None = None,
-             stochastic: bool = False, description: str = ""):
+def register(
+    name: str,
+    *,
+    library: str,
+    family: str,
+    options: dict[str, tuple[Any, str]] | None = None,
+    stochastic: bool = False,
+    description: str = "",
+):
     """Decorator adding ``run`` to :data:`METHODS` under ``name``."""
     if family not in FAMILIES:
         raise ValueError(f"family {family!r} is unknown; allowed: {', '.join(FAMILIES)}")
 
     def deco(run):
-        METHODS[name] = MethodInfo(name, library, family, dict(options or {}), run, stochastic, description)
+        METHODS[name] = MethodInfo(
+            name, library, family, dict(options or {}), run, stochastic, description
+        )
         return run
 
     return deco
 
 
 def register_resolver(resolve: Callable[[str], MethodInfo | None]) -> None:
-    """Add a resolver of dynamic method names (e.g. any ``nlopt:<ALGORITHM>``) to :func:`get_method`."""
+    """Add a resolver of dynamic method names (e.g. any ``nlopt:<ALGORITHM>``) to
+    :func:`get_method`."""
     _RESOLVERS.append(resolve)
 
 
@@ -100,15 +120,18 @@ def find_method(name: str) -> MethodInfo | None:
 
 
 def get_method(name: str) -> MethodInfo:
-    """The registered method ``name`` (or one resolved dynamically, e.g. any ``nlopt:<ALGORITHM>``)."""
+    """The registered method ``name`` (or one resolved dynamically, e.g. any
+    ``nlopt:<ALGORITHM>``)."""
     if name in METHODS:
         return METHODS[name]
     for resolve in _RESOLVERS:
         info = resolve(name)
         if info is not None:
             return info
-    raise ValueError(f"solver {name!r} is unknown; allowed: {', '.join(sorted(METHODS))} "
-                     "(and any nlopt:<ALGORITHM>)")
+    raise ValueError(
+        f"solver {name!r} is unknown; allowed: {', '.join(sorted(METHODS))} "
+        "(and any nlopt:<ALGORITHM>)"
+    )
 
 
 @dataclass
@@ -146,10 +169,13 @@ class Run:
         obj = self.objective
         self._iteration[0] += 1
         best = obj.best
-        row = {"iteration": self._iteration[0], "n_evals": obj.n_evals,
-               "best_cost": best.cost if best is not None else math.inf,
-               "cost": math.inf if cost is None else float(cost),
-               "x": [] if z is None else [float(v) for v in obj.to_physical(z)]}
+        row = {
+            "iteration": self._iteration[0],
+            "n_evals": obj.n_evals,
+            "best_cost": best.cost if best is not None else math.inf,
+            "cost": math.inf if cost is None else float(cost),
+            "x": [] if z is None else [float(v) for v in obj.to_physical(z)],
+        }
         if self.phase:
             row["phase"] = self.phase
         row.update({k: jsonio.plain(v) for k, v in more.items()})
@@ -167,14 +193,25 @@ class Run:
             if entry["ok"] and entry["feasible"]:
                 best = min(best, entry["cost"])
             self._iteration[0] += 1
-            row = {"iteration": self._iteration[0], "n_evals": entry["n_evals"], "best_cost": best,
-                   "cost": entry["cost"], "x": [float(v) for v in entry["x"]]}
+            row = {
+                "iteration": self._iteration[0],
+                "n_evals": entry["n_evals"],
+                "best_cost": best,
+                "cost": entry["cost"],
+                "x": [float(v) for v in entry["x"]],
+            }
             if self.phase:
                 row["phase"] = self.phase
             self.history.append(row)
 
-    def sub(self, method: str, z0, budget: int, options: dict[str, Any] | None = None,
-            phase: str | None = None) -> Outcome:
+    def sub(
+        self,
+        method: str,
+        z0,
+        budget: int,
+        options: dict[str, Any] | None = None,
+        phase: str | None = None,
+    ) -> Outcome:
         """Run another registered method as a phase, capped at ``budget`` more evaluations.
 
         The phase shares the objective, the history and the iteration counter. If the phase uses
@@ -187,8 +224,17 @@ class Run:
         outer = obj.budget
         cap = obj.n_evals + max(0, int(budget))
         obj.set_budget(cap if outer is None else min(outer, cap))
-        child = Run(obj, method, np.asarray(z0, float), self.seed, int(budget), opts, self.history,
-                    phase or method, self._iteration)
+        child = Run(
+            obj,
+            method,
+            np.asarray(z0, float),
+            self.seed,
+            int(budget),
+            opts,
+            self.history,
+            phase or method,
+            self._iteration,
+        )
         try:
             out = info.run(child)
         except BudgetExhausted as exc:
@@ -201,26 +247,67 @@ class Run:
 
 
 #: options that count something (population, walkers, iterations, evaluations): whole numbers >= 1
-COUNT_OPTIONS = frozenset({
-    "pop_size", "popsize", "n_particles", "n_starts", "n_walkers", "n_steps", "n_initial", "n_points", "n_restarts",
-    "num_workers", "max_generations", "max_iterations", "maxiter", "maxeval", "max_nfev", "max_backtracks",
-    "max_evals", "ftol_iter", "incpopsize"})
+COUNT_OPTIONS = frozenset(
+    {
+        "pop_size",
+        "popsize",
+        "n_particles",
+        "n_starts",
+        "n_walkers",
+        "n_steps",
+        "n_initial",
+        "n_points",
+        "n_restarts",
+        "num_workers",
+        "max_generations",
+        "max_iterations",
+        "maxiter",
+        "maxeval",
+        "max_nfev",
+        "max_backtracks",
+        "max_evals",
+        "ftol_iter",
+        "incpopsize",
+    }
+)
 #: options that are probabilities or fractions: numbers in [0, 1] (burn_fraction below 1)
-FRACTION_OPTIONS = frozenset({"crossover_prob", "mutation_prob", "CR", "burn_fraction", "global_fraction"})
+FRACTION_OPTIONS = frozenset(
+    {"crossover_prob", "mutation_prob", "CR", "burn_fraction", "global_fraction"}
+)
 #: step sizes and scales: numbers > 0
-POSITIVE_OPTIONS = frozenset({"initial_step", "ball_size", "sigma0", "rel_step", "velocity_clamp", "min_tau_multiple"})
+POSITIVE_OPTIONS = frozenset(
+    {"initial_step", "ball_size", "sigma0", "rel_step", "velocity_clamp", "min_tau_multiple"}
+)
 #: tolerances and distribution indices: numbers >= 0
-NONNEGATIVE_OPTIONS = frozenset({"xtol", "gtol", "xtol_rel", "ftol_rel", "ftol_abs", "tolfun", "tolx", "local_xtol_rel",
-                                 "local_ftol_rel", "crossover_eta", "mutation_eta", "c1", "max_asks_factor"})
+NONNEGATIVE_OPTIONS = frozenset(
+    {
+        "xtol",
+        "gtol",
+        "xtol_rel",
+        "ftol_rel",
+        "ftol_abs",
+        "tolfun",
+        "tolx",
+        "local_xtol_rel",
+        "local_ftol_rel",
+        "crossover_eta",
+        "mutation_eta",
+        "c1",
+        "max_asks_factor",
+    }
+)
 
 
 def option_choices(description: str) -> tuple[str, ...]:
-    """The names an option's description offers as ``name (...) | name | ...`` (after its last colon)."""
+    """The names an option's description offers as ``name (...) | name | ...``
+    (after its last colon)."""
     text = description.rsplit(":", 1)[-1]
     alternatives = [a.strip() for a in text.split(" | ")]
     if len(alternatives) < 2:
         return ()
-    return tuple(a.replace("=", " ").replace("(", " ").split()[0] for a in alternatives if a.split())
+    return tuple(
+        a.replace("=", " ").replace("(", " ").split()[0] for a in alternatives if a.split()
+    )
 
 
 def option_value_error(name: str, value: Any, default: Any, description: str = "") -> str | None:
@@ -237,7 +324,9 @@ def option_value_error(name: str, value: Any, default: Any, description: str = "
         return None if default is None else f"{value!r} is not allowed (default {default!r})"
     if isinstance(default, bool):
         return None if isinstance(value, bool) else f"{value!r} is not true/false"
-    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+        value, (bool, np.bool_)
+    )
     if isinstance(default, (int, float)) or (default is None and number):
         if isinstance(value, str):
             if f"'{value}'" in description:
@@ -251,8 +340,13 @@ def option_value_error(name: str, value: Any, default: Any, description: str = "
             return f"{value!r} is not a whole number"
         if name in COUNT_OPTIONS and (float(value) != int(value) or value < 1):
             return f"{value!r} is out of range: a whole number >= 1"
-        if name in FRACTION_OPTIONS and not (0 <= value < 1 if name == "burn_fraction" else 0 <= value <= 1):
-            return f"{value!r} is out of range: must be in [0, 1{')' if name == 'burn_fraction' else ']'}"
+        if name in FRACTION_OPTIONS and not (
+            0 <= value < 1 if name == "burn_fraction" else 0 <= value <= 1
+        ):
+            return (
+                f"{value!r} is out of range: must be in [0, "
+                f"1{')' if name == 'burn_fraction' else ']'}"
+            )
         if name in POSITIVE_OPTIONS and not value > 0:
             return f"{value!r} is out of range: must be > 0"
         if name in NONNEGATIVE_OPTIONS and not value >= 0:
@@ -260,17 +354,23 @@ def option_value_error(name: str, value: Any, default: Any, description: str = "
         return None
     if isinstance(default, str) and isinstance(value, str):
         choices = option_choices(description)
-        if default in choices and value not in choices:  # (only a description that offers its default)
+        if default in choices and value not in choices:
+            # (only a description that offers its default)
             return f"{value!r} is unknown; allowed: {', '.join(choices)}"
     return None  # otherwise the method checks (bo's noise takes a name or a number)
 
 
-def resolve_options(info: MethodInfo, options: dict[str, Any], strict: bool = True) -> dict[str, Any]:
+def resolve_options(
+    info: MethodInfo, options: dict[str, Any], strict: bool = True
+) -> dict[str, Any]:
     """Defaults overridden by ``options``; unknown names and impossible values (see
-    :func:`option_value_error`) raise ``ValueError`` (unknown names are dropped when not ``strict``)."""
+    :func:`option_value_error`) raise ``ValueError`` (unknown names are dropped when not
+    ``strict``)."""
     unknown = set(options) - set(info.options)
     if unknown and strict:
-        raise ValueError(f"{info.name}: unknown option(s) {sorted(unknown)}; allowed: {sorted(info.options)}")
+        raise ValueError(
+            f"{info.name}: unknown option(s) {sorted(unknown)}; allowed: {sorted(info.options)}"
+        )
     if strict:
         for k, v in options.items():
             default, text = info.options[k]
@@ -293,8 +393,9 @@ def isolated_global_rng(seed: int):
         np.random.set_state(state)
 
 
-def solve(objective: Evaluator, method: str, *, budget: int, seed: int | None = 0, x0=None,
-          **options) -> RunResult:
+def solve(
+    objective: Evaluator, method: str, *, budget: int, seed: int | None = 0, x0=None, **options
+) -> RunResult:
     """Minimise ``objective`` with ``method`` within ``budget`` forward evaluations.
 
     ``x0`` is physical (``None``: centre of the box). Options are the method's (see
@@ -313,17 +414,26 @@ def solve(objective: Evaluator, method: str, *, budget: int, seed: int | None = 
         x0 = 0.5 * (obj.lower + obj.upper)
     x0 = np.asarray(x0, dtype=float).ravel()
     if x0.size != obj.n_params:
-        raise ValueError(f"x0 has {x0.size} values, expected {obj.n_params} ({', '.join(obj.names)})")
+        raise ValueError(
+            f"x0 has {x0.size} values, expected {obj.n_params} ({', '.join(obj.names)})"
+        )
     span = obj.upper - obj.lower
     if np.any(x0 < obj.lower - 1e-9 * span) or np.any(x0 > obj.upper + 1e-9 * span):
-        raise ValueError("x0 lies outside the bounds: " + "; ".join(
-            f"{n} = {v:g} is outside [{lo:g}, {hi:g}]" for n, v, lo, hi, w in zip(obj.names, x0, obj.lower, obj.upper, span)
-            if not lo - 1e-9 * w <= v <= hi + 1e-9 * w))
+        raise ValueError(
+            "x0 lies outside the bounds: "
+            + "; ".join(
+                f"{n} = {v:g} is outside [{lo:g}, {hi:g}]"
+                for n, v, lo, hi, w in zip(obj.names, x0, obj.lower, obj.upper, span)
+                if not lo - 1e-9 * w <= v <= hi + 1e-9 * w
+            )
+        )
     x0 = np.clip(x0, obj.lower, obj.upper)
 
     obj.reset()
     obj.set_budget(budget)
-    run = Run(obj, info.name if method == info.name else method, obj.to_scaled(x0), seed, budget, opts)
+    run = Run(
+        obj, info.name if method == info.name else method, obj.to_scaled(x0), seed, budget, opts
+    )
     t0 = time.perf_counter()
     try:
         out = info.run(run)
@@ -341,25 +451,47 @@ def solve(objective: Evaluator, method: str, *, budget: int, seed: int | None = 
         x, cost = x0.copy(), math.inf
         last = next((e for e in reversed(obj.log) if not e["ok"] or not e["feasible"]), None)
         status = "failed"
-        message = ("no successful evaluation" + (f"; {message}" if message else "")
-                   + (f" (last failure at x = {np.asarray(last['x']).tolist()})" if last else ""))
+        message = (
+            "no successful evaluation"
+            + (f"; {message}" if message else "")
+            + (f" (last failure at x = {np.asarray(last['x']).tolist()})" if last else "")
+        )
     else:
         x, cost = best.x.copy(), best.cost
-    success = status == "converged" or (info.family != "local" and status in ("budget", "max_iterations"))
+    success = status == "converged" or (
+        info.family != "local" and status in ("budget", "max_iterations")
+    )
     extra = {k: jsonio.plain(v) for k, v in out.extra.items()}
     if obj.n_jacobian_failures:
         extra["n_jacobian_failures"] = obj.n_jacobian_failures
     return RunResult(
-        method=run.method, options={k: jsonio.plain(v) for k, v in opts.items()}, seed=seed, budget=budget,
-        parameter_names=list(obj.names), reference=[float(v) for v in obj.reference],
-        x0=[float(v) for v in x0], x=[float(v) for v in x],
-        x_normalised=[float(v) for v in obj.to_scaled(x)], cost=float(cost), status=status,
-        success=bool(success), message=message, n_evals=obj.n_evals, n_failed=obj.n_failed,
-        n_infeasible=obj.n_infeasible, n_cache_hits=obj.n_cache_hits,
+        method=run.method,
+        options={k: jsonio.plain(v) for k, v in opts.items()},
+        seed=seed,
+        budget=budget,
+        parameter_names=list(obj.names),
+        reference=[float(v) for v in obj.reference],
+        x0=[float(v) for v in x0],
+        x=[float(v) for v in x],
+        x_normalised=[float(v) for v in obj.to_scaled(x)],
+        cost=float(cost),
+        status=status,
+        success=bool(success),
+        message=message,
+        n_evals=obj.n_evals,
+        n_failed=obj.n_failed,
+        n_infeasible=obj.n_infeasible,
+        n_cache_hits=obj.n_cache_hits,
         n_iterations=int(out.n_iterations if out.n_iterations is not None else run.n_iterations),
-        wall_s=wall, forward_equivalents=obj.forward_equivalents(),
-        charges={k: {**c, "forward_equivalents": obj.charged_equivalents()[k]} for k, c in obj.charges.items()},
-        provenance=jsonio.plain(dict(obj.provenance)), history=run.history, extra=extra,
+        wall_s=wall,
+        forward_equivalents=obj.forward_equivalents(),
+        charges={
+            k: {**c, "forward_equivalents": obj.charged_equivalents()[k]}
+            for k, c in obj.charges.items()
+        },
+        provenance=jsonio.plain(dict(obj.provenance)),
+        history=run.history,
+        extra=extra,
     )
 
 

@@ -29,7 +29,8 @@ process fitted to *all* points evaluated so far.
 * The surrogate costs O(k^3) in the number k of points (the acquisition search O(k^2) per
   prediction), about 0.1-0.5 s per iteration up to k ~ 100 on one core: the run stops after
   ``max_evals`` evaluations (status ``max_iterations``) even if the budget is larger. The GP runs
-  with BLAS limited to one thread (tiny matrices: threads only contend, 3x slower on two busy cores).
+  with BLAS limited to one thread (tiny matrices: threads only contend, 3x slower on two busy
+  cores).
 
 Seeding: the design from the run's seed, and every scikit-optimize ``Optimizer`` (a fresh one per
 iteration, fitted on all points, so that failure substitutes can follow the worst cost) gets a
@@ -37,6 +38,7 @@ iteration, fitted on all points, so that failure substitutes can follow the wors
 :func:`~solvers.base.isolated_global_rng` (scikit-learn/scikit-optimize draw from NumPy's global
 generator in places: without it, equal seeds gave different points).
 """
+
 from __future__ import annotations
 
 import warnings
@@ -46,20 +48,39 @@ import numpy as np
 from solvers.base import Outcome, Run, isolated_global_rng, lhs, register
 
 BO_OPTIONS = {
-    "n_initial": (None, "Latin-hypercube points of the initial design (None: 4 n, n = number of parameters)"),
+    "n_initial": (
+        None,
+        "Latin-hypercube points of the initial design (None: 4 n, n = number of parameters)",
+    ),
     "include_x0": (False, "put the start point into the initial design"),
     "acq_func": ("EI", "acquisition: EI (expected improvement) | PI | LCB | gp_hedge"),
     "xi": (0.01, "EI/PI exploration margin, in units of the transformed cost"),
     "kappa": (1.96, "LCB exploration weight"),
-    "transform": ("none", "surrogate target: none = cost | log1p = ln(1 + cost/cost_scale) | log = ln(cost)"),
-    "cost_scale": (None, "cost_scale of log1p: a cost | median (running median cost) | None (number of residuals)"),
+    "transform": (
+        "none",
+        "surrogate target: none = cost | log1p = ln(1 + cost/cost_scale) | log = ln(cost)",
+    ),
+    "cost_scale": (
+        None,
+        "cost_scale of log1p: a cost | median (running median cost) | None (number of residuals)",
+    ),
     "failure_penalty": (1.0, "failed points: worst transformed cost so far + failure_penalty"),
-    "acq_optimizer": ("lbfgs", "acquisition search: lbfgs (random points + L-BFGS-B polish) | sampling"),
+    "acq_optimizer": (
+        "lbfgs",
+        "acquisition search: lbfgs (random points + L-BFGS-B polish) | sampling",
+    ),
     "n_points": (2000, "random points scored per acquisition search"),
     "n_restarts": (2, "L-BFGS-B starts of the acquisition search (lbfgs; at least 1)"),
     "gp_restarts": (1, "random restarts of the GP hyperparameter (marginal likelihood) fit"),
-    "refit_every": (5, "fit the GP hyperparameters at every refit_every-th iteration; in between keep them"),
-    "noise": ("gaussian", "GP noise: gaussian (a learned white-noise level) | a fixed variance (of the normalised target)"),
+    "refit_every": (
+        5,
+        "fit the GP hyperparameters at every refit_every-th iteration; in between keep them",
+    ),
+    "noise": (
+        "gaussian",
+        "GP noise: gaussian (a learned white-noise level) | a fixed variance (of the normalised "
+        "target)",
+    ),
     "max_evals": (200, "stop after this many evaluations (the GP costs O(k^3)); None: the budget"),
 }
 
@@ -74,9 +95,15 @@ def _transform(cost: np.ndarray, how: str, scale: float) -> np.ndarray:
     raise ValueError(f"bo: transform {how!r} is unknown; allowed: log1p, log, none")
 
 
-@register("bo", library="scikit-optimize", family="global", options=BO_OPTIONS, stochastic=True,
-          description="Bayesian optimisation: GP (Matern 5/2) surrogate, expected improvement, "
-                      "Latin-hypercube start; for small budgets (<= ~200 evaluations)")
+@register(
+    "bo",
+    library="scikit-optimize",
+    family="global",
+    options=BO_OPTIONS,
+    stochastic=True,
+    description="Bayesian optimisation: GP (Matern 5/2) surrogate, expected improvement, "
+    "Latin-hypercube start; for small budgets (<= ~200 evaluations)",
+)
 def run_bo(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     n = r.lower.size
@@ -121,8 +148,14 @@ def run_bo(r: Run) -> Outcome:
         if obj.n_evals == before and iterations > 10 * cap:  # guard; repeats are replaced above
             return Outcome("stalled", "suggestions only repeat evaluated points", iterations)
     if cap < r.budget:
-        return Outcome("max_iterations", f"max_evals = {cap} evaluations (the surrogate grows as k^3)", iterations)
-    return Outcome("budget", f"evaluation budget spent after {iterations} surrogate iterations", iterations)
+        return Outcome(
+            "max_iterations",
+            f"max_evals = {cap} evaluations (the surrogate grows as k^3)",
+            iterations,
+        )
+    return Outcome(
+        "budget", f"evaluation budget spent after {iterations} surrogate iterations", iterations
+    )
 
 
 def _is_cached(obj, z) -> bool:
@@ -131,7 +164,9 @@ def _is_cached(obj, z) -> bool:
     return any(np.array_equal(x, e["x"]) for e in obj.log)
 
 
-def _suggest(U: np.ndarray, C: np.ndarray, ok: np.ndarray, o: dict, how: str, scale, seed: int, hyper=None):
+def _suggest(
+    U: np.ndarray, C: np.ndarray, ok: np.ndarray, o: dict, how: str, scale, seed: int, hyper=None
+):
     """Next point (unit box) from a GP fitted to all points ``U`` with costs ``C`` (``ok``: usable).
 
     ``hyper``: ``(kernel, noise)`` of an earlier fit to keep (no hyperparameter optimisation), or
@@ -150,33 +185,52 @@ def _suggest(U: np.ndarray, C: np.ndarray, ok: np.ndarray, o: dict, how: str, sc
     else:  # nothing succeeded yet: a flat surrogate, EI then explores at random
         y[:] = 0.0
     acq_kwargs = {"xi": float(o["xi"]), "kappa": float(o["kappa"])}
-    opt_kwargs = {"n_points": int(o["n_points"]), "n_restarts_optimizer": max(1, int(o["n_restarts"])), "n_jobs": 1}
+    opt_kwargs = {
+        "n_points": int(o["n_points"]),
+        "n_restarts_optimizer": max(1, int(o["n_restarts"])),
+        "n_jobs": 1,
+    }
     gp = _gp(U.shape[1], o["noise"], int(o["gp_restarts"]), hyper)
     with threadpool_limits(1), isolated_global_rng(seed), warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # sklearn's GP convergence warnings, skopt's repeat warnings
-        opt = Optimizer([(0.0, 1.0)] * U.shape[1], base_estimator=gp, n_initial_points=0,
-                        acq_func=str(o["acq_func"]), acq_optimizer=str(o["acq_optimizer"]),
-                        acq_func_kwargs=acq_kwargs, acq_optimizer_kwargs=opt_kwargs, random_state=seed)
+        # sklearn's GP convergence warnings, skopt's repeat warnings
+        warnings.simplefilter("ignore")
+        opt = Optimizer(
+            [(0.0, 1.0)] * U.shape[1],
+            base_estimator=gp,
+            n_initial_points=0,
+            acq_func=str(o["acq_func"]),
+            acq_optimizer=str(o["acq_optimizer"]),
+            acq_func_kwargs=acq_kwargs,
+            acq_optimizer_kwargs=opt_kwargs,
+            random_state=seed,
+        )
         opt.tell([list(map(float, u)) for u in U], [float(v) for v in y])
         model = opt.models[-1]
         kernel = model.kernel_
         if isinstance(kernel, Sum) and isinstance(kernel.k2, WhiteKernel):
-            kernel = kernel.k1  # skopt adds the noise term at every fit (and zeroes it for predictions)
+            # skopt adds the noise term at every fit (and zeroes it for predictions)
+            kernel = kernel.k1
         return np.asarray(opt.ask(), dtype=float), (kernel, model.noise_)
 
 
 def _gp(n: int, noise, restarts: int, hyper=None):
-    """scikit-optimize's default GP for ``n`` continuous parameters (noise model and restarts as given);
-    with ``hyper = (kernel, noise level)``, a GP with these hyperparameters kept fixed."""
+    """scikit-optimize's default GP for ``n`` continuous parameters (noise model and restarts as
+    given); with ``hyper = (kernel, noise level)``, a GP with these hyperparameters kept fixed."""
     from skopt.learning import GaussianProcessRegressor
     from skopt.learning.gaussian_process.kernels import ConstantKernel, Matern
 
     if hyper is not None:
         kernel, level = hyper
-        return GaussianProcessRegressor(kernel=kernel, normalize_y=True, optimizer=None,
-                                        noise=float(level) if level else None)
+        return GaussianProcessRegressor(
+            kernel=kernel, normalize_y=True, optimizer=None, noise=float(level) if level else None
+        )
 
-    kernel = ConstantKernel(1.0, (0.01, 1000.0)) * Matern(length_scale=np.ones(n), length_scale_bounds=[(0.01, 100)] * n,
-                                                          nu=2.5)
-    return GaussianProcessRegressor(kernel=kernel, normalize_y=True, n_restarts_optimizer=restarts,
-                                    noise=noise if noise == "gaussian" else float(noise))
+    kernel = ConstantKernel(1.0, (0.01, 1000.0)) * Matern(
+        length_scale=np.ones(n), length_scale_bounds=[(0.01, 100)] * n, nu=2.5
+    )
+    return GaussianProcessRegressor(
+        kernel=kernel,
+        normalize_y=True,
+        n_restarts_optimizer=restarts,
+        noise=noise if noise == "gaussian" else float(noise),
+    )

@@ -16,6 +16,7 @@ Seeding: cma draws from NumPy's *global* generator (its ``seed`` option reseeds 
 wrapped in :func:`~solvers.base.isolated_global_rng` and each restart gets a seed derived from the
 run's seed. cma writes no files (``verb_log=0``) and prints nothing (``verbose=-9``).
 """
+
 from __future__ import annotations
 
 import math
@@ -33,12 +34,22 @@ CMA_OPTIONS = {
     "incpopsize": (2, "population factor at each restart (IPOP; 1: plain restarts)"),
     "tolfun": (1e-11, "cma termination: range of the recent best costs below tolfun"),
     "tolx": (1e-11, "cma termination: step sizes below tolx (unit box)"),
-    "max_generations": (None, "maximum number of generations over all restarts (None: until the budget)"),
+    "max_generations": (
+        None,
+        "maximum number of generations over all restarts (None: until the budget)",
+    ),
 }
 
 
-@register("cma", library="cma", family="global", options=CMA_OPTIONS, stochastic=True,
-          description="CMA-ES (covariance matrix adaptation evolution strategy) with bounds and IPOP restarts")
+@register(
+    "cma",
+    library="cma",
+    family="global",
+    options=CMA_OPTIONS,
+    stochastic=True,
+    description="CMA-ES (covariance matrix adaptation evolution strategy) with bounds and IPOP "
+    "restarts",
+)
 def run_cma(r: Run) -> Outcome:
     import cma
 
@@ -53,33 +64,69 @@ def run_cma(r: Run) -> Outcome:
     with isolated_global_rng(r.seed), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         while True:
-            es = cma.CMAEvolutionStrategy(u0, float(o["sigma0"]), {
-                "bounds": [0.0, 1.0], "popsize": popsize, "seed": int(rng.integers(1, 2**31 - 1)),
-                "tolfun": float(o["tolfun"]), "tolx": float(o["tolx"]),
-                "verbose": -9, "verb_log": 0, "verb_disp": 0})
+            es = cma.CMAEvolutionStrategy(
+                u0,
+                float(o["sigma0"]),
+                {
+                    "bounds": [0.0, 1.0],
+                    "popsize": popsize,
+                    "seed": int(rng.integers(1, 2**31 - 1)),
+                    "tolfun": float(o["tolfun"]),
+                    "tolx": float(o["tolx"]),
+                    "verbose": -9,
+                    "verb_log": 0,
+                    "verb_disp": 0,
+                },
+            )
             while not es.stop():
                 if obj.remaining == 0:
-                    return Outcome("budget", f"evaluation budget spent after {generations} generations", generations,
-                                   {"restarts": restarts_done, "terminations": terminations})
+                    return Outcome(
+                        "budget",
+                        f"evaluation budget spent after {generations} generations",
+                        generations,
+                        {"restarts": restarts_done, "terminations": terminations},
+                    )
                 if max_gen is not None and generations >= max_gen:
-                    return Outcome("max_iterations", f"{max_gen} generations", generations,
-                                   {"restarts": restarts_done, "terminations": terminations})
+                    return Outcome(
+                        "max_iterations",
+                        f"{max_gen} generations",
+                        generations,
+                        {"restarts": restarts_done, "terminations": terminations},
+                    )
                 U = np.asarray(es.ask(), dtype=float)
                 Z = np.clip(r.lower + U * width, r.lower, r.upper)
                 before = obj.n_evals
                 try:
                     f = obj.costs(Z)
                 except BudgetExhausted as exc:  # the points that fitted are evaluated and logged
-                    if obj.best is not None and obj.n_evals > before:  # a row for the cut generation
-                        r.record(obj.best_z, obj.best.cost, generation=generations + 1, restart=restarts_done,
-                                 popsize=popsize, sigma=float(es.sigma), partial=True)
-                    return Outcome("budget", str(exc), generations,
-                                   {"restarts": restarts_done, "terminations": terminations})
+                    if obj.best is not None and obj.n_evals > before:
+                        # a row for the cut generation
+                        r.record(
+                            obj.best_z,
+                            obj.best.cost,
+                            generation=generations + 1,
+                            restart=restarts_done,
+                            popsize=popsize,
+                            sigma=float(es.sigma),
+                            partial=True,
+                        )
+                    return Outcome(
+                        "budget",
+                        str(exc),
+                        generations,
+                        {"restarts": restarts_done, "terminations": terminations},
+                    )
                 es.tell(list(U), [float(c) for c in f])
                 generations += 1
                 k = int(np.argmin(f))
-                r.record(Z[k], f[k], generation=generations, restart=restarts_done, popsize=popsize,
-                         sigma=float(es.sigma))
+                r.record(
+                    Z[k],
+                    f[k],
+                    generation=generations,
+                    restart=restarts_done,
+                    popsize=popsize,
+                    sigma=float(es.sigma),
+                )
             terminations.append({k: _plain(v) for k, v in es.stop().items()})
             if restarts_done >= int(o["restarts"]) or obj.remaining == 0:
                 break
@@ -87,8 +134,12 @@ def run_cma(r: Run) -> Outcome:
             popsize = int(round(popsize * float(o["incpopsize"])))
             u0 = rng.uniform(0.0, 1.0, n)
     stops = ", ".join(sorted(terminations[-1]))
-    return Outcome("converged", f"cma terminated ({stops}) after {restarts_done} restart(s)", generations,
-                   {"restarts": restarts_done, "terminations": terminations})
+    return Outcome(
+        "converged",
+        f"cma terminated ({stops}) after {restarts_done} restart(s)",
+        generations,
+        {"restarts": restarts_done, "terminations": terminations},
+    )
 
 
 def _plain(v):

@@ -6,6 +6,7 @@ Round k: ``eps_k = U_hifi(x_k) - U_inverse(x_k)`` (``correction_at(x_k)``), obje
 ``max_i |x_{k+1,i} / x_{k,i} - 1| < tol`` (default 0.1 %) or after ``max_rounds``. Every round's
 evaluations count against one budget, and every high-fidelity run is charged.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -17,8 +18,18 @@ from solvers.base import solve
 from solvers.result import RunResult
 
 
-def solve_iterated(make_objective: Callable, correction_at: Callable, method: str, *, budget: int, x0,
-                   seed: int | None = 0, tol: float = 1e-3, max_rounds: int = 8, **options) -> RunResult:
+def solve_iterated(
+    make_objective: Callable,
+    correction_at: Callable,
+    method: str,
+    *,
+    budget: int,
+    x0,
+    seed: int | None = 0,
+    tol: float = 1e-3,
+    max_rounds: int = 8,
+    **options,
+) -> RunResult:
     """Minimise with the iterated correction; returns the last round's result with totals.
 
     make_objective : ``correction -> Evaluator``, the objective with that correction applied and its
@@ -48,8 +59,15 @@ def solve_iterated(make_objective: Callable, correction_at: Callable, method: st
         history += [{**row, "round": k} for row in result.history]
         x_new = np.asarray(result.x, float)
         move = float(np.max(np.abs(x_new / x - 1.0)))
-        rounds.append({"round": k, "x": x_new.tolist(), "cost": result.cost, "move": move,
-                       "n_evals": result.n_evals})
+        rounds.append(
+            {
+                "round": k,
+                "x": x_new.tolist(),
+                "cost": result.cost,
+                "move": move,
+                "n_evals": result.n_evals,
+            }
+        )
         x = x_new
         if move < tol:
             break
@@ -57,7 +75,15 @@ def solve_iterated(make_objective: Callable, correction_at: Callable, method: st
         raise ValueError(f"budget = {budget!r} leaves no evaluation for the first round")
     converged = rounds[-1]["move"] < tol
     extra = {**result.extra, "correction_rounds": rounds, "correction_converged": converged}
-    return replace(result, x0=[float(v) for v in np.asarray(x0, float)], n_evals=used, budget=int(budget),
-                   forward_equivalents=fe, charges=charges, history=history, extra=extra,
-                   n_iterations=sum(r["n_evals"] > 0 for r in rounds),
-                   provenance={**result.provenance, "treatment": "iterated", "tol": tol})
+    return replace(
+        result,
+        x0=[float(v) for v in np.asarray(x0, float)],
+        n_evals=used,
+        budget=int(budget),
+        forward_equivalents=fe,
+        charges=charges,
+        history=history,
+        extra=extra,
+        n_iterations=sum(r["n_evals"] > 0 for r in rounds),
+        provenance={**result.provenance, "treatment": "iterated", "tol": tol},
+    )

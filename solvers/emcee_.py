@@ -11,14 +11,14 @@ ball around the start point (``init="ball"``, standard deviation ``ball_size`` i
 the box by Latin hypercube (``init="lhs"``). Seeded: walker start from ``seed``, emcee's own
 ``RandomState`` from ``seed``.
 
-Reported in ``extra``: posterior ``mean``, ``median``, ``std``, ``q2.5``/``q97.5`` (95 % interval) per
-parameter (physical, after discarding ``burn_fraction`` of the steps), ``map`` (best sample) and
-its cost, ``acceptance_fraction``, ``autocorr_time`` (integrated, in steps), ``n_steps``, ``n_walkers``,
-``warnings`` (e.g. a chain shorter than 50 autocorrelation times), and the chain itself (physical,
-``chain[step][walker][param]`` and ``log_prob[step][walker]``), or, with ``chain_path``, the path
-of the ``.npz`` file holding them (see below). The RunResult's ``x`` is the best point evaluated
-(at least as good as the MAP sample). Status: ``"converged"`` when the kept chain is at least 50
-autocorrelation times long, else ``"budget"`` or ``"max_iterations"``.
+Reported in ``extra``: posterior ``mean``, ``median``, ``std``, ``q2.5``/``q97.5`` (95 % interval)
+per parameter (physical, after discarding ``burn_fraction`` of the steps), ``map`` (best sample) and
+its cost, ``acceptance_fraction``, ``autocorr_time`` (integrated, in steps), ``n_steps``,
+``n_walkers``, ``warnings`` (e.g. a chain shorter than 50 autocorrelation times), and the chain
+itself (physical, ``chain[step][walker][param]`` and ``log_prob[step][walker]``), or, with
+``chain_path``, the path of the ``.npz`` file holding them (see below). The RunResult's ``x`` is the
+best point evaluated (at least as good as the MAP sample). Status: ``"converged"`` when the kept
+chain is at least 50 autocorrelation times long, else ``"budget"`` or ``"max_iterations"``.
 
 Structure: :func:`run_mcmc` is a thin loop over :func:`ensemble_steps` (emcee's
 ``EnsembleSampler.sample()`` generator, iterated as emcee's own ``run_mcmc`` does, in chunks the
@@ -28,6 +28,7 @@ the in-memory :class:`emcee.backends.Backend`, or, with ``chain_path``,
 z = x / reference, with ``names`` and ``scale`` = reference: x = chain x scale).
 :func:`chain_summary` turns a backend into the numbers of ``extra``.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,18 +45,31 @@ MCMC_OPTIONS = {
     "init": ("ball", "walker start: ball (around x0) | lhs (Latin hypercube over the box)"),
     "ball_size": (1e-2, "standard deviation of the start ball, in z = x / reference"),
     "burn_fraction": (0.3, "fraction of the steps discarded as burn-in"),
-    "moves": ("de-mix", "emcee moves: de-mix (80 % DE + 20 % DE-snooker) | stretch | de | de-snooker | walk"),
+    "moves": (
+        "de-mix",
+        "emcee moves: de-mix (80 % DE + 20 % DE-snooker) | stretch | de | de-snooker | walk",
+    ),
     "keep_chain": (True, "store the chain in extra (ignored when chain_path is given)"),
-    "chain_path": (None, "keep the chain in this .npz file (solvers.npz_backend.NpzBackend) instead of extra"),
-    "min_tau_multiple": (50.0, "warn when the kept chain is shorter than this many autocorrelation times"),
+    "chain_path": (
+        None,
+        "keep the chain in this .npz file (solvers.npz_backend.NpzBackend) instead of extra",
+    ),
+    "min_tau_multiple": (
+        50.0,
+        "warn when the kept chain is shorter than this many autocorrelation times",
+    ),
 }
 
 
 def _moves(name: str):
     import emcee
 
-    table = {"stretch": emcee.moves.StretchMove, "de": emcee.moves.DEMove,
-             "de-snooker": emcee.moves.DESnookerMove, "walk": emcee.moves.WalkMove}
+    table = {
+        "stretch": emcee.moves.StretchMove,
+        "de": emcee.moves.DEMove,
+        "de-snooker": emcee.moves.DESnookerMove,
+        "walk": emcee.moves.WalkMove,
+    }
     if name == "de-mix":
         return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     if name not in table:
@@ -64,7 +78,8 @@ def _moves(name: str):
 
 
 def initial_ensemble(r: Run, n_walkers: int) -> np.ndarray:
-    """Walker start positions (n_walkers, n) in z: a ball about ``r.z0`` reflected into the box, or LHS."""
+    """Walker start positions (n_walkers, n) in z: a ball about ``r.z0`` reflected into the box, or
+    LHS."""
     o, lo, hi = r.options, r.lower, r.upper
     rng = r.rng(1)
     if o["init"] == "ball":
@@ -92,7 +107,9 @@ def log_posterior(objective, lower, upper) -> Callable[[np.ndarray], np.ndarray]
     return log_prob
 
 
-def ensemble_steps(sampler, p0, remaining: Callable[[], float], max_steps: float = math.inf) -> Iterator:
+def ensemble_steps(
+    sampler, p0, remaining: Callable[[], float], max_steps: float = math.inf
+) -> Iterator:
     """Iterate emcee's ``sampler.sample()`` generator from ``p0`` and yield the ensemble state after
     each step, for at most ``max_steps`` steps and only while the budget surely allows them: a step
     costs at most one evaluation per walker, the first one also the initial ensemble's.
@@ -103,13 +120,17 @@ def ensemble_steps(sampler, p0, remaining: Callable[[], float], max_steps: float
         chunk = min(max_steps - done, (remaining() - (nw if done == 0 else 0)) // nw)
         if chunk < 1:
             return
-        for state in sampler.sample(state, iterations=int(chunk), skip_initial_state_check=True):
+        # the last state of a chunk is where the next chunk starts
+        for state in sampler.sample(state, iterations=int(chunk), skip_initial_state_check=True):  # noqa: B020
             done += 1
             yield state
 
 
-def chain_summary(backend, names, to_physical, burn_fraction: float, min_tau_multiple: float) -> dict:
-    """Posterior numbers of ``extra`` from an emcee backend (chain in z; ``to_physical`` maps z to x):
+def chain_summary(
+    backend, names, to_physical, burn_fraction: float, min_tau_multiple: float
+) -> dict:
+    """Posterior numbers of ``extra`` from an emcee backend (chain in z; ``to_physical`` maps z to
+    x):
     burn-in, mean/median/std/percentiles of the kept chain, MAP sample and cost, acceptance,
     integrated autocorrelation times (steps) and the short-chain warning."""
     from emcee.autocorr import integrated_time
@@ -126,7 +147,9 @@ def chain_summary(backend, names, to_physical, burn_fraction: float, min_tau_mul
     tau_max = float(np.max(tau))
     k = np.unravel_index(np.argmax(logp), logp.shape)
     extra = {
-        "n_walkers": backend.nwalkers, "n_steps": steps, "burn": burn,
+        "n_walkers": backend.nwalkers,
+        "n_steps": steps,
+        "burn": burn,
         "mean": dict(zip(names, flat.mean(axis=0))),
         "median": dict(zip(names, np.median(flat, axis=0))),
         "std": dict(zip(names, flat.std(axis=0, ddof=1) if len(flat) > 1 else np.zeros(n))),
@@ -142,12 +165,20 @@ def chain_summary(backend, names, to_physical, burn_fraction: float, min_tau_mul
     if (steps - burn) < min_tau_multiple * tau_max:
         extra["warnings"].append(
             f"chain of {steps - burn} kept steps is shorter than {min_tau_multiple:g} "
-            f"autocorrelation times (tau = {tau_max:.3g} steps): the estimates are unreliable")
+            f"autocorrelation times (tau = {tau_max:.3g} steps): the estimates are unreliable"
+        )
     return extra
 
 
-@register("mcmc", library="emcee", family="sampling", options=MCMC_OPTIONS, stochastic=True,
-          description="posterior sampling (emcee ensemble sampler), Gaussian likelihood, uniform prior on the box")
+@register(
+    "mcmc",
+    library="emcee",
+    family="sampling",
+    options=MCMC_OPTIONS,
+    stochastic=True,
+    description="posterior sampling (emcee ensemble sampler), Gaussian likelihood, uniform prior "
+    "on the box",
+)
 def run_mcmc(r: Run) -> Outcome:
     import emcee
 
@@ -158,27 +189,42 @@ def run_mcmc(r: Run) -> Outcome:
     nw = int(o["n_walkers"] or max(16, 4 * n))
     nw += nw % 2
     if nw < 2 * n:  # emcee's ensemble moves need it
-        raise ValueError(f"mcmc: n_walkers = {o['n_walkers']} is out of range: at least twice the {n} parameters ({2 * n})")
+        raise ValueError(
+            f"mcmc: n_walkers = {o['n_walkers']} is out of range: at least twice the {n} "
+            f"parameters ({2 * n})"
+        )
     p0 = initial_ensemble(r, nw)
     if obj.remaining < nw:
         return Outcome("budget", f"budget below the {nw} evaluations of the initial ensemble", 0)
     if o["chain_path"]:
-        backend = NpzBackend(o["chain_path"], metadata={"names": np.array(obj.names),
-                                                        "scale": obj.to_physical(np.ones(n))})
+        backend = NpzBackend(
+            o["chain_path"],
+            metadata={"names": np.array(obj.names), "scale": obj.to_physical(np.ones(n))},
+        )
     else:
         backend = emcee.backends.Backend()
-    sampler = emcee.EnsembleSampler(nw, n, log_posterior(obj, r.lower, r.upper), vectorize=True,
-                                    moves=_moves(o["moves"]), backend=backend)
+    sampler = emcee.EnsembleSampler(
+        nw,
+        n,
+        log_posterior(obj, r.lower, r.upper),
+        vectorize=True,
+        moves=_moves(o["moves"]),
+        backend=backend,
+    )
     sampler.random_state = np.random.RandomState(r.seed % 2**32).get_state()
     planned = int(o["n_steps"]) if o["n_steps"] else math.inf
     for state in ensemble_steps(sampler, p0, lambda: obj.remaining, planned):
         k = int(np.argmax(state.log_prob))
-        r.record(state.coords[k], -2.0 * state.log_prob[k] if np.isfinite(state.log_prob[k]) else None)
+        r.record(
+            state.coords[k], -2.0 * state.log_prob[k] if np.isfinite(state.log_prob[k]) else None
+        )
     steps = backend.iteration
     if steps == 0:
         return Outcome("budget", "budget too small for one step", 0)
 
-    extra = chain_summary(backend, obj.names, obj.to_physical, o["burn_fraction"], o["min_tau_multiple"])
+    extra = chain_summary(
+        backend, obj.names, obj.to_physical, o["burn_fraction"], o["min_tau_multiple"]
+    )
     tau_max = extra.pop("tau_max")
     for msg in extra["warnings"]:
         warnings.warn(f"mcmc: {msg}", RuntimeWarning, stacklevel=2)
@@ -192,5 +238,8 @@ def run_mcmc(r: Run) -> Outcome:
         status = "converged"
     else:
         status = "budget" if steps < planned else "max_iterations"
-    message = f"{steps} steps x {nw} walkers, acceptance {extra['acceptance_fraction']:.2f}, tau_max {tau_max:.3g}"
+    message = (
+        f"{steps} steps x {nw} walkers, acceptance {extra['acceptance_fraction']:.2f}, tau_max "
+        f"{tau_max:.3g}"
+    )
     return Outcome(status, message, steps, extra)

@@ -15,6 +15,7 @@ Stops: relative cost decrease < ftol or relative step < xtol ("converged"), proj
 < gtol ("converged"), no acceptable step after ``max_backtracks`` halvings ("stalled"),
 ``max_iterations`` ("max_iterations").
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,8 +34,13 @@ GN_OPTIONS = {
 }
 
 
-@register("gauss-newton", library="femubench", family="local", options=GN_OPTIONS,
-          description="own bounded Gauss-Newton: H = J^T J, projected step, Armijo backtracking")
+@register(
+    "gauss-newton",
+    library="femubench",
+    family="local",
+    options=GN_OPTIONS,
+    description="own bounded Gauss-Newton: H = J^T J, projected step, Armijo backtracking",
+)
 def run_gauss_newton(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     lo, hi = r.lower, r.upper

@@ -10,6 +10,7 @@ to LM, which gets the rest.
 Both run their phases through :meth:`~solvers.base.Run.sub`: one objective, one budget, one
 history (rows carry a ``phase`` label).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,8 +36,14 @@ def _best_in_log(obj, start: int) -> tuple[float, list[float] | None]:
     return float(best), x
 
 
-@register("multistart-lm", library="scipy", family="global", options=MULTISTART_OPTIONS, stochastic=True,
-          description="LM from k seeded Latin-hypercube starts within the budget")
+@register(
+    "multistart-lm",
+    library="scipy",
+    family="global",
+    options=MULTISTART_OPTIONS,
+    stochastic=True,
+    description="LM from k seeded Latin-hypercube starts within the budget",
+)
 def run_multistart(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     k = int(o["n_starts"])
@@ -52,15 +59,26 @@ def run_multistart(r: Run) -> Outcome:
         log0, n0 = len(obj.log), obj.n_evals
         out = r.sub("lm", z0, share, lm_opts, phase=f"lm[{i}]")
         cost, x = _best_in_log(obj, log0)
-        summary.append({"x0": [float(v) for v in obj.to_physical(z0)], "x": x, "cost": cost,
-                        "status": out.status, "n_evals": obj.n_evals - n0})
+        summary.append(
+            {
+                "x0": [float(v) for v in obj.to_physical(z0)],
+                "x": x,
+                "cost": cost,
+                "status": out.status,
+                "n_evals": obj.n_evals - n0,
+            }
+        )
         statuses.append(out.status)
     best = min(range(len(summary)), key=lambda j: summary[j]["cost"]) if summary else None
     status = "converged" if best is not None and statuses[best] == "converged" else "max_iterations"
     if obj.remaining == 0 and status != "converged":
         status = "budget"
-    return Outcome(status, f"{len(summary)} LM starts; best from start {best}", r.n_iterations,
-                   {"starts": summary})
+    return Outcome(
+        status,
+        f"{len(summary)} LM starts; best from start {best}",
+        r.n_iterations,
+        {"starts": summary},
+    )
 
 
 PSO_LM_OPTIONS = {
@@ -71,8 +89,14 @@ PSO_LM_OPTIONS = {
 }
 
 
-@register("pso+lm", library="pyswarms+scipy", family="global", options=PSO_LM_OPTIONS, stochastic=True,
-          description="short particle-swarm phase, then LM from its best point")
+@register(
+    "pso+lm",
+    library="pyswarms+scipy",
+    family="global",
+    options=PSO_LM_OPTIONS,
+    stochastic=True,
+    description="short particle-swarm phase, then LM from its best point",
+)
 def run_pso_lm(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     n_global = max(1, int(o["global_fraction"] * r.budget))
@@ -82,5 +106,9 @@ def run_pso_lm(r: Run) -> Outcome:
     n_pso = obj.n_evals
     z_best = obj.best_z if obj.best is not None else r.z0
     out_l = r.sub("lm", z_best, r.budget - obj.n_evals, {k: o[k] for k in _LM_KEYS}, phase="lm")
-    return Outcome(out_l.status, f"pso: {out_g.status}; lm: {out_l.message}", r.n_iterations,
-                   {"pso_evals": n_pso})
+    return Outcome(
+        out_l.status,
+        f"pso: {out_g.status}; lm: {out_l.message}",
+        r.n_iterations,
+        {"pso_evals": n_pso},
+    )

@@ -10,11 +10,12 @@ through ``parametrization.random_state``. Its initial value is a seeded uniform 
 (the start point with ``include_x0``, like the other population methods). NGOpt 1.0's choice for a
 few bounded continuous parameters: with one worker, ``Cobyla`` (a deterministic local method, whose
 trajectory then depends on the seed only through that point) up to a budget of ``50 n``, above it
-a quadratic-surrogate-assisted CMA (``MetaModel`` over ``CmaFmin2``); with more workers, ``MetaModel``
-(CMA-ES) at any budget. ``extra["optimizer"]`` records the choice. Candidates are asked in
-batches of ``num_workers``: each batch is one :meth:`Evaluator.costs` call (one history row per
-batch), then told. Points are clipped to the box (a no-op for nevergrad's bounded arrays,
-kept against rounding). Failed and infeasible points are told ``FAILURE_COST`` (1e12).
+a quadratic-surrogate-assisted CMA (``MetaModel`` over ``CmaFmin2``); with more workers,
+``MetaModel`` (CMA-ES) at any budget. ``extra["optimizer"]`` records the choice. Candidates are
+asked in batches of ``num_workers``: each batch is one :meth:`Evaluator.costs` call
+(one history row per batch), then told. Points are clipped to the box (a no-op for nevergrad's
+bounded arrays, kept against rounding). Failed and infeasible points are told ``FAILURE_COST``
+(1e12).
 
 Nevergrad's own ``budget`` is set to the run's budget; cache hits (repeated points) are free, so
 asking goes on until the objective's budget is spent, up to ``max_asks_factor`` times the budget
@@ -28,6 +29,7 @@ seeds cma from the clock: during the run ``cma.fmin`` is wrapped to pass a seed 
 seed when none is given (the thread and the main thread hand over synchronously, so the draws are
 in a fixed order). Without this, the same seed gave different results.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -39,16 +41,34 @@ from problems.inverse.evaluator import BudgetExhausted
 from solvers.base import Outcome, Run, isolated_global_rng, register
 
 NGOPT_OPTIONS = {
-    "num_workers": (1, "candidates asked per batch (one objective.costs call each; NGOpt adapts its choice to it)"),
-    "optimizer": ("NGOpt", "nevergrad optimizer name from ng.optimizers.registry (NGOpt: the portfolio)"),
-    "include_x0": (False, "start nevergrad at the start point (False: at a seeded uniform point of the box)"),
-    "max_asks_factor": (3, "stop (stalled) after max_asks_factor * budget asks (repeated points are free)"),
+    "num_workers": (
+        1,
+        "candidates asked per batch (one objective.costs call each; NGOpt adapts its choice to it)",
+    ),
+    "optimizer": (
+        "NGOpt",
+        "nevergrad optimizer name from ng.optimizers.registry (NGOpt: the portfolio)",
+    ),
+    "include_x0": (
+        False,
+        "start nevergrad at the start point (False: at a seeded uniform point of the box)",
+    ),
+    "max_asks_factor": (
+        3,
+        "stop (stalled) after max_asks_factor * budget asks (repeated points are free)",
+    ),
 }
 
 
-@register("ngopt", library="nevergrad", family="global", options=NGOPT_OPTIONS, stochastic=True,
-          description="Nevergrad's NGOpt portfolio (chooses e.g. surrogate-assisted CMA, DE, Cobyla "
-                      "from dimension, budget and workers)")
+@register(
+    "ngopt",
+    library="nevergrad",
+    family="global",
+    options=NGOPT_OPTIONS,
+    stochastic=True,
+    description="Nevergrad's NGOpt portfolio (chooses e.g. surrogate-assisted CMA, DE, Cobyla "
+    "from dimension, budget and workers)",
+)
 def run_ngopt(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     width = r.upper - r.lower
@@ -65,14 +85,18 @@ def run_ngopt(r: Run) -> Outcome:
             raise ValueError(f"ngopt: optimizer {o['optimizer']!r} is not in nevergrad's registry")
         param = ng.p.Array(init=u0, lower=0.0, upper=1.0)
         param.random_state = np.random.RandomState(int(r.rng(1).integers(2**31 - 1)))
-        opt = ng.optimizers.registry[o["optimizer"]](parametrization=param, budget=r.budget, num_workers=workers)
+        opt = ng.optimizers.registry[o["optimizer"]](
+            parametrization=param, budget=r.budget, num_workers=workers
+        )
         chosen = _chosen(opt)
         extra = {"optimizer": chosen}
         max_asks = int(o["max_asks_factor"]) * r.budget
         asks, batches = 0, 0
         while obj.remaining > 0:
             if asks >= max_asks:
-                return Outcome("stalled", f"{asks} asks gave only {obj.n_evals} new points", batches, extra)
+                return Outcome(
+                    "stalled", f"{asks} asks gave only {obj.n_evals} new points", batches, extra
+                )
             k = int(min(workers, obj.remaining))
             cands = [opt.ask() for _ in range(k)]
             asks += k
@@ -87,7 +111,12 @@ def run_ngopt(r: Run) -> Outcome:
             j = int(np.argmin(f))
             r.record(Z[j], f[j], batch=batches)
         extra["optimizer"] = _chosen(opt)
-    return Outcome("budget", f"evaluation budget spent after {batches} batches of up to {workers}", batches, extra)
+    return Outcome(
+        "budget",
+        f"evaluation budget spent after {batches} batches of up to {workers}",
+        batches,
+        extra,
+    )
 
 
 @contextlib.contextmanager

@@ -13,6 +13,7 @@ sequence and is deterministic). nlopt evaluates one point per call: one history 
 Local algorithms stop on ``xtol_rel`` / ``ftol_rel``; global ones run until ``maxeval`` (default:
 the budget) unless tolerances are given.
 """
+
 from __future__ import annotations
 
 import nlopt
@@ -42,26 +43,37 @@ GLOBAL_OPTIONS = {
 }
 MLSL_OPTIONS = {
     **GLOBAL_OPTIONS,
-    "local": ("BOBYQA", "local optimizer of MLSL (an LN_ algorithm; LD_ ones get the Jacobian gradient)"),
+    "local": (
+        "BOBYQA",
+        "local optimizer of MLSL (an LN_ algorithm; LD_ ones get the Jacobian gradient)",
+    ),
     "local_xtol_rel": (1e-6, "relative z tolerance of each local search"),
     "local_ftol_rel": (1e-10, "relative cost tolerance of each local search"),
 }
 
 _RESULT = {
-    nlopt.SUCCESS: "converged", nlopt.STOPVAL_REACHED: "converged", nlopt.FTOL_REACHED: "converged",
-    nlopt.XTOL_REACHED: "converged", nlopt.MAXEVAL_REACHED: "max_iterations",
+    nlopt.SUCCESS: "converged",
+    nlopt.STOPVAL_REACHED: "converged",
+    nlopt.FTOL_REACHED: "converged",
+    nlopt.XTOL_REACHED: "converged",
+    nlopt.MAXEVAL_REACHED: "max_iterations",
     nlopt.MAXTIME_REACHED: "max_iterations",
 }
 
 
 def algorithm_code(name: str) -> tuple[int, str]:
-    """nlopt constant and full name for ``BOBYQA``, ``LN_BOBYQA``, ``MLSL``... (ValueError if unknown)."""
+    """nlopt constant and full name for ``BOBYQA``, ``LN_BOBYQA``, ``MLSL``...
+    (ValueError if unknown)."""
     key = name.upper()
     if key == "MLSL":
         key = "G_MLSL_LDS"
     candidates = [key] + [p + key for p in ("LN_", "GN_", "LD_", "GD_", "G_")]
     for c in candidates:
-        if hasattr(nlopt, c) and isinstance(getattr(nlopt, c), int) and c[:2] in ("LN", "GN", "LD", "GD", "G_"):
+        if (
+            hasattr(nlopt, c)
+            and isinstance(getattr(nlopt, c), int)
+            and c[:2] in ("LN", "GN", "LD", "GD", "G_")
+        ):
             return getattr(nlopt, c), c
     raise ValueError(f"nlopt algorithm {name!r} is unknown (e.g. {', '.join(LOCAL + GLOBAL)})")
 
@@ -93,7 +105,9 @@ def _make_run(full: str):
             calls[0] += 1
             try:
                 if grad.size > 0:
-                    c, g = obj.gradient(z, scheme=o.get("scheme", "forward"), rel_step=o.get("rel_step", 1e-6))
+                    c, g = obj.gradient(
+                        z, scheme=o.get("scheme", "forward"), rel_step=o.get("rel_step", 1e-6)
+                    )
                     grad[:] = g
                 else:
                     c = obj.cost(z)
@@ -160,7 +174,9 @@ def _info(name: str, short: str) -> MethodInfo:
     _, full = algorithm_code(short)
     family = "global" if _is_global(full) else "local"
     stochastic = any(s in full for s in _STOCHASTIC) or (full.endswith("MLSL"))
-    return MethodInfo(name, "nlopt", family, _options(full), _make_run(full), stochastic, f"nlopt {full}")
+    return MethodInfo(
+        name, "nlopt", family, _options(full), _make_run(full), stochastic, f"nlopt {full}"
+    )
 
 
 for _short in LOCAL + GLOBAL:

@@ -10,10 +10,12 @@ on a flush costs little, and a crash loses at most ``flush_every`` steps.
 
 File keys (as HDFBackend's datasets): ``chain`` (steps, walkers, dimensions) in the sampler's
 coordinates, ``log_prob`` (steps, walkers), ``accepted`` (walkers,), ``iteration``, plus the
-``metadata`` arrays given to the constructor (e.g. ``names`` and ``scale``: physical = chain x scale).
+``metadata`` arrays given to the constructor (e.g. ``names`` and ``scale``:
+physical = chain x scale).
 A file with only ``chain`` and ``log_prob`` (and optional metadata) loads too: ``iteration`` is then
 the chain length and ``accepted`` zero.
 """
+
 from __future__ import annotations
 
 import os
@@ -43,21 +45,29 @@ class NpzBackend(Backend):
             self.flush()
 
     def flush(self) -> Path:
-        """Write the steps so far (and the metadata) to :attr:`path` atomically; returns the path."""
+        """Write the steps so far (and the metadata) to :attr:`path` atomically; returns the
+        path."""
         if not self.initialized:
             raise ValueError("the backend holds no chain yet")
         n = self.iteration
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(self.path.name + ".tmp")
         with open(tmp, "wb") as fh:
-            np.savez(fh, chain=self.chain[:n], log_prob=self.log_prob[:n], accepted=self.accepted,
-                     iteration=np.int64(n), **self.metadata)
+            np.savez(
+                fh,
+                chain=self.chain[:n],
+                log_prob=self.log_prob[:n],
+                accepted=self.accepted,
+                iteration=np.int64(n),
+                **self.metadata,
+            )
         os.replace(tmp, self.path)
         return self.path
 
     @classmethod
     def load(cls, path) -> NpzBackend:
-        """The backend stored in ``path``, ready for reading (or for an ``EnsembleSampler`` to continue)."""
+        """The backend stored in ``path``, ready for reading (or for an ``EnsembleSampler`` to
+        continue)."""
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{path} does not exist")

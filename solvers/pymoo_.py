@@ -5,6 +5,7 @@ i.e. one :meth:`Evaluator.costs` batch through the mapper. The initial populatio
 Latin hypercube (optionally with the start point as its first member). pymoo's own evaluation
 count and termination are only a backstop: the objective's budget is the hard cap.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -67,34 +68,67 @@ def _minimize(r: Run, algorithm) -> Outcome:
 
     termination = ("n_gen", int(max_gen)) if max_gen else ("n_evals", r.budget)
     with isolated_global_rng(r.seed):  # pymoo 0.6.2 uses its own Generator; belt and braces
-        res = minimize(_problem(obj, r.lower, r.upper), algorithm, termination, seed=r.seed,
-                       callback=callback, verbose=False, copy_algorithm=False)
+        res = minimize(
+            _problem(obj, r.lower, r.upper),
+            algorithm,
+            termination,
+            seed=r.seed,
+            callback=callback,
+            verbose=False,
+            copy_algorithm=False,
+        )
     if obj.remaining == 0 or not max_gen:
         return Outcome("budget", f"evaluation budget spent after {res.algorithm.n_gen} generations")
     return Outcome("max_iterations", f"{max_gen} generations")
 
 
-@register("ga", library="pymoo", family="global", options=GA_OPTIONS, stochastic=True,
-          description="real-coded genetic algorithm: tournament selection, SBX crossover, polynomial mutation")
+@register(
+    "ga",
+    library="pymoo",
+    family="global",
+    options=GA_OPTIONS,
+    stochastic=True,
+    description="real-coded genetic algorithm: tournament selection, SBX crossover, polynomial "
+    "mutation",
+)
 def run_ga(r: Run) -> Outcome:
     from pymoo.algorithms.soo.nonconvex.ga import GA
     from pymoo.operators.crossover.sbx import SBX
     from pymoo.operators.mutation.pm import PM
 
     o = r.options
-    mutation = PM(eta=o["mutation_eta"]) if o["mutation_prob"] is None else PM(eta=o["mutation_eta"], prob=o["mutation_prob"])
-    algorithm = GA(pop_size=int(o["pop_size"]), sampling=_initial(r),
-                   crossover=SBX(prob=o["crossover_prob"], eta=o["crossover_eta"]),
-                   mutation=mutation, eliminate_duplicates=True)
+    mutation = (
+        PM(eta=o["mutation_eta"])
+        if o["mutation_prob"] is None
+        else PM(eta=o["mutation_eta"], prob=o["mutation_prob"])
+    )
+    algorithm = GA(
+        pop_size=int(o["pop_size"]),
+        sampling=_initial(r),
+        crossover=SBX(prob=o["crossover_prob"], eta=o["crossover_eta"]),
+        mutation=mutation,
+        eliminate_duplicates=True,
+    )
     return _minimize(r, algorithm)
 
 
-@register("de", library="pymoo", family="global", options=DE_OPTIONS, stochastic=True,
-          description="differential evolution")
+@register(
+    "de",
+    library="pymoo",
+    family="global",
+    options=DE_OPTIONS,
+    stochastic=True,
+    description="differential evolution",
+)
 def run_de(r: Run) -> Outcome:
     from pymoo.algorithms.soo.nonconvex.de import DE
 
     o = r.options
-    algorithm = DE(pop_size=int(o["pop_size"]), sampling=_initial(r), variant=o["variant"],
-                   CR=o["CR"], F=o["F"])
+    algorithm = DE(
+        pop_size=int(o["pop_size"]),
+        sampling=_initial(r),
+        variant=o["variant"],
+        CR=o["CR"],
+        F=o["F"],
+    )
     return _minimize(r, algorithm)

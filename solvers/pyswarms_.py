@@ -7,6 +7,7 @@ working directory; here pyswarms is imported and built with ``logging.config.dic
 disabled, so neither happens. The Pyramid and Random topologies are not offered (they break on
 NumPy >= 1.24). Each iteration evaluates the swarm as one :meth:`Evaluator.costs` batch.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -24,9 +25,19 @@ PSO_OPTIONS = {
     "c1": (1.49445, "cognitive coefficient"),
     "c2": (1.49445, "social coefficient"),
     "max_iterations": (None, "maximum number of iterations (None: until the budget)"),
-    "bh_strategy": ("reflective", "pyswarms boundary handling: nearest | reflective | shrink | random | intermediate | periodic"),
-    "velocity_clamp": (0.5, "maximum |velocity| per iteration as a fraction of each box width (None: no clamp)"),
-    "ftol": (-math.inf, "stop when the best cost improves by less than ftol (relative) for ftol_iter iterations"),
+    "bh_strategy": (
+        "reflective",
+        "pyswarms boundary handling: nearest | reflective | shrink | random | intermediate | "
+        "periodic",
+    ),
+    "velocity_clamp": (
+        0.5,
+        "maximum |velocity| per iteration as a fraction of each box width (None: no clamp)",
+    ),
+    "ftol": (
+        -math.inf,
+        "stop when the best cost improves by less than ftol (relative) for ftol_iter iterations",
+    ),
     "ftol_iter": (1, "iterations over which ftol is checked"),
     "include_x0": (False, "put the start point into the initial swarm"),
 }
@@ -51,15 +62,27 @@ def _make_optimizer(r: Run):
         # pyswarms clamps all dimensions alike: work on the unit box, z = lower + u (upper - lower)
         clamp = (-float(o["velocity_clamp"]), float(o["velocity_clamp"]))
     with _no_logging_config():
-        return GlobalBestPSO(n_particles=int(o["n_particles"]), dimensions=r.lower.size,
-                             options={"c1": o["c1"], "c2": o["c2"], "w": o["w"]},
-                             bounds=(np.zeros(r.lower.size), np.ones(r.lower.size)),
-                             bh_strategy=o["bh_strategy"], velocity_clamp=clamp, ftol=o["ftol"],
-                             ftol_iter=int(o["ftol_iter"]), init_pos=(init - r.lower) / (r.upper - r.lower))
+        return GlobalBestPSO(
+            n_particles=int(o["n_particles"]),
+            dimensions=r.lower.size,
+            options={"c1": o["c1"], "c2": o["c2"], "w": o["w"]},
+            bounds=(np.zeros(r.lower.size), np.ones(r.lower.size)),
+            bh_strategy=o["bh_strategy"],
+            velocity_clamp=clamp,
+            ftol=o["ftol"],
+            ftol_iter=int(o["ftol_iter"]),
+            init_pos=(init - r.lower) / (r.upper - r.lower),
+        )
 
 
-@register("pso", library="pyswarms", family="global", options=PSO_OPTIONS, stochastic=True,
-          description="global-best particle swarm (pyswarms GlobalBestPSO, star topology, bounds)")
+@register(
+    "pso",
+    library="pyswarms",
+    family="global",
+    options=PSO_OPTIONS,
+    stochastic=True,
+    description="global-best particle swarm (pyswarms GlobalBestPSO, star topology, bounds)",
+)
 def run_pso(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     width = r.upper - r.lower

@@ -1,4 +1,5 @@
 """The uniform result of one identification run (cf. scipy's OptimizeResult, pymoo's Result)."""
+
 from __future__ import annotations
 
 import json
@@ -60,7 +61,9 @@ class RunResult:
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names
         if unknown:
-            raise ValueError(f"RunResult: unknown fields {sorted(unknown)}; allowed: {sorted(names)}")
+            raise ValueError(
+                f"RunResult: unknown fields {sorted(unknown)}; allowed: {sorted(names)}"
+            )
         return cls(**jsonio.decode(d))
 
     def to_json(self, **kw) -> str:

@@ -1,4 +1,5 @@
 """scipy adapters: ``lm`` (least_squares, trf) and ``sa`` (dual_annealing)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,16 +21,29 @@ LM_OPTIONS = {
     "max_nfev": (None, "least_squares max_nfev (its own count, Jacobians excluded); None = budget"),
 }
 
-_LS_STATUS = {-1: "failed", 0: "max_iterations", 1: "converged", 2: "converged", 3: "converged", 4: "converged"}
+_LS_STATUS = {
+    -1: "failed",
+    0: "max_iterations",
+    1: "converged",
+    2: "converged",
+    3: "converged",
+    4: "converged",
+}
 
 
-@register("lm", library="scipy", family="local", options=LM_OPTIONS,
-          description="Levenberg-Marquardt-type trust region with bounds (least_squares 'trf'), "
-                      "parallel finite-difference Jacobian of the objective")
+@register(
+    "lm",
+    library="scipy",
+    family="local",
+    options=LM_OPTIONS,
+    description="Levenberg-Marquardt-type trust region with bounds (least_squares 'trf'), "
+    "parallel finite-difference Jacobian of the objective",
+)
 def run_lm(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     lo, hi = r.lower, r.upper
-    # least_squares('trf') starts strictly inside the box; do the same here so its first call is a cache hit
+    # least_squares('trf') starts strictly inside the box; do the same here so its first call is a
+    # cache hit
     z0 = np.clip(r.z0, lo + 1e-10 * (hi - lo), hi - 1e-10 * (hi - lo))
     ev0 = obj.evaluate(z0)
     if not ev0.usable:
@@ -42,18 +56,34 @@ def run_lm(r: Run) -> Outcome:
         n_jac[0] += 1
         return obj.jacobian(z, scheme=o["scheme"], rel_step=o["rel_step"], r0=ev.residual)
 
-    res = least_squares(obj.residual, z0, jac=jac, bounds=(lo, hi), method="trf", ftol=o["ftol"],
-                        xtol=o["xtol"], gtol=o["gtol"], x_scale=o["x_scale"],
-                        max_nfev=o["max_nfev"] or r.budget)
+    res = least_squares(
+        obj.residual,
+        z0,
+        jac=jac,
+        bounds=(lo, hi),
+        method="trf",
+        ftol=o["ftol"],
+        xtol=o["xtol"],
+        gtol=o["gtol"],
+        x_scale=o["x_scale"],
+        max_nfev=o["max_nfev"] or r.budget,
+    )
     r.record(res.x, obj.cost(res.x))
-    return Outcome(_LS_STATUS.get(res.status, "failed"), res.message, n_jac[0],
-                   {"library_nfev": int(res.nfev), "library_njev": int(res.njev or 0)})
+    return Outcome(
+        _LS_STATUS.get(res.status, "failed"),
+        res.message,
+        n_jac[0],
+        {"library_nfev": int(res.nfev), "library_njev": int(res.njev or 0)},
+    )
 
 
 SA_OPTIONS = {
     "maxiter": (1000, "maximum number of annealing iterations"),
     "initial_temp": (5230.0, "initial temperature"),
-    "restart_temp_ratio": (2e-5, "reannealing starts when the temperature falls to initial_temp * ratio"),
+    "restart_temp_ratio": (
+        2e-5,
+        "reannealing starts when the temperature falls to initial_temp * ratio",
+    ),
     "visit": (2.62, "visiting distribution parameter"),
     "accept": (-5.0, "acceptance distribution parameter"),
     "no_local_search": (False, "pure generalised simulated annealing (no L-BFGS-B polishing)"),
@@ -61,9 +91,15 @@ SA_OPTIONS = {
 }
 
 
-@register("sa", library="scipy", family="global", options=SA_OPTIONS, stochastic=True,
-          description="dual annealing (generalised simulated annealing + L-BFGS-B local search, "
-                      "gradients from the parallel Jacobian)")
+@register(
+    "sa",
+    library="scipy",
+    family="global",
+    options=SA_OPTIONS,
+    stochastic=True,
+    description="dual annealing (generalised simulated annealing + L-BFGS-B local search, "
+    "gradients from the parallel Jacobian)",
+)
 def run_sa(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     start = len(obj.log)
@@ -72,15 +108,25 @@ def run_sa(r: Run) -> Outcome:
         return obj.gradient(z, scheme=o["scheme"], rel_step=o["rel_step"])[1]
 
     try:
-        res = dual_annealing(obj.cost, list(zip(r.lower, r.upper)), maxiter=o["maxiter"],
-                             minimizer_kwargs={"method": "L-BFGS-B", "jac": grad},
-                             initial_temp=o["initial_temp"], restart_temp_ratio=o["restart_temp_ratio"],
-                             visit=o["visit"], accept=o["accept"], maxfun=r.budget, rng=r.seed,
-                             no_local_search=o["no_local_search"], x0=r.z0)
+        res = dual_annealing(
+            obj.cost,
+            list(zip(r.lower, r.upper)),
+            maxiter=o["maxiter"],
+            minimizer_kwargs={"method": "L-BFGS-B", "jac": grad},
+            initial_temp=o["initial_temp"],
+            restart_temp_ratio=o["restart_temp_ratio"],
+            visit=o["visit"],
+            accept=o["accept"],
+            maxfun=r.budget,
+            rng=r.seed,
+            no_local_search=o["no_local_search"],
+            x0=r.z0,
+        )
     finally:  # the callback fires only on improvement: the history comes from the objective's log
         r.record_log(start)
     message = "; ".join(res.message) if isinstance(res.message, list) else str(res.message)
     status = "max_iterations"
-    if obj.remaining == 0 or "function call" in message:  # its maxfun (cache hits included) = budget
+    if obj.remaining == 0 or "function call" in message:
+        # its maxfun (cache hits included) = budget
         status = "budget"
     return Outcome(status, message, int(res.nit), {"library_nfev": int(res.nfev)})

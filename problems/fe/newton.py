@@ -26,6 +26,7 @@ import time
 import weakref
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -36,6 +37,9 @@ from problems.fe.linear_solver import (LINEAR_SOLVERS, Factor, LinearSolver, Sin
 from problems.fe.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
 from problems.materials.base import Material
 from problems.fe.mesh import Mesh, check_symmetry, lower_half, nested_dissection_order, unfold_mid_height
+
+if TYPE_CHECKING:
+    from problems.fe.sensitivity import Sensitivities
 
 PLATES = ("friction", "frictionless")
 ASSEMBLIES = ("fused", "numpy")
@@ -234,6 +238,9 @@ class Response:
     stress        : (N, n_elements, 6) element-mean stress, MPa
     state         : (N, n_elements, n_state) element-mean history variables (e.g. eqps)
     symmetry      : the model that was solved (``eighth``: fields above z = 75 mm are mirror images)
+    sensitivities : derivatives of displacements and plate forces with respect to material
+                    parameters (:class:`problems.fe.sensitivity.Sensitivities`) when the run was
+                    asked for them, else None
     """
 
     mesh: Mesh
@@ -252,6 +259,7 @@ class Response:
     timing: dict = field(default_factory=dict)
     residual_history: list = field(default_factory=list)  # per increment: relative residual norms
     symmetry: str = "quarter"
+    sensitivities: Sensitivities | None = None  # when run(sensitivities=...) asked for them
 
     def front_face(self, points_mm) -> tuple[np.ndarray, np.ndarray]:
         """In-plane displacements of the front face x = 75 mm at points (m, 2) = (y, z) mm.
@@ -265,10 +273,15 @@ class Response:
 
 
 def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
-        settings: NewtonSettings = NewtonSettings(), *, progress: bool = False) -> Response:
+        settings: NewtonSettings = NewtonSettings(), *, progress: bool = False,
+        sensitivities=False) -> Response:
     """Run the plate-compression test on ``disc`` with ``material``; never raises on non-convergence.
 
     ``progress`` shows a progress bar over the snapshots (for long runs on fine meshes).
+    ``sensitivities`` (True: all of ``material.parameter_names``; or a sequence of some of those
+    names) also computes the exact derivatives of the displacements and plate forces with respect
+    to those parameters by direct differentiation (problems/fe/sensitivity.py) into
+    ``Response.sensitivities``; the response itself is the same as without them.
     """
     t0 = time.perf_counter()
     bar = None
@@ -283,6 +296,11 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
     stress = np.zeros((disc.n_points, 6))
     state = material.initial_state(disc.n_points)
     D = None
+    ddm = None
+    if sensitivities is not False and sensitivities is not None:
+        from problems.fe.sensitivity import GlobalDDM, select_parameters
+
+        ddm = GlobalDDM(solver, material, select_parameters(material, sensitivities))
     out_u, out_s, out_h, out_f, out_d = [], [], [], [], []
     nominal = 1.0 / (loading.snapshots * settings.substeps)
     step, lam, increments, cuts, message = nominal, 0.0, 0, 0, "converged"
@@ -293,6 +311,8 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
             dlam = min(step, target - lam)
             inc = solver.increment(u, stress, state, D, -dlam * loading.displacement_mm * bc.top_fraction)
             if inc.ok:
+                if ddm is not None:
+                    ddm.advance(inc, stress, state)
                 u, stress, state, D, f_int = inc.u, inc.stress, inc.state, inc.tangent, inc.f_int
                 lam += dlam
                 increments += 1
@@ -313,6 +333,8 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         out_h.append(state.reshape(ne, 8, -1).mean(axis=1))
         out_f.append(bc.plate_force_kN(f_int))
         out_d.append(lam * loading.displacement_mm)
+        if ddm is not None:
+            ddm.snapshot()
         if bar is not None:
             bar.update(1)
     if bar is not None:
@@ -339,6 +361,7 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         timing=dict(solver.timing),
         residual_history=solver.residual_history,
         symmetry=disc.symmetry,
+        sensitivities=None if ddm is None else ddm.result(disc.full_mesh),
     )
 
 
@@ -358,6 +381,7 @@ class _Increment:
     f_int: np.ndarray | None = None
     factor: Factor | None = None
     factor_at_converged: bool = False
+    strain_increment: np.ndarray | None = None   # (n_points, 6) of the converged update
 
 
 #: Newton forcing terms of the Krylov solves (relative linear residual asked of GMRES). Predictor:
@@ -612,7 +636,8 @@ class _Newton:
                 return _Increment(False, "residual is not finite")
             if rel_r <= s.rtol_force * (1.0 if rel_u <= s.rtol_displacement else s.linear_rtol):
                 self.residual_history.append(norms)
-                return self._converged(u=u_n + du, stress=upd.stress, state=upd.state, tangent=upd.tangent, f_int=f_int)
+                return self._converged(u=u_n + du, stress=upd.stress, state=upd.state, tangent=upd.tangent,
+                                       f_int=f_int, strain_increment=deps)
             if it >= 3 and rel_r > 1e3 * norms[0]:
                 return _Increment(False, f"Newton diverged (relative residual {rel_r:.3g})")
             corr, why = self._solve(self._tangent_free(upd.tangent), -r_free, upd.tangent, forcing_term(rel_r, s))

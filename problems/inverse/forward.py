@@ -1,12 +1,15 @@
 """The FE model of the cube test as a forward model of the objective: parameters -> measurements.
 
-The measurement vector of one run is laid out by :mod:`problems.inverse.layout`.
+The measurement vector of one run is laid out by :mod:`problems.inverse.layout`. With
+``jacobian=True`` the same run also gives the exact Jacobian dU/dx by direct differentiation
+(problems/fe/sensitivity.py), chained from the material's parameters to the identified ones.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import ClassVar
 
 import numpy as np
 
@@ -70,7 +73,13 @@ class FEForwardModel:
                by default the eighth model where it is exact)
     loading  : plate displacement, snapshots and plate condition
     points   : (m, 2) front-face measurement points (y, z), mm
+
+    ``model(x, jacobian=True)`` returns the exact Jacobian dU/dx (m, n) too: rows the measurement
+    vector (mm per unit of x for the displacements, kN per unit for the force), columns the
+    identified parameters in physical units, from one run with sensitivities.
     """
+
+    provides_jacobian: ClassVar[bool] = True
 
     case: Case
     mesh: str = "coarse"
@@ -92,20 +101,50 @@ class FEForwardModel:
             return str(exc)
         return None
 
-    def response(self, x, *, progress: bool = False):
-        """The full FE :class:`~problems.fe.Response` at ``x``."""
+    def response(self, x, *, progress: bool = False, sensitivities=False):
+        """The full FE :class:`~problems.fe.Response` at ``x`` (with ``sensitivities``: see
+        :func:`problems.fe.newton.run`; names are the material's parameters)."""
         return run(discretisation(self.mesh), case_material(self.case, x), self.loading, self.settings,
-                   progress=progress)
+                   progress=progress, sensitivities=sensitivities)
 
-    def __call__(self, x):
+    def material_chain(self, x) -> tuple[tuple[str, ...], np.ndarray]:
+        """The material parameters the identified ones move, and d(those)/dx (P', n): the rows of
+        ``case.material_jacobian`` that are not zero (fixed constants such as nu are dropped)."""
+        material = case_material(self.case, x)
+        chain = self.case.material_jacobian(x, material.parameter_names)
+        keep = np.flatnonzero(np.any(chain != 0.0, axis=1))
+        return tuple(material.parameter_names[i] for i in keep), chain[keep]
+
+    def __call__(self, x, jacobian: bool = False):
         from problems.inverse.protocol import ForwardResult
 
         t0 = time.perf_counter()
         try:
-            resp = self.response(x)
+            if jacobian:
+                names, chain = self.material_chain(x)
+                resp = self.response(x, sensitivities=names)
+            else:
+                resp = self.response(x)
         except ValueError as exc:  # invalid material parameters slipped past check()
             return ForwardResult(False, None, str(exc), time.perf_counter() - t0)
         if not resp.converged:
             return ForwardResult(False, None, resp.message, time.perf_counter() - t0)
-        return ForwardResult(True, layout.stack(*resp.front_face(self.points), resp.reaction_kN), "",
-                             time.perf_counter() - t0)
+        values = layout.stack(*resp.front_face(self.points), resp.reaction_kN)
+        J, message = None, ""
+        if jacobian:
+            J = self.jacobian_from(resp, chain)
+            if J is None:
+                message = f"no exact Jacobian: {resp.sensitivities.message}"
+        return ForwardResult(True, values, message, time.perf_counter() - t0, J)
+
+    def jacobian_from(self, resp, chain) -> np.ndarray | None:
+        """dU/dx (m, n) in the layout of the measurement vector from a response with sensitivities
+        (columns ``material_chain(x)[0]``) and ``chain`` = d(material params)/dx; None when its
+        sensitivities failed."""
+        sens = resp.sensitivities
+        if sens is None or not sens.ok:
+            return None
+        du_h, du_v = sens.front_face(self.points, resp.mesh)
+        k = len(sens.parameter_names)
+        Jp = np.concatenate([du_h.reshape(-1, k), du_v.reshape(-1, k), sens.reaction_kN])
+        return Jp @ chain

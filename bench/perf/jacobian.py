@@ -1,0 +1,120 @@
+"""Accuracy and cost of the exact (DDM) Jacobians of the FE forward model (not a test).
+
+    OMP_NUM_THREADS=1 python -m bench.perf.jacobian [--meshes coarse,paper] [--cases all|NAME,...]
+                      [--paper-cases linear-compression,hyperbolic-shear,exponent-tension]
+                      [--modes auto|direct,krylov] [--repeat 2] [--step 1e-5] [--no-fd]
+
+Per mesh and case, at the case's reference: the best of ``--repeat`` plain forward evaluations
+``model(x)`` and of evaluations with the Jacobian ``model(x, jacobian=True)`` (response + dU/dx,
+6 identified parameters), alternated so that both see the same machine load, and their ratio
+(``cost``: the target is <= 1.6); where the sensitivity time went (material: the two
+``sensitivity`` calls per increment; assem: pseudo-loads, strains, internal-force sensitivities and
+converged tangents; solve: factorisations + back-substitutions or Krylov iterations, ``its``);
+then, unless ``--no-fd``, the largest relative 2-norm error of a Jacobian column against central
+differences of plain runs with relative step ``--step`` (default 1e-5) and the parameter it belongs
+to, and the same with a step 100 times smaller (``err/100``): where a Gauss point starts to yield
+within the first step of the reference (a kink of the discrete response: the one-sided
+differences converge to the DDM column from one side only), the smaller step is in the clean
+range again.
+``--modes direct,krylov`` times each sensitivity solve mode of problems/fe/sensitivity.py (the
+measured choice behind ``auto``). ``coarse`` runs all nine cases, ``paper`` only ``--paper-cases``.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import problems.fe.sensitivity as sensitivity
+from problems.inverse.cases import CASES
+from problems.inverse.forward import FEForwardModel, discretisation
+
+PAPER_CASES = "linear-compression,hyperbolic-shear,exponent-tension"
+
+
+def timed(fn):
+    t = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t, out
+
+
+def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> list[str]:
+    case = CASES[name]
+    model = FEForwardModel(case, mesh)
+    x = case.reference
+    FEForwardModel(case, "1,1,2")(x, jacobian=True)   # compiled kernels loaded outside the timings
+    best_plain, best = np.inf, {m: np.inf for m in modes}
+    out = {}
+    for _ in range(repeat):
+        t, plain = timed(lambda: model(x))
+        best_plain = min(best_plain, t)
+        for mode in modes:
+            sensitivity.DEFAULT_MODE = mode
+            t, res = timed(lambda: model(x, jacobian=True))
+            best[mode] = min(best[mode], t)
+            out[mode] = res
+    sensitivity.DEFAULT_MODE = "auto"
+    if not plain.ok or any(not r.ok or r.jacobian is None for r in out.values()):
+        return [f"{mesh:8} {name:22} failed: {plain.message or next(iter(out.values())).message}"]
+    err, worst, err_small = np.nan, "", np.nan
+    if step:
+        J = out[modes[0]].jacobian
+        errs = {s: [] for s in (step, step / 100.0)}
+        for s in errs:
+            for j in range(len(x)):
+                h = s * abs(x[j])
+                xp, xm = x.copy(), x.copy()
+                xp[j] += h
+                xm[j] -= h
+                g = (model(xp).values - model(xm).values) / (2.0 * h)
+                errs[s].append(np.linalg.norm(J[:, j] - g) / np.linalg.norm(g))
+        err, err_small = max(errs[step]), max(errs[step / 100.0])
+        worst = case.names[int(np.argmax(errs[step]))]
+    rows = []   # the split of the sensitivity time: one more run per mode
+    for mode in modes:
+        sensitivity.DEFAULT_MODE = mode
+        tm = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities.timing
+        sensitivity.DEFAULT_MODE = "auto"
+        solve = tm["factor_s"] + tm["solve_s"]
+        rows.append(f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {tm['mode']:7} "
+                    f"{best_plain:7.3f} {best[mode]:7.3f} {best[mode] / best_plain:5.2f} "
+                    f"{tm['material_s']:6.3f} {tm['assembly_s']:6.3f} {solve:6.3f} "
+                    f"{tm['krylov_iterations']:5d} {err:9.1e} {worst:>7} {err_small:9.1e}")
+    return rows
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--meshes", default="coarse,paper")
+    ap.add_argument("--cases", default="all",
+                    help="cases on every mesh but paper: all | comma-separated names")
+    ap.add_argument("--paper-cases", default=PAPER_CASES,
+                    help="cases on paper (comma-separated, or all)")
+    ap.add_argument("--modes", default="auto",
+                    help="sensitivity solve modes to time: auto | direct,krylov")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--step", type=float, default=1e-5, help="relative central-difference step")
+    ap.add_argument("--no-fd", action="store_true", help="skip the central differences")
+    args = ap.parse_args(argv)
+    modes = args.modes.split(",")
+    for m in modes:
+        if m not in sensitivity.SOLVE_MODES:
+            allowed = ", ".join(sensitivity.SOLVE_MODES)
+            raise SystemExit(f"mode {m!r} is unknown; allowed: {allowed}")
+    print(f"{'mesh':8} {'dofs':>6} {'case':22} {'mode':7} {'plain s':>7} {'jac s':>7} {'cost':>5} "
+          f"{'mater':>6} {'assem':>6} {'solve':>6} {'its':>5} {'max err':>9} {'worst':>7} "
+          f"{'err/100':>9}", flush=True)
+    for mesh in args.meshes.split(","):
+        spec = args.paper_cases if mesh.split(":")[0] == "paper" else args.cases
+        names = list(CASES) if spec == "all" else spec.split(",")
+        for name in names:
+            if name not in CASES:
+                raise SystemExit(f"case {name!r} is unknown; allowed: {', '.join(CASES)}")
+            for row in measure(mesh, name, modes, args.repeat, None if args.no_fd else args.step):
+                print(row, flush=True)
+
+
+if __name__ == "__main__":
+    main()
