@@ -1,9 +1,11 @@
-"""CMA-ES (``cma``), Bayesian optimisation (``bo``) and Nevergrad's NGOpt (``ngopt``) on the analytic
-problems: seeding, budget, bounds, convergence on the smooth problem, failing regions, batches.
+"""CMA-ES (``cma``), Bayesian optimisation (``bo``) and Nevergrad's NGOpt (``ngopt``) on the
+analytic problems: seeding, budget, bounds, convergence on the smooth problem, failing regions,
+batches.
 
 (test_solvers.py runs every registered method, these three included, through the generic checks;
 here are the checks specific to them, kept short: ``bo`` costs ~0.1 s per iteration.)
 """
+
 from __future__ import annotations
 
 import warnings
@@ -44,8 +46,12 @@ def test_registered_as_global_stochastic_methods_with_declared_options():
 @pytest.mark.parametrize("method", NEW)
 def test_same_seed_same_result_other_seed_other_trajectory(method):
     budget = 30 if method == "bo" else 80
-    runs = [solve(analytic_objective("analytic-multimodal"), method, budget=budget, seed=s, x0=MULTI.start)
-            for s in (11, 11, 12)]
+    runs = [
+        solve(
+            analytic_objective("analytic-multimodal"), method, budget=budget, seed=s, x0=MULTI.start
+        )
+        for s in (11, 11, 12)
+    ]
     a, b, c = runs
     assert a.x == b.x and a.n_evals == b.n_evals and a.cost == b.cost  # bit for bit
     assert _trajectory(a) == _trajectory(b)
@@ -56,7 +62,9 @@ def test_ngopt_is_reproducible_when_it_delegates_to_cma_fmin():
     # NGOpt's CmaFmin2 member calls cma.fmin (time-seeded unless told otherwise) on a thread
     runs = []
     for seed in (0, 1, 0):
-        res = solve(analytic_objective("analytic-smooth"), "ngopt", budget=210, seed=seed, x0=SMOOTH.start)
+        res = solve(
+            analytic_objective("analytic-smooth"), "ngopt", budget=210, seed=seed, x0=SMOOTH.start
+        )
         runs.append(res)
     assert "CmaFmin2" in runs[0].extra["optimizer"]
     assert _trajectory(runs[0]) == _trajectory(runs[2]) and runs[0].x == runs[2].x
@@ -83,12 +91,15 @@ def test_bo_stops_at_max_evals_below_the_budget():
 
 @pytest.mark.parametrize("method", NEW)
 def test_every_evaluated_point_lies_in_the_box(method):
-    # Rastrigin: asymmetric bounds, many local minima; start near a corner so the search hits the walls
+    # Rastrigin: asymmetric bounds, many local minima; start near a corner so the search hits the
+    # walls
     case = ANALYTIC_CASES["analytic-rastrigin"]
     obj = analytic_objective("analytic-rastrigin")
     x0 = case.lower + 0.02 * (case.upper - case.lower)
     budget = 40 if method == "bo" else 300
-    res = solve(obj, method, budget=budget, seed=0, x0=x0, **({"sigma0": 0.9} if method == "cma" else {}))
+    res = solve(
+        obj, method, budget=budget, seed=0, x0=x0, **({"sigma0": 0.9} if method == "cma" else {})
+    )
     X = np.array([e["x"] for e in obj.log])
     assert len(X) >= res.n_evals == budget
     assert np.all(X >= case.lower) and np.all(X <= case.upper)
@@ -103,7 +114,9 @@ CONVERGENCE = {"cma": (1000, 1e-5), "ngopt": (250, 2e-2), "bo": (60, 0.15)}
 @pytest.mark.parametrize("method", NEW)
 def test_reaches_the_optimum_of_the_smooth_problem(method):
     budget, tol = CONVERGENCE[method]
-    res = solve(analytic_objective("analytic-smooth"), method, budget=budget, seed=0, x0=SMOOTH.start)
+    res = solve(
+        analytic_objective("analytic-smooth"), method, budget=budget, seed=0, x0=SMOOTH.start
+    )
     err = np.max(np.abs(np.array(res.x_normalised) - 1.0))
     assert err < tol, (res.n_evals, res.cost, err)
     assert res.n_evals <= budget
@@ -140,15 +153,17 @@ def test_a_model_that_raises_in_half_the_box_is_survived(method):
                 raise FloatingPointError("diverged")
             return ForwardResult(True, np.array([x[0] - 1.0, x[1] - 1.0]))
 
-    obj = evaluator(HalfBroken(), np.zeros(2), lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0])
+    obj = evaluator(
+        HalfBroken(), np.zeros(2), lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0]
+    )
     budget = 30 if method == "bo" else 80
     opts = {"num_workers": 4} if method == "ngopt" else {}
     res = solve(obj, method, budget=budget, seed=0, x0=[1.9, 1.9], **opts)  # cma: the start fails
     assert res.n_failed > 0 and res.n_evals == budget
     assert res.status != "failed" and res.x[0] <= 1.3 and res.cost < 0.05
     if method == "ngopt":
-        # NGOpt delegates small budgets to Cobyla, which cannot leave a flat plateau of failed points
-        # when started inside it: a result (status "failed"), not an exception
+        # NGOpt delegates small budgets to Cobyla, which cannot leave a flat plateau of failed
+        # points when started inside it: a result (status "failed"), not an exception
         stuck = solve(obj, method, budget=budget, seed=0, x0=[1.9, 1.9], include_x0=True)
         assert stuck.status == "failed" and stuck.n_failed == stuck.n_evals == budget
 
@@ -165,13 +180,19 @@ class _CountingMapper:
 def test_cma_evaluates_one_batch_per_generation_and_restarts_with_a_larger_population():
     mapper = _CountingMapper()
     obj = analytic_objective("analytic-smooth", mapper=mapper)
-    res = solve(obj, "cma", budget=400, seed=0, popsize=10, tolfun=1e3)  # tolfun 1e3: early terminations
+    # tolfun 1e3: early terminations
+    res = solve(obj, "cma", budget=400, seed=0, popsize=10, tolfun=1e3)
     gens = [row for row in res.history if not row.get("partial")]
     assert len(mapper.sizes) == len(res.history)
-    assert mapper.sizes[:len(gens)] == [row["popsize"] for row in gens]
-    assert res.extra["restarts"] >= 1 and max(r["popsize"] for r in gens) == 10 * 2 ** res.extra["restarts"]
+    assert mapper.sizes[: len(gens)] == [row["popsize"] for row in gens]
+    assert (
+        res.extra["restarts"] >= 1
+        and max(r["popsize"] for r in gens) == 10 * 2 ** res.extra["restarts"]
+    )
     # with no restarts allowed, cma's own termination ends the run before the budget
-    res = solve(analytic_objective("analytic-smooth"), "cma", budget=400, seed=0, tolfun=1e3, restarts=0)
+    res = solve(
+        analytic_objective("analytic-smooth"), "cma", budget=400, seed=0, tolfun=1e3, restarts=0
+    )
     assert res.status == "converged" and res.n_evals < 400 and "tolfun" in res.message
 
 
@@ -183,7 +204,8 @@ def test_ngopt_and_bo_batches():
     mapper = _CountingMapper()
     obj = analytic_objective("analytic-multimodal", mapper=mapper)
     solve(obj, "bo", budget=15, seed=0, n_initial=10)
-    assert mapper.sizes == [10] + [1] * 5  # the Latin-hypercube design in one call, then one point each
+    # the Latin-hypercube design in one call, then one point each
+    assert mapper.sizes == [10] + [1] * 5
 
 
 def test_global_numpy_rng_untouched_and_options_checked():
@@ -196,4 +218,6 @@ def test_global_numpy_rng_untouched_and_options_checked():
     with pytest.raises(ValueError, match="transform"):
         solve(analytic_objective("analytic-smooth"), "bo", budget=20, transform="sqrt")
     with pytest.raises(ValueError, match="registry"):
-        solve(analytic_objective("analytic-smooth"), "ngopt", budget=20, optimizer="NoSuchOptimizer")
+        solve(
+            analytic_objective("analytic-smooth"), "ngopt", budget=20, optimizer="NoSuchOptimizer"
+        )

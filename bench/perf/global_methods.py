@@ -1,6 +1,7 @@
 """Evaluations the global methods need to reach the optimum of the analytic problems (not a test).
 
-    python -m bench.perf.global_methods [--methods cma,bo,ngopt,de,pso] [--seeds 5] [--problems smooth,multimodal]
+    python -m bench.perf.global_methods [--methods cma,bo,ngopt,de,pso] [--seeds 5]
+                                        [--problems smooth,multimodal]
 
 A method may carry options after ``@``: ``ngopt@num_workers=4``, ``cma@popsize=16,restarts=0``
 (values are parsed as Python literals when they are).
@@ -18,6 +19,7 @@ infinite, so the median is finite when more than half of the seeds succeed), how
 the median best cost at the end, and the median wall time of a run in seconds (the optimiser's
 own overhead: the analytic models cost microseconds). ``bo`` stops at its ``max_evals`` (200).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,7 +35,12 @@ from solvers import solve
 
 #: problem -> (case, budget, criterion on (scaled point / reference, cost), criterion text)
 PROBLEMS = {
-    "smooth": ("analytic-smooth", 2000, lambda xn, c: bool(np.max(np.abs(xn - 1.0)) < 0.01), "all |x/ref - 1| < 1 %"),
+    "smooth": (
+        "analytic-smooth",
+        2000,
+        lambda xn, c: bool(np.max(np.abs(xn - 1.0)) < 0.01),
+        "all |x/ref - 1| < 1 %",
+    ),
     "multimodal": ("analytic-multimodal", 600, lambda xn, c: c < 100.0, "cost < 100"),
 }
 
@@ -49,7 +56,7 @@ def evals_to_reach(obj, reached) -> float:
 
 
 def parse_method(spec: str) -> tuple[str, dict]:
-    """``"ngopt@num_workers=4,optimizer=NGOpt"`` -> ``("ngopt", {"num_workers": 4, "optimizer": "NGOpt"})``."""
+    """``"ngopt@num_workers=4,optimizer=NGOpt"`` -> ``("ngopt", {"num_workers": 4, ...})``."""
     method, _, rest = spec.partition("@")
     options = {}
     for item in filter(None, rest.split(",")):
@@ -75,12 +82,19 @@ def measure(spec: str, problem: str, seeds: int) -> dict:
         walls.append(time.perf_counter() - t0)
         evals.append(evals_to_reach(obj, reached))
         costs.append(res.cost)
-    return {"median_evals": float(np.median(evals)), "reached": sum(math.isfinite(e) for e in evals),
-            "evals": evals, "median_cost": float(np.median(costs)), "median_wall_s": float(np.median(walls))}
+    return {
+        "median_evals": float(np.median(evals)),
+        "reached": sum(math.isfinite(e) for e in evals),
+        "evals": evals,
+        "median_cost": float(np.median(costs)),
+        "median_wall_s": float(np.median(walls)),
+    }
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--methods", default="cma,bo,ngopt,ngopt@num_workers=4,de,pso")
     ap.add_argument("--problems", default="smooth,multimodal")
     ap.add_argument("--seeds", type=int, default=5)
@@ -89,7 +103,11 @@ def main(argv=None) -> None:
     for p in problems:
         name, budget, _, text = PROBLEMS[p]
         print(f"# {p}: {name}, budget {budget}, reached = {text}")
-    header = f"| method | " + " | ".join(f"{p}: median evals (reached) | best cost | wall s" for p in problems) + " |"
+    header = (
+        "| method | "
+        + " | ".join(f"{p}: median evals (reached) | best cost | wall s" for p in problems)
+        + " |"
+    )
     print(header)
     print("|---" * (1 + 3 * len(problems)) + "|")
     for method in args.methods.split(","):
@@ -97,7 +115,8 @@ def main(argv=None) -> None:
         for p in problems:
             m = measure(method, p, args.seeds)
             med = "—" if not math.isfinite(m["median_evals"]) else f"{m['median_evals']:.0f}"
-            cells.append(f"{med} ({m['reached']}/{args.seeds}) | {m['median_cost']:.2g} | {m['median_wall_s']:.1f}")
+            reached = f"{m['reached']}/{args.seeds}"
+            cells.append(f"{med} ({reached}) | {m['median_cost']:.2g} | {m['median_wall_s']:.1f}")
         print(f"| `{method}` | " + " | ".join(cells) + " |", flush=True)
 
 
