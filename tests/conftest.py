@@ -1,5 +1,6 @@
 """Shared fixtures. Fast unit tests run by default (``make test``); long integration checks are
 marked ``@pytest.mark.slow`` and run with ``make test-slow``."""
+
 from __future__ import annotations
 
 import pytest

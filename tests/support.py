@@ -1,4 +1,5 @@
 """Small helpers shared by the tests (fixtures live in conftest.py)."""
+
 from __future__ import annotations
 
 from problems.inverse.evaluator import Evaluator
@@ -11,7 +12,8 @@ def evaluator(model, data, *, mapper=None, cache=True, **problem):
 
 
 def material(form: str, hardening: str, **overrides):
-    """A Drucker-Prager material of ``form``/``hardening`` at its typical parameters (+ overrides)."""
+    """A Drucker-Prager material of ``form``/``hardening`` at its typical parameters
+    (+ overrides)."""
     from problems.materials.drucker_prager import make_material
     from problems.materials.verification import typical_parameters
 
@@ -19,4 +21,8 @@ def material(form: str, hardening: str, **overrides):
 
 
 #: the nine (form, hardening) variants of the extended Drucker-Prager family
-VARIANTS = [(f, h) for f in ("linear", "hyperbolic", "exponent") for h in ("compression", "shear", "tension")]
+VARIANTS = [
+    (f, h)
+    for f in ("linear", "hyperbolic", "exponent")
+    for h in ("compression", "shear", "tension")
+]

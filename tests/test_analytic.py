@@ -1,4 +1,5 @@
 """The analytic forward models: known optima, derivatives, noise, failure regions."""
+
 from __future__ import annotations
 
 import pickle
@@ -6,8 +7,15 @@ import pickle
 import numpy as np
 import pytest
 
-from problems.inverse.analytic import (ANALYTIC_CASES, LinearModel, RastriginModel, SinusoidModel,
-                               StressStrainModel, analytic_model, analytic_objective)
+from problems.inverse.analytic import (
+    ANALYTIC_CASES,
+    LinearModel,
+    RastriginModel,
+    SinusoidModel,
+    StressStrainModel,
+    analytic_model,
+    analytic_objective,
+)
 from problems.inverse.cases import get_case
 from problems.inverse.problem import FAILURE_COST
 
@@ -15,8 +23,14 @@ NAMES = sorted(ANALYTIC_CASES)
 
 
 def test_cases_are_registered_and_consistent():
-    assert {"analytic-smooth", "analytic-multimodal", "analytic-linear", "analytic-infeasible",
-            "analytic-failing", "analytic-rastrigin"} <= set(NAMES)
+    assert {
+        "analytic-smooth",
+        "analytic-multimodal",
+        "analytic-linear",
+        "analytic-infeasible",
+        "analytic-failing",
+        "analytic-rastrigin",
+    } <= set(NAMES)
     for name in NAMES:
         case = get_case(name)
         assert case is ANALYTIC_CASES[name]
@@ -45,10 +59,16 @@ def test_noise_is_seeded_and_has_the_nominal_scale(name):
     assert abs(a.cost(np.ones(a.n_params)) - m) < 5 * np.sqrt(2 * m)
 
 
-@pytest.mark.parametrize("model_cls", [StressStrainModel, SinusoidModel, RastriginModel, LinearModel])
+@pytest.mark.parametrize(
+    "model_cls", [StressStrainModel, SinusoidModel, RastriginModel, LinearModel]
+)
 def test_objective_fd_jacobian_matches_model_jacobian(model_cls):
-    name = {StressStrainModel: "analytic-smooth", SinusoidModel: "analytic-multimodal",
-            RastriginModel: "analytic-rastrigin", LinearModel: "analytic-linear"}[model_cls]
+    name = {
+        StressStrainModel: "analytic-smooth",
+        SinusoidModel: "analytic-multimodal",
+        RastriginModel: "analytic-rastrigin",
+        LinearModel: "analytic-linear",
+    }[model_cls]
     obj = analytic_objective(name)
     case = ANALYTIC_CASES[name]
     x = 0.5 * (case.reference + case.start)
@@ -72,7 +92,9 @@ def test_multimodal_problem_has_a_local_minimum_near_the_start():
     res = least_squares(obj.residual, obj.to_scaled(case.start), bounds=(obj.lower_z, obj.upper_z))
     assert 2 * res.cost > 1e4  # stuck in the local minimum near omega = 1.5
     assert obj.to_physical(res.x)[1] == pytest.approx(1.5, abs=0.05)
-    res = least_squares(obj.residual, obj.to_scaled([1.2, 1.8, 0.9]), bounds=(obj.lower_z, obj.upper_z))
+    res = least_squares(
+        obj.residual, obj.to_scaled([1.2, 1.8, 0.9]), bounds=(obj.lower_z, obj.upper_z)
+    )
     assert 2 * res.cost < 1e-12  # inside the global basin
 
 

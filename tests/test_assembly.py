@@ -1,4 +1,5 @@
 """The fused (numba) assembly against the numpy reference: tangent, internal force, strain."""
+
 import numpy as np
 import pytest
 
@@ -16,7 +17,7 @@ def test_fused_kernels_match_numpy_reference_on_distorted_mesh(use_b_bar):
     disc = discretise(distort(box_mesh(3, 4, 5), 0.25, seed=3), use_b_bar=use_b_bar)
     ne, n_pts = disc.mesh.n_elements, disc.n_points
     rng = np.random.default_rng(0)
-    D = rng.standard_normal((n_pts, 6, 6)) * 1e4          # non-symmetric, like a plastic tangent
+    D = rng.standard_normal((n_pts, 6, 6)) * 1e4  # non-symmetric, like a plastic tangent
     stress = rng.standard_normal((n_pts, 6)) * 10.0
     u = rng.standard_normal(disc.pattern.n_dofs) * 1e-2
     fa = FusedAssembler(disc.B, disc.dV, disc.pattern)

@@ -1,4 +1,5 @@
 """Interrupting a suite with SIGKILL, resuming it, and Dask vs in-process runs."""
+
 from __future__ import annotations
 
 import json
@@ -75,21 +76,41 @@ def test_sigkill_part_way_then_resume_gives_the_uninterrupted_result(tmp_path):
     assert len(expected) == 36
 
     out = tmp_path / "interrupted"
-    cmd = [sys.executable, "-c", SLOW_CLI, "run", str(suite_file), "--out", str(out), "--workers", "1", "--quiet"]
+    cmd = [
+        sys.executable,
+        "-c",
+        SLOW_CLI,
+        "run",
+        str(suite_file),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--quiet",
+    ]
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        cmd,
+        cwd=ROOT,
+        env=env,
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     deadline = time.monotonic() + 60
     try:
         while len(store.done_hashes(out)) < 5:
-            assert proc.poll() is None, f"suite ended before the kill: {proc.stderr.read().decode()}"
+            assert proc.poll() is None, (
+                f"suite ended before the kill: {proc.stderr.read().decode()}"
+            )
             assert time.monotonic() < deadline, "no record appeared in 60 s"
             time.sleep(0.005)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the whole process tree, at an arbitrary moment
         proc.wait()
     assert proc.returncode == -signal.SIGKILL
-    before = {r["config_hash"]: r["finished"] for r in store.load_records(out)}  # all parse: no partial record
+    # all parse: no partial record
+    before = {r["config_hash"]: r["finished"] for r in store.load_records(out)}
     assert 5 <= len(before) < len(expected), "the kill did not land part-way"
     assert set(before) <= expected
 
@@ -98,10 +119,13 @@ def test_sigkill_part_way_then_resume_gives_the_uninterrupted_result(tmp_path):
     assert f"{len(before)} already done, {len(expected) - len(before)} run now" in p.stdout
     records = store.load_records(out)
     hashes = [r["config_hash"] for r in records]
-    assert len(hashes) == len(set(hashes)) == len(expected) and set(hashes) == expected  # each run exactly once
+    # each run exactly once
+    assert len(hashes) == len(set(hashes)) == len(expected) and set(hashes) == expected
     assert all(store.record_path(out, r["config_hash"]).stem == config_hash_of(r) for r in records)
     assert store.stray_tmp(out) == []
-    assert {h: f for h, f in ((r["config_hash"], r["finished"]) for r in records) if h in before} == before
+    assert {
+        h: f for h, f in ((r["config_hash"], r["finished"]) for r in records) if h in before
+    } == before
     log = (out / "killme.log").read_text()
     assert f"{len(before)} with a record, {len(expected) - len(before)} to run" in log
 
@@ -118,20 +142,24 @@ def test_torn_records_are_rerun_kept_aside_and_reported_by_the_cli(tmp_path, cap
     from bench.cli import main
 
     suite_file = tmp_path / "torn.toml"
-    suite_file.write_text('[suite]\nname = "torn"\ncases = ["analytic-linear"]\nmethods = ["lm"]\n'
-                          'seeds = [0, 1, 2]\nbudgets = [40]\n')
+    suite_file.write_text(
+        '[suite]\nname = "torn"\ncases = ["analytic-linear"]\nmethods = ["lm"]\n'
+        "seeds = [0, 1, 2]\nbudgets = [40]\n"
+    )
     out = tmp_path / "out"
     assert main(["run", str(suite_file), "--out", str(out), "--workers", "1", "--quiet"]) == 0
     paths = sorted(store.runs_dir(out).glob("*.json"))
     assert len(paths) == 3
-    paths[0].write_text(paths[0].read_text()[:100])      # truncated, as by a full disk
-    paths[1].write_text("")                              # empty
-    paths[2].write_bytes(b"\xff\xfe garbage")            # not even text
+    paths[0].write_text(paths[0].read_text()[:100])  # truncated, as by a full disk
+    paths[1].write_text("")  # empty
+    paths[2].write_bytes(b"\xff\xfe garbage")  # not even text
     capsys.readouterr()
 
-    assert main(["report", str(out), "--format", "md", "--no-figures"]) == 2  # nothing readable: an error ...
+    # nothing readable: an error ...
+    assert main(["report", str(out), "--format", "md", "--no-figures"]) == 2
     err = capsys.readouterr().err
-    assert all(f"unreadable record {p} left out" in err for p in paths)      # ... naming every bad file
+    # ... naming every bad file
+    assert all(f"unreadable record {p} left out" in err for p in paths)
     assert "(3 unreadable)" in err
 
     assert main(["run", str(suite_file), "--out", str(out), "--workers", "1", "--quiet"]) == 0
@@ -157,7 +185,9 @@ def config_hash_of(record) -> str:
 
 
 def test_dask_local_cluster_gives_the_same_records_as_in_process(tmp_path):
-    suite = load_suite_text(tmp_path, """
+    suite = load_suite_text(
+        tmp_path,
+        """
 [suite]
 name = "dask"
 cases = ["analytic-smooth", "analytic-multimodal"]
@@ -165,7 +195,8 @@ methods = ["lm", "gauss-newton"]
 seeds = [0, 1]
 starts = ["default", "random"]
 budgets = [60]
-""")
+""",
+    )
     one = run_suite(suite, tmp_path / "one", workers=1, progress=False)
     two = run_suite(suite, tmp_path / "two", workers=2, progress=False)
     assert one.ran == two.ran == len(suite) == 16
@@ -178,17 +209,28 @@ budgets = [60]
 def test_existing_scheduler_with_fan_out_gives_the_same_records(tmp_path):
     from distributed import LocalCluster
 
-    suite = load_suite_text(tmp_path, """
+    suite = load_suite_text(
+        tmp_path,
+        """
 [suite]
 name = "sched"
 cases = ["analytic-smooth"]
 methods = ["lm", "ga"]
 seeds = [3]
 budgets = [60]
-""")
+""",
+    )
     run_suite(suite, tmp_path / "one", workers=1, progress=False)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
-        s = run_suite(suite, tmp_path / "sched", scheduler=cluster.scheduler_address, fan_out=True, progress=False)
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+    ) as cluster:
+        s = run_suite(
+            suite,
+            tmp_path / "sched",
+            scheduler=cluster.scheduler_address,
+            fan_out=True,
+            progress=False,
+        )
     assert s.ran == 2 and s.crashed == 0
     assert _comparable_records(tmp_path / "one") == _comparable_records(tmp_path / "sched")
 

@@ -1,4 +1,5 @@
 """Results store and runner: atomic records, resume, --force, crashes as records, tidy frames."""
+
 from __future__ import annotations
 
 import json
@@ -10,8 +11,16 @@ from bench import store
 from bench.runner import run_one, run_suite
 from bench.suite import RunConfig, config_hash, parse_suite
 
-SUITE = {"suite": {"name": "tiny", "cases": ["analytic-smooth", "analytic-linear"], "methods": ["lm"],
-                   "seeds": [0], "starts": ["default", "random"], "budgets": [60]}}
+SUITE = {
+    "suite": {
+        "name": "tiny",
+        "cases": ["analytic-smooth", "analytic-linear"],
+        "methods": ["lm"],
+        "seeds": [0],
+        "starts": ["default", "random"],
+        "budgets": [60],
+    }
+}
 
 
 def test_atomic_write_leaves_no_partial_file_when_the_writer_dies(tmp_path, monkeypatch):
@@ -78,7 +87,9 @@ def test_a_crash_becomes_a_failed_record_and_never_stops_the_suite(tmp_path, mon
     runs, _ = store.to_frames(tmp_path)
     crashed = runs[runs["crashed"]]
     assert set(crashed["case"]) == {"analytic-linear"} and (crashed["status"] == "failed").all()
-    assert all("RuntimeError: solver exploded" in m and "Traceback" in m for m in crashed["message"])
+    assert all(
+        "RuntimeError: solver exploded" in m and "Traceback" in m for m in crashed["message"]
+    )
     assert (runs.loc[~runs["crashed"], "status"] != "failed").all()
     assert "solver exploded" in (tmp_path / "tiny.log").read_text()
 
@@ -105,8 +116,11 @@ def test_resume_and_force(tmp_path):
     bigger = parse_suite({"suite": {**SUITE["suite"], "seeds": [0, 1]}})
     second = run_suite(bigger, tmp_path, workers=1, progress=False)
     assert (second.total, second.skipped, second.ran) == (8, 4, 4)
-    assert {h: f for h, f in ((r["config_hash"], r["finished"]) for r in store.load_records(tmp_path))
-            if h in stamps} == stamps  # finished runs untouched
+    assert {
+        h: f
+        for h, f in ((r["config_hash"], r["finished"]) for r in store.load_records(tmp_path))
+        if h in stamps
+    } == stamps  # finished runs untouched
     forced = run_suite(suite, tmp_path, workers=1, progress=False, force=True)
     assert forced.ran == 4 and len(store.load_records(tmp_path)) == 8
     assert sorted(store.done_hashes(tmp_path)) == sorted(config_hash(r) for r in bigger.runs())
@@ -117,11 +131,29 @@ def test_frames_are_tidy(tmp_path):
     run_suite(suite, tmp_path, workers=1, progress=False)
     runs, hist = store.to_frames(tmp_path)
     assert len(runs) == 4 and runs["config_hash"].is_unique
-    assert {"case", "method", "seed", "start", "start_index", "budget", "cost", "n_evals", "wall_s",
-            "err.E", "err.p", "xn.psi", "x0.H", "data_hash"} <= set(runs.columns)
+    assert {
+        "case",
+        "method",
+        "seed",
+        "start",
+        "start_index",
+        "budget",
+        "cost",
+        "n_evals",
+        "wall_s",
+        "err.E",
+        "err.p",
+        "xn.psi",
+        "x0.H",
+        "data_hash",
+    } <= set(runs.columns)
     smooth = runs[runs["case"] == "analytic-smooth"]
     assert smooth["err.p"].isna().all() and smooth["err.E"].notna().all()  # inactive -> NaN
-    assert len(hist) == sum(len(r["result"]["history"]) for r in store.load_records(tmp_path)) > len(runs)
+    assert (
+        len(hist)
+        == sum(len(r["result"]["history"]) for r in store.load_records(tmp_path))
+        > len(runs)
+    )
     assert set(hist["config_hash"]) == set(runs["config_hash"])
     assert (hist.groupby("config_hash")["n_evals"].apply(lambda s: s.is_monotonic_increasing)).all()
     paths = store.write_parquet(tmp_path)
@@ -146,26 +178,42 @@ def test_a_data_set_that_cannot_be_made_fails_its_runs_only(tmp_path, monkeypatc
         raise RuntimeError(f"data model of {cfg.case} did not converge")
 
     monkeypatch.setattr(runner, "dataset_for", broken)
-    suite = parse_suite({"suite": {"name": "d", "cases": ["linear-compression", "analytic-linear"],
-                                   "methods": ["lm"], "budgets": [20]}, "data": {"noise_um": 1.0}})
+    suite = parse_suite(
+        {
+            "suite": {
+                "name": "d",
+                "cases": ["linear-compression", "analytic-linear"],
+                "methods": ["lm"],
+                "budgets": [20],
+            },
+            "data": {"noise_um": 1.0},
+        }
+    )
     summary = run_suite(suite, tmp_path, workers=1, progress=False)
     assert summary.ran == 2 and summary.crashed == 1
     runs, _ = store.to_frames(tmp_path)
     fe = runs[runs["case"] == "linear-compression"].iloc[0]
     assert fe["crashed"] and fe["status"] == "failed" and "did not converge" in fe["message"]
     assert fe["data.noise_um"] == 1.0 and fe["n_evals"] == 0
-    assert not runs[runs["case"] == "analytic-linear"]["crashed"].any()  # analytic runs need no data set
+    # analytic runs need no data set
+    assert not runs[runs["case"] == "analytic-linear"]["crashed"].any()
 
 
 def test_dry_run_counts_and_runs_nothing(tmp_path, capsys):
     from bench.cli import main
 
     suite = tmp_path / "s.toml"
-    suite.write_text('[suite]\ncases = ["analytic-smooth"]\nmethods = ["lm", "gauss-newton"]\n'
-                     'seeds = [0, 1]\nstarts = ["default", "random"]\nrandom_starts = 3\nbudgets = [50]\n')
+    suite.write_text(
+        '[suite]\ncases = ["analytic-smooth"]\nmethods = ["lm", "gauss-newton"]\n'
+        'seeds = [0, 1]\nstarts = ["default", "random"]\nrandom_starts = 3\nbudgets = [50]\n'
+    )
     assert main(["run", str(suite), "--out", str(tmp_path / "o"), "--dry-run"]) == 0
     out = capsys.readouterr().out
-    assert "16 runs, 0 with a record" in out and "16 to run" in out and "at most 800 forward evaluations" in out
+    assert (
+        "16 runs, 0 with a record" in out
+        and "16 to run" in out
+        and "at most 800 forward evaluations" in out
+    )
     assert not (tmp_path / "o" / "runs").exists()
 
 
@@ -190,7 +238,8 @@ def test_an_unreadable_record_is_moved_aside_rerun_and_reported(tmp_path, kind, 
     assert victim.stem not in store.done_hashes(tmp_path)
     assert len(store.scan_records(tmp_path)[1]) == 1
 
-    write_report(tmp_path, ["md"], figures=False)  # before the rerun: the record is left out, and named
+    # before the rerun: the record is left out, and named
+    write_report(tmp_path, ["md"], figures=False)
     err = capsys.readouterr().err
     assert f"unreadable record {victim} left out" in err
     md = (tmp_path / "report" / "report.md").read_text()
@@ -200,14 +249,19 @@ def test_an_unreadable_record_is_moved_aside_rerun_and_reported(tmp_path, kind, 
     summary = run_suite(suite, tmp_path, workers=1, progress=False)
     assert summary.skipped == 3 and summary.ran == 1  # the torn run is run again, the others not
     (aside,) = store.set_aside_files(tmp_path)
-    assert aside.parent == store.corrupt_dir(tmp_path) and aside.name.startswith(f"{victim.name}.corrupt-")
+    assert aside.parent == store.corrupt_dir(tmp_path) and aside.name.startswith(
+        f"{victim.name}.corrupt-"
+    )
     assert aside.read_text() == bad  # kept as found, for inspection
     assert summary.set_aside == [aside] and "1 unreadable record(s) moved to" in str(summary)
     log = (tmp_path / "tiny.log").read_text()
     assert f"unreadable record {victim.name}" in log and str(aside) in log
     assert len(store.load_records(tmp_path)) == 4 and store.scan_records(tmp_path)[1] == []
 
-    write_report(tmp_path, ["md"], figures=False)  # after the rerun: complete, the file kept aside is named
-    assert f"kept aside by 'femubench run' (its run was run again): {aside}" in capsys.readouterr().err
+    # after the rerun: complete, the file kept aside is named
+    write_report(tmp_path, ["md"], figures=False)
+    assert (
+        f"kept aside by 'femubench run' (its run was run again): {aside}" in capsys.readouterr().err
+    )
     md = (tmp_path / "report" / "report.md").read_text()
     assert "**4 runs**" in md and f"runs/corrupt/{aside.name}" in md

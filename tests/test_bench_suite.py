@@ -1,4 +1,5 @@
 """Suites: strict validation (the promised errors), expansion and the config hash."""
+
 from __future__ import annotations
 
 import copy
@@ -13,8 +14,15 @@ from bench.suite import RunConfig, config_hash, load_suite, parse_suite
 ROOT = Path(__file__).resolve().parent.parent
 
 GOOD = {
-    "suite": {"name": "t", "cases": ["analytic-smooth", "analytic-linear"], "methods": ["lm", "gauss-newton"],
-              "seeds": [0, 1], "starts": ["default", "random"], "random_starts": 2, "budgets": [50, 100]},
+    "suite": {
+        "name": "t",
+        "cases": ["analytic-smooth", "analytic-linear"],
+        "methods": ["lm", "gauss-newton"],
+        "seeds": [0, 1],
+        "starts": ["default", "random"],
+        "random_starts": 2,
+        "budgets": [50, 100],
+    },
 }
 
 
@@ -41,7 +49,11 @@ def test_expansion_counts_and_order():
     assert len(runs) == len(s) == 2 * 2 * 2 * 2 * 3
     assert len({config_hash(r) for r in runs}) == len(runs)
     assert runs[0] == RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", {}, {})
-    assert [(r.start, r.start_index) for r in runs[:3]] == [("default", 0), ("random", 0), ("random", 1)]
+    assert [(r.start, r.start_index) for r in runs[:3]] == [
+        ("default", 0),
+        ("random", 0),
+        ("random", 1),
+    ]
     assert s.total_budget == sum(r.budget for r in runs)
 
 
@@ -56,7 +68,11 @@ def test_options_are_attached_to_their_method_only():
     from solvers import METHODS
 
     name, (default, _) = next(iter(METHODS["lm"].options.items()))
-    value = default if not isinstance(default, (int, float)) or isinstance(default, bool) else default * 2
+    value = (
+        default
+        if not isinstance(default, (int, float)) or isinstance(default, bool)
+        else default * 2
+    )
     s = parse_suite(with_(f"options.lm.{name}", value))
     lm = [r for r in s.runs() if r.method == "lm"]
     gn = [r for r in s.runs() if r.method == "gauss-newton"]
@@ -65,42 +81,88 @@ def test_options_are_attached_to_their_method_only():
 
 
 def test_config_hash_is_canonical_and_stable():
-    a = RunConfig("analytic-smooth", "lm", 0, "default", 0, 100, "coarse", {"b": 1, "a": 2.0}, {"y": 1, "x": "s"})
-    b = RunConfig("analytic-smooth", "lm", 0, "default", 0, 100, "coarse", {"a": 2.0, "b": 1}, {"x": "s", "y": 1})
+    a = RunConfig(
+        "analytic-smooth",
+        "lm",
+        0,
+        "default",
+        0,
+        100,
+        "coarse",
+        {"b": 1, "a": 2.0},
+        {"y": 1, "x": "s"},
+    )
+    b = RunConfig(
+        "analytic-smooth",
+        "lm",
+        0,
+        "default",
+        0,
+        100,
+        "coarse",
+        {"a": 2.0, "b": 1},
+        {"x": "s", "y": 1},
+    )
     assert config_hash(a) == config_hash(b)
     assert config_hash(a) != config_hash(RunConfig.from_dict({**a.to_dict(), "seed": 1}))
     assert RunConfig.from_dict(a.to_dict()) == a
     # changing this value orphans every stored record: bump CONFIG_SCHEMA deliberately if needed
-    assert config_hash(RunConfig("linear-compression", "lm", 0, "default", 0, 200, "coarse")) == \
-        "eed14cf8837e99bd0b695de64ff8df2cc2e0df32c4069d7586a377ab23af057b"
+    assert (
+        config_hash(RunConfig("linear-compression", "lm", 0, "default", 0, 200, "coarse"))
+        == "eed14cf8837e99bd0b695de64ff8df2cc2e0df32c4069d7586a377ab23af057b"
+    )
 
 
-@pytest.mark.parametrize("raw, needles", [
-    (with_("suite.seed", [0]), ["[suite] unknown key 'seed'", "did you mean 'seeds'", "allowed: name"]),
-    (with_("suite.cases", ["linear-compresion"]), ["case 'linear-compresion' is unknown", "linear-compression"]),
-    (with_("suite.cases", []), ["cases must be"]),
-    (with_("suite.methods", ["lm", "levenberg"]), ["method 'levenberg' is unknown", "allowed:", "gauss-newton"]),
-    (with_("suite.methods", ["nlopt:NOSUCH"]), ["method 'nlopt:NOSUCH' is unknown"]),
-    (with_("suite.budgets", [0]), ["budgets must be positive integers", "0"]),
-    (with_("suite.budgets", [-5, 10]), ["budgets must be positive integers", "-5"]),
-    (with_("suite.budgets", []), ["budgets must be a non-empty list"]),
-    (with_("suite.budgets", _DELETE), ["missing key 'budgets'"]),
-    (with_("suite.seeds", [0.5]), ["seeds must be integers >= 0", "0.5"]),
-    (with_("suite.seeds", ["1"]), ["seeds must be integers >= 0"]),
-    (with_("suite.seeds", [True]), ["seeds must be integers >= 0"]),
-    (with_("suite.seeds", [1, 1]), ["seeds lists 1 more than once"]),
-    (with_("suite.starts", ["default", "randon"]), ["'randon' is not a start kind", "default, random"]),
-    (with_("suite.random_starts", 0), ["random_starts must be an integer >= 1"]),
-    (with_("suite.mesh", "huge"), ["mesh 'huge' is unknown", "coarse"]),
-    (with_("results.x", 1), ["unknown top-level table [results]", "[suite], [data], [options]"]),
-    (with_("data.noize_um", 1.0), ["[data] unknown key 'noize_um'", "allowed:"]),
-    (with_("data.noise_um", -1.0), ["[data] noise_um = -1.0 is out of range"]),
-    (with_("data.route", "laser"), ["[data] route = 'laser' is unknown", "fe, dic"]),
-    (with_("data.seed", 1.5), ["[data] seed must be of type int"]),
-    (with_("options.pso.w", 0.5), ["[options.pso] is for method 'pso', which the suite does not run"]),
-    (with_("options.lm.no_such_option", 1), ["[options.lm] unknown option 'no_such_option'", "allowed:"]),
-    ({"suite": {"cases": "all"}}, ["missing key 'methods'", "missing key 'budgets'"]),
-])
+@pytest.mark.parametrize(
+    "raw, needles",
+    [
+        (
+            with_("suite.seed", [0]),
+            ["[suite] unknown key 'seed'", "did you mean 'seeds'", "allowed: name"],
+        ),
+        (
+            with_("suite.cases", ["linear-compresion"]),
+            ["case 'linear-compresion' is unknown", "linear-compression"],
+        ),
+        (with_("suite.cases", []), ["cases must be"]),
+        (
+            with_("suite.methods", ["lm", "levenberg"]),
+            ["method 'levenberg' is unknown", "allowed:", "gauss-newton"],
+        ),
+        (with_("suite.methods", ["nlopt:NOSUCH"]), ["method 'nlopt:NOSUCH' is unknown"]),
+        (with_("suite.budgets", [0]), ["budgets must be positive integers", "0"]),
+        (with_("suite.budgets", [-5, 10]), ["budgets must be positive integers", "-5"]),
+        (with_("suite.budgets", []), ["budgets must be a non-empty list"]),
+        (with_("suite.budgets", _DELETE), ["missing key 'budgets'"]),
+        (with_("suite.seeds", [0.5]), ["seeds must be integers >= 0", "0.5"]),
+        (with_("suite.seeds", ["1"]), ["seeds must be integers >= 0"]),
+        (with_("suite.seeds", [True]), ["seeds must be integers >= 0"]),
+        (with_("suite.seeds", [1, 1]), ["seeds lists 1 more than once"]),
+        (
+            with_("suite.starts", ["default", "randon"]),
+            ["'randon' is not a start kind", "default, random"],
+        ),
+        (with_("suite.random_starts", 0), ["random_starts must be an integer >= 1"]),
+        (with_("suite.mesh", "huge"), ["mesh 'huge' is unknown", "coarse"]),
+        (
+            with_("results.x", 1),
+            ["unknown top-level table [results]", "[suite], [data], [options]"],
+        ),
+        (with_("data.noize_um", 1.0), ["[data] unknown key 'noize_um'", "allowed:"]),
+        (with_("data.noise_um", -1.0), ["[data] noise_um = -1.0 is out of range"]),
+        (with_("data.route", "laser"), ["[data] route = 'laser' is unknown", "fe, dic"]),
+        (with_("data.seed", 1.5), ["[data] seed must be of type int"]),
+        (
+            with_("options.pso.w", 0.5),
+            ["[options.pso] is for method 'pso', which the suite does not run"],
+        ),
+        (
+            with_("options.lm.no_such_option", 1),
+            ["[options.lm] unknown option 'no_such_option'", "allowed:"],
+        ),
+        ({"suite": {"cases": "all"}}, ["missing key 'methods'", "missing key 'budgets'"]),
+    ],
+)
 def test_invalid_suites_are_rejected_with_the_key_and_what_is_allowed(raw, needles):
     with pytest.raises(ValueError) as info:
         parse_suite(raw)
@@ -124,18 +186,28 @@ def test_all_errors_are_reported_at_once():
 def test_option_values_are_type_checked():
     from solvers import METHODS
 
-    name, (default, _) = next((k, v) for k, v in METHODS["lm"].options.items()
-                              if isinstance(v[0], (int, float)) and not isinstance(v[0], bool))
+    name, (default, _) = next(
+        (k, v)
+        for k, v in METHODS["lm"].options.items()
+        if isinstance(v[0], (int, float)) and not isinstance(v[0], bool)
+    )
     with pytest.raises(ValueError, match=rf"\[options.lm\] {name} must be like its default"):
         parse_suite(with_(f"options.lm.{name}", "fast"))
 
 
 def test_cli_rejects_an_invalid_suite_before_running_anything(tmp_path):
     bad = tmp_path / "bad.toml"
-    bad.write_text('[suite]\ncases = ["analytic-smooth"]\nmethods = ["lm"]\nbudgets = [0]\nstart = ["default"]\n')
+    bad.write_text(
+        '[suite]\ncases = ["analytic-smooth"]\nmethods = ["lm"]\nbudgets = [0]\nstart = '
+        '["default"]\n'
+    )
     out = tmp_path / "out"
-    p = subprocess.run([sys.executable, "-m", "bench", "run", str(bad), "--out", str(out), "--workers", "1"],
-                       capture_output=True, text=True, cwd=ROOT)
+    p = subprocess.run(
+        [sys.executable, "-m", "bench", "run", str(bad), "--out", str(out), "--workers", "1"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert p.returncode == 2
     assert "femubench run: error:" in p.stderr and "budgets must be positive integers" in p.stderr
     assert "unknown key 'start'" in p.stderr and "did you mean 'starts'" in p.stderr
@@ -162,21 +234,38 @@ def test_default_and_paper_suites_have_the_documented_shape():
 
     d = load_suite(ROOT / "suites" / "default.toml")
     assert set(d.cases) == set(CASES) and set(d.methods) == {"lm", "gauss-newton"}
-    assert d.starts == ("default",) and d.mesh == "coarse" and d.tiers == ("model-error", "consistent")
+    assert (
+        d.starts == ("default",) and d.mesh == "coarse" and d.tiers == ("model-error", "consistent")
+    )
     # 9 cases x 2 methods x (consistent, model-error untreated, model-error one-point)
     assert len(d) == 54 and {(r.tier, r.treatment) for r in d.runs()} == {
-        ("consistent", "none"), ("model-error", "none"), ("model-error", "one-point")}
+        ("consistent", "none"),
+        ("model-error", "none"),
+        ("model-error", "one-point"),
+    }
     p = load_suite(ROOT / "suites" / "paper.toml")
-    assert set(p.cases) == set(CASES) and len(p.budgets) == 1 and "random" in p.starts and len(p.seeds) > 1
+    assert (
+        set(p.cases) == set(CASES)
+        and len(p.budgets) == 1
+        and "random" in p.starts
+        and len(p.seeds) > 1
+    )
     for m in ("lm", "gauss-newton", "ga", "pso", "sa", "mcmc"):
         assert m in p.methods
     assert sum(m.startswith("nlopt:") for m in p.methods) >= 5
 
 
 def test_tiers_and_treatments_span_the_suite_without_correcting_consistent_data():
-    raw = {"suite": {"cases": ["linear-compression"], "methods": ["lm"], "budgets": [50],
-                     "tiers": ["consistent", "model-error"], "treatments": ["none", "iterated"],
-                     "plate_margin_mm": 15.0}}
+    raw = {
+        "suite": {
+            "cases": ["linear-compression"],
+            "methods": ["lm"],
+            "budgets": [50],
+            "tiers": ["consistent", "model-error"],
+            "treatments": ["none", "iterated"],
+            "plate_margin_mm": 15.0,
+        }
+    }
     s = parse_suite(raw)
     combos = sorted((r.tier, r.treatment) for r in s.runs())
     assert combos == [("consistent", "none"), ("model-error", "iterated"), ("model-error", "none")]

@@ -1,4 +1,5 @@
 """The nine cases: names, parameters, reference values, bounds, starts."""
+
 import json
 import math
 
@@ -10,8 +11,11 @@ from problems.materials.drucker_prager import hyperbolic_l0
 
 
 def test_nine_cases_with_the_paper_active_parameters():
-    assert sorted(CASES) == sorted(f"{f}-{h}" for f in ("linear", "hyperbolic", "exponent")
-                                   for h in ("compression", "shear", "tension"))
+    assert sorted(CASES) == sorted(
+        f"{f}-{h}"
+        for f in ("linear", "hyperbolic", "exponent")
+        for h in ("compression", "shear", "tension")
+    )
     assert CASES["linear-shear"].names == ("E", "beta", "K", "psi", "sigma0", "H")
     assert CASES["hyperbolic-tension"].names == ("E", "beta", "psi", "sigma0", "H", "pt0")
     # the exponent form identifies its hydrostatic tension strength pt0 in place of a
@@ -22,7 +26,7 @@ def test_nine_cases_with_the_paper_active_parameters():
 def test_exponent_cases_derive_the_papers_a_exactly(hardening):
     case = CASES[f"exponent-{hardening}"]
     mat = case.material_parameters(case.reference)
-    assert "pt0" not in mat and math.isclose(mat["a"], A_REF, rel_tol=1e-12)   # the same concrete
+    assert "pt0" not in mat and math.isclose(mat["a"], A_REF, rel_tol=1e-12)  # the same concrete
     x = case.reference * np.array([1.1, 0.9, 1.2, 0.8, 0.85, 1.15])
     names = ("E", "psi", "sigma0", "H", "a", "b", "nu")
     J = case.material_jacobian(x, names)
@@ -31,7 +35,10 @@ def test_exponent_cases_derive_the_papers_a_exactly(hardening):
         up, dn = x.copy(), x.copy()
         up[j] += h
         dn[j] -= h
-        fd = [(case.material_parameters(up)[n] - case.material_parameters(dn)[n]) / (2 * h) for n in names]
+        fd = [
+            (case.material_parameters(up)[n] - case.material_parameters(dn)[n]) / (2 * h)
+            for n in names
+        ]
         np.testing.assert_allclose(J[:, j], fd, rtol=1e-7, atol=1e-12)
 
 

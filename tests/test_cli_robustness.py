@@ -1,4 +1,5 @@
 """The command line itself: --version, and a closed output pipe ends it quietly."""
+
 from __future__ import annotations
 
 import os
@@ -25,8 +26,13 @@ def test_version_prints_the_package_version(capsys):
 def test_a_closed_output_pipe_gives_no_traceback(argv):
     """As ``femubench solvers | head -0``: the reader is gone before anything is written."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    proc = subprocess.Popen([sys.executable, "-m", "bench", *argv], cwd=ROOT, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bench", *argv],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.close()
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) in (0, 141), err  # argparse itself ignores a failed --help write
@@ -40,4 +46,6 @@ def test_an_output_path_that_is_a_directory_is_a_one_line_error(tmp_path, capsys
     blocker.write_text("a file where a folder should be")
     code = main(["run", str(suite), "--out", str(blocker), "--workers", "1"])
     err = capsys.readouterr().err
-    assert code == 2 and err.startswith("femubench run: error:") and len(err.strip().splitlines()) == 1
+    assert (
+        code == 2 and err.startswith("femubench run: error:") and len(err.strip().splitlines()) == 1
+    )

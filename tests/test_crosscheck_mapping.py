@@ -3,6 +3,7 @@ the `femubench crosscheck` command without openseespy.
 
 Pure checks: nothing here needs openseespy (the cross-check run itself does).
 """
+
 import math
 import subprocess
 import sys
@@ -11,7 +12,12 @@ import numpy as np
 import pytest
 
 from bench.crosscheck.mapping import (
-    REFERENCE, dp_return, eqps_from_alpha, opensees_flow_direction, opensees_parameters, opensees_yield_value,
+    REFERENCE,
+    dp_return,
+    eqps_from_alpha,
+    opensees_flow_direction,
+    opensees_parameters,
+    opensees_yield_value,
     tension_cutoff_I1,
 )
 from bench.crosscheck.reference import material_point_uniaxial, uniaxial_closed_form
@@ -21,8 +27,11 @@ P = {k: REFERENCE[k] for k in ("E", "nu", "beta", "psi", "sigma0", "H")}
 
 
 def _ours(p):
-    return make_material("linear", "compression", {**{k: p[k] for k in ("E", "nu", "beta", "psi", "sigma0", "H")},
-                                                    "K": 1.0})
+    return make_material(
+        "linear",
+        "compression",
+        {**{k: p[k] for k in ("E", "nu", "beta", "psi", "sigma0", "H")}, "K": 1.0},
+    )
 
 
 def test_mapping_values_at_the_reference():
@@ -30,11 +39,19 @@ def test_mapping_values_at_the_reference():
     tb = math.tan(math.radians(35.0))
     assert osp["K"] == pytest.approx(30_000 / 1.8)
     assert osp["G"] == pytest.approx(12_500.0)
-    assert osp["rho"] == pytest.approx(math.sqrt(2 / 3) * tb / 3) and osp["rho"] == pytest.approx(0.190572, abs=1e-6)
-    assert osp["rhoBar"] == osp["rho"]                     # psi = beta: associated
+    assert osp["rho"] == pytest.approx(math.sqrt(2 / 3) * tb / 3) and osp["rho"] == pytest.approx(
+        0.190572, abs=1e-6
+    )
+    assert osp["rhoBar"] == osp["rho"]  # psi = beta: associated
     assert osp["sigmaY"] == pytest.approx(15.3319, abs=1e-4)
     assert osp["H"] == pytest.approx((1 - tb / 3) ** 2 * 1500.0)
-    assert (osp["theta"], osp["Kinf"], osp["Ko"], osp["delta1"], osp["delta2"]) == (1.0, 0.0, 0.0, 0.0, 0.0)
+    assert (osp["theta"], osp["Kinf"], osp["Ko"], osp["delta1"], osp["delta2"]) == (
+        1.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    )
     non = opensees_parameters(**{**P, "psi": 15.0})
     assert non["rhoBar"] == pytest.approx(math.sqrt(2 / 3) * math.tan(math.radians(15.0)) / 3)
     assert non["H"] == pytest.approx((1 - tb / 3) * (1 - math.tan(math.radians(15.0)) / 3) * 1500.0)
@@ -42,7 +59,9 @@ def test_mapping_values_at_the_reference():
     assert tension_cutoff_I1(osp) == pytest.approx(3 * 20.0 * (1 - tb / 3) / tb)
 
 
-@pytest.mark.parametrize("bad", [{"psi": 40.0}, {"beta": 75.0}, {"psi": -1.0}, {"nu": 0.5}, {"sigma0": 0.0}])
+@pytest.mark.parametrize(
+    "bad", [{"psi": 40.0}, {"beta": 75.0}, {"psi": -1.0}, {"nu": 0.5}, {"sigma0": 0.0}]
+)
 def test_mapping_rejects_what_opensees_cannot_represent(bad):
     with pytest.raises(ValueError):
         opensees_parameters(**{**P, **bad})
@@ -50,7 +69,8 @@ def test_mapping_rejects_what_opensees_cannot_represent(bad):
 
 @pytest.mark.parametrize("psi", [35.0, 15.0, 0.0])
 def test_yield_surface_and_hardening_coincide(psi):
-    """F_femubench = sqrt(3/2) f1_OpenSees with alpha1 = eqps / (1 - tan(psi)/3), anywhere in stress space."""
+    """F_femubench = sqrt(3/2) f1_OpenSees with alpha1 = eqps / (1 - tan(psi)/3), anywhere in stress
+    space."""
     p = {**P, "psi": psi}
     mat, osp = _ours(p), opensees_parameters(**p)
     rng = np.random.default_rng(1)
@@ -69,8 +89,12 @@ def test_flow_directions_coincide(psi):
     p = {**P, "psi": psi}
     mat, osp = _ours(p), opensees_parameters(**p)
     stress = np.random.default_rng(2).normal(0.0, 30.0, (100, 6))
-    assert np.allclose(mat.flow_direction(stress), math.sqrt(1.5) * opensees_flow_direction(stress, osp),
-                       rtol=1e-12, atol=1e-12)
+    assert np.allclose(
+        mat.flow_direction(stress),
+        math.sqrt(1.5) * opensees_flow_direction(stress, osp),
+        rtol=1e-12,
+        atol=1e-12,
+    )
 
 
 @pytest.mark.parametrize("psi", [35.0, 15.0])
@@ -91,8 +115,12 @@ def test_rederived_opensees_return_and_its_two_tangents():
     osp = opensees_parameters(**{**P, "psi": 15.0})
     eps = np.array([5e-4, 2e-4, -2e-3, 4e-4, -3e-4, 2e-4])
     h = 1e-9
-    fd = np.column_stack([(dp_return(eps + h * e, osp)[0] - dp_return(eps - h * e, osp)[0]) / (2 * h)
-                          for e in np.eye(6)])
+    fd = np.column_stack(
+        [
+            (dp_return(eps + h * e, osp)[0] - dp_return(eps - h * e, osp)[0]) / (2 * h)
+            for e in np.eye(6)
+        ]
+    )
     _, C = dp_return(eps, osp, "trial")
     _, C_ret = dp_return(eps, osp, "returned")
     assert np.abs(C - fd).max() < 1e-6 * np.abs(fd).max()
@@ -104,11 +132,23 @@ def test_rederived_opensees_return_and_its_two_tangents():
 
 
 def test_importing_the_crosscheck_does_not_import_openseespy():
-    modules = ("mapping", "reference", "loader", "opensees_box", "single_element", "cube", "tangent", "report",
-               "study", "figures")
-    code = ("import sys, bench.commands.crosscheck; "
-            + "; ".join(f"import bench.crosscheck.{m}" for m in modules)
-            + "; assert 'openseespy' not in sys.modules")
+    modules = (
+        "mapping",
+        "reference",
+        "loader",
+        "opensees_box",
+        "single_element",
+        "cube",
+        "tangent",
+        "report",
+        "study",
+        "figures",
+    )
+    code = (
+        "import sys, bench.commands.crosscheck; "
+        + "; ".join(f"import bench.crosscheck.{m}" for m in modules)
+        + "; assert 'openseespy' not in sys.modules"
+    )
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
@@ -125,22 +165,49 @@ def test_command_without_openseespy_exits_2_with_the_install_hint(monkeypatch, c
 
 
 def test_render_redraws_the_figures_from_the_report(tmp_path, capsys):
-    """--render needs only opensees_dp.json (no openseespy): a report with one single-element run and
+    """--render needs only opensees_dp.json (no openseespy): a report with one single-element run
+    and
     one cube whose first OpenSees attempt converged."""
     from bench.cli import main
 
     strain = np.linspace(0.0, 0.01, 7)[1:]
     s, lat = uniaxial_closed_form(strain, **P)
     curve = {"stress": s.tolist(), "lateral": lat.tolist()}
-    attempt = {"strategy": "Newton", "converged": True, "snapshots_mm": [0.75, 1.5], "reaction_kN": [500.0, 700.0]}
-    report = {"single_element": [{"psi": 35.0, "strain": strain.tolist(), "closed_form": curve, "femubench": curve,
-                                  "material_point": curve, "opensees": {"bbarBrick": curve, "stdBrick": curve}}],
-              "cube": [{"psi": 35.0, "femubench": {"snapshots_mm": [0.75, 1.5], "reaction_kN": [510.0, 705.0]},
-                        "opensees": [attempt],
-                        "plot": {"strategy": "Newton", "at_mm": 1.5, "step": 2, "z_mm": [5.0, 75.0, 145.0],
-                                 "u_h_femubench": [0.01, 0.03, 0.01], "u_h_opensees": [0.01, 0.03, 0.01],
-                                 "residuals_opensees": [1.0, 1e-2, 1e-5, 1e-9],
-                                 "residuals_femubench": [1.0, 1e-4, 1e-10]}}]}
+    attempt = {
+        "strategy": "Newton",
+        "converged": True,
+        "snapshots_mm": [0.75, 1.5],
+        "reaction_kN": [500.0, 700.0],
+    }
+    report = {
+        "single_element": [
+            {
+                "psi": 35.0,
+                "strain": strain.tolist(),
+                "closed_form": curve,
+                "femubench": curve,
+                "material_point": curve,
+                "opensees": {"bbarBrick": curve, "stdBrick": curve},
+            }
+        ],
+        "cube": [
+            {
+                "psi": 35.0,
+                "femubench": {"snapshots_mm": [0.75, 1.5], "reaction_kN": [510.0, 705.0]},
+                "opensees": [attempt],
+                "plot": {
+                    "strategy": "Newton",
+                    "at_mm": 1.5,
+                    "step": 2,
+                    "z_mm": [5.0, 75.0, 145.0],
+                    "u_h_femubench": [0.01, 0.03, 0.01],
+                    "u_h_opensees": [0.01, 0.03, 0.01],
+                    "residuals_opensees": [1.0, 1e-2, 1e-5, 1e-9],
+                    "residuals_femubench": [1.0, 1e-4, 1e-10],
+                },
+            }
+        ],
+    }
     import json
 
     (tmp_path / "opensees_dp.json").write_text(json.dumps(report))

@@ -1,24 +1,27 @@
 """The Drucker-Prager family in the cube : all nine variants converge, quadratically,
 and the B-bar element does not lock under isochoric plastic flow."""
+
 import numpy as np
 import pytest
 
-from problems.inverse.cases import CASES
+from problems.fe.mesh import box_mesh
 from problems.fe.newton import Loading, discretise, run
+from problems.inverse.cases import CASES
 from problems.inverse.forward import FORWARD_SETTINGS, case_material, discretisation
 from problems.materials.drucker_prager import make_material
-from problems.fe.mesh import box_mesh
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_all_nine_variants_run_the_default_test_on_coarse(name):
     case = CASES[name]
-    r = run(discretisation("coarse"), case_material(case, case.reference), Loading(), FORWARD_SETTINGS)
+    r = run(
+        discretisation("coarse"), case_material(case, case.reference), Loading(), FORWARD_SETTINGS
+    )
     assert r.converged, r.message
     assert len(r.snapshots_mm) == 10 and np.isclose(r.snapshots_mm[-1], 1.5)
     eqps = r.state[:, :, r.state_names.index("eqps")]
-    assert eqps[-1].max() > 1e-3                       # the test really goes plastic
-    assert np.all(np.diff(eqps.max(axis=1)) >= 0)      # and plastic strain only grows
+    assert eqps[-1].max() > 1e-3  # the test really goes plastic
+    assert np.all(np.diff(eqps.max(axis=1)) >= 0)  # and plastic strain only grows
     # the plate force stays far below the elastic one (E A delta / L = 6 750 kN frictionless)
     assert 300 < r.reaction_kN[-1] < 3000
     # quadratic convergence: once the residual is small, each iteration roughly squares it
@@ -33,7 +36,12 @@ def test_all_nine_variants_run_the_default_test_on_coarse(name):
 
 def test_newton_residual_ratios_show_quadratic_convergence():
     case = CASES["linear-compression"]
-    r = run(discretisation("coarse"), case_material(case, case.reference), Loading(1.5, 5), FORWARD_SETTINGS)
+    r = run(
+        discretisation("coarse"),
+        case_material(case, case.reference),
+        Loading(1.5, 5),
+        FORWARD_SETTINGS,
+    )
     assert r.converged
     longest = max(r.residual_history, key=len)
     assert len(longest) >= 3
@@ -43,16 +51,22 @@ def test_newton_residual_ratios_show_quadratic_convergence():
 
 
 def test_b_bar_does_not_lock_under_isochoric_plastic_flow():
-    """Von Mises limit of the linear form (K = 1, beta -> 0, psi = 0, H = 0): standard B locks, B-bar does not."""
-    vm = make_material("linear", "compression", {"E": 30_000.0, "nu": 0.3, "beta": 1e-6, "K": 1.0, "psi": 0.0,
-                                                  "sigma0": 20.0, "H": 0.0})
+    """Von Mises limit of the linear form (K = 1, beta -> 0, psi = 0, H = 0): standard B locks,
+    B-bar does not."""
+    vm = make_material(
+        "linear",
+        "compression",
+        {"E": 30_000.0, "nu": 0.3, "beta": 1e-6, "K": 1.0, "psi": 0.0, "sigma0": 20.0, "H": 0.0},
+    )
     load = Loading(3.0, 6, "friction")
     forces = {}
     for n in (3, 6):
         m = box_mesh(n, n, 2 * n)
-        forces[n] = [run(discretise(m, use_b_bar=b), vm, load, FORWARD_SETTINGS) for b in (True, False)]
+        forces[n] = [
+            run(discretise(m, use_b_bar=b), vm, load, FORWARD_SETTINGS) for b in (True, False)
+        ]
     limit_kN = 20.0 * 150**2 / 1000  # uniaxial limit load sigma0 * A
-    for n, (rb, rs) in forces.items():
+    for _n, (rb, _rs) in forces.items():
         assert rb.converged, rb.message
         # B-bar: close to the limit load (friction adds a little), and mesh-insensitive
         assert 1.0 < rb.reaction_kN[-1] / limit_kN < 1.15

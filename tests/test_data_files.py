@@ -1,5 +1,6 @@
 """Data sets on disk: shipped as package data, overridable, never overwritten by accident, and a
 bad data file is a one-line error (exit code 2), never a traceback."""
+
 from __future__ import annotations
 
 import fnmatch
@@ -42,10 +43,15 @@ def fake_make_data(monkeypatch):
 
 # --- where the data sets are ----------------------------------------------------------------
 
+
 def test_the_shipped_data_sets_are_declared_package_data():
-    package_data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    package_data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-data"
+    ]
     globs = package_data["problems.inverse"]
-    shipped = sorted(p.relative_to(D.SHIPPED_DIR.parent).as_posix() for p in D.SHIPPED_DIR.glob("*.json"))
+    shipped = sorted(
+        p.relative_to(D.SHIPPED_DIR.parent).as_posix() for p in D.SHIPPED_DIR.glob("*.json")
+    )
     assert len(shipped) == len(FE_CASES) == 9
     assert all(any(fnmatch.fnmatch(f, g) for g in globs) for f in shipped)
     for case in FE_CASES:
@@ -70,7 +76,9 @@ def test_the_cache_is_a_user_directory_never_the_package(monkeypatch, tmp_path):
     path = D.cached_path("linear-compression", D.DataSettings(noise_um=1.0))
     assert path.parent == tmp_path / "xdg" / "femubench" / "data"
     monkeypatch.setenv(D.CACHE_DIR_ENV, str(tmp_path / "c"))
-    assert D.cached_path("linear-compression", D.DataSettings(noise_um=1.0)).parent == tmp_path / "c"
+    assert (
+        D.cached_path("linear-compression", D.DataSettings(noise_um=1.0)).parent == tmp_path / "c"
+    )
 
 
 def test_a_computed_dic_data_set_keeps_its_images_next_to_it_in_the_cache(fake_make_data, tmp_path):
@@ -82,6 +90,7 @@ def test_a_computed_dic_data_set_keeps_its_images_next_to_it_in_the_cache(fake_m
 
 
 # --- femubench data: where it writes ---------------------------------------------------------
+
 
 @pytest.mark.parametrize("out", ["sets.json", "existing-file"])
 def test_data_all_refuses_a_file_for_out(tmp_path, capsys, fake_make_data, out):
@@ -101,7 +110,9 @@ def test_data_all_writes_one_file_per_case_into_the_out_directory(tmp_path, caps
     assert D.load(tmp_path / "sets" / "linear-compression.json").hash == D.load(SHIPPED).hash
 
 
-def test_data_never_overwrites_the_shipped_file_without_force(tmp_path, capsys, fake_make_data, monkeypatch):
+def test_data_never_overwrites_the_shipped_file_without_force(
+    tmp_path, capsys, fake_make_data, monkeypatch
+):
     before = SHIPPED.read_bytes()
     assert main(["data", "linear-compression"]) == 2
     err = capsys.readouterr().err
@@ -110,7 +121,8 @@ def test_data_never_overwrites_the_shipped_file_without_force(tmp_path, capsys, 
     assert fake_make_data == [] and SHIPPED.read_bytes() == before
     assert main(["data", "all", "--check"]) == 0  # checking compares, writes nothing: allowed
 
-    mine = tmp_path / "mine"  # --force writes the default data set (here into an overriding directory)
+    # --force writes the default data set (here into an overriding directory)
+    mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "linear-compression.json").write_text("old")
     monkeypatch.setenv(D.DATA_DIR_ENV, str(mine))
@@ -121,12 +133,21 @@ def test_data_never_overwrites_the_shipped_file_without_force(tmp_path, capsys, 
 
 def test_dic_images_go_next_to_the_users_output(tmp_path, capsys, fake_make_data):
     out = tmp_path / "my" / "lc_dic.json"
-    assert main(["data", "linear-compression", "--route", "dic", "--mesh", "coarse", "--out", str(out)]) == 0
-    assert out.is_file() and fake_make_data[-1]["image_dir"] == tmp_path / "my" / "lc_dic__dic_images"
-    assert main(["data", "linear-compression", "--route", "dic", "--mesh", "coarse"]) == 0  # no --out: the cache
+    assert (
+        main(
+            ["data", "linear-compression", "--route", "dic", "--mesh", "coarse", "--out", str(out)]
+        )
+        == 0
+    )
+    assert (
+        out.is_file() and fake_make_data[-1]["image_dir"] == tmp_path / "my" / "lc_dic__dic_images"
+    )
+    # no --out: the cache
+    assert main(["data", "linear-compression", "--route", "dic", "--mesh", "coarse"]) == 0
     assert fake_make_data[-1]["image_dir"].parent == tmp_path / "cache"
     for call in fake_make_data:
-        assert D.SHIPPED_DIR.parent not in call["image_dir"].resolve().parents  # never into the package
+        # never into the package
+        assert D.SHIPPED_DIR.parent not in call["image_dir"].resolve().parents
 
 
 def test_make_data_hands_the_image_directory_to_the_dic_route(monkeypatch, tmp_path):
@@ -139,11 +160,17 @@ def test_make_data_hands_the_image_directory_to_the_dic_route(monkeypatch, tmp_p
         return "dataset"
 
     monkeypatch.setattr(route, "dic_dataset", fake_dic)
-    assert D.make_data("linear-compression", mesh="2,2,4", snapshots=1, route="dic", image_dir=tmp_path) == "dataset"
+    assert (
+        D.make_data(
+            "linear-compression", mesh="2,2,4", snapshots=1, route="dic", image_dir=tmp_path
+        )
+        == "dataset"
+    )
     assert seen["image_dir"] == tmp_path
 
 
 # --- bad data files ----------------------------------------------------------------------------
+
 
 def _doc() -> dict:
     return json.loads(SHIPPED.read_text())
@@ -158,14 +185,30 @@ BAD = {
     "a JSON list": ("[1, 2, 3]", "expected a JSON object, got a list"),
     "not JSON": ('{"format": "femubench-data/1", "u_h": [[0.1, ', "not valid JSON"),
     "missing field": (lambda: {k: v for k, v in _doc().items() if k != "u_v"}, "u_v missing"),
-    "wrong shape": (lambda: _rehash({**_doc(), "u_h": _doc()["u_h"][:3]}), "field u_h has shape (3, 406)"),
-    "ragged": (lambda: _rehash({**_doc(), "points": [[1.0, 2.0], [3.0]]}), "field points is not a rectangular"),
-    "not numbers": (lambda: _rehash({**_doc(), "reaction_kN": ["a"] * 10}), "field reaction_kN is not"),
-    "bad settings": (lambda: _rehash({**_doc(), "settings": {**_doc()["settings"], "colour": 1}}),
-                     "field settings: "),
-    "out-of-range settings": (lambda: _rehash({**_doc(), "settings": {**_doc()["settings"], "noise_um": -1}}),
-                              "field settings: noise_um"),
-    "settings not an object": (lambda: _rehash({**_doc(), "settings": [1]}), "field settings must be"),
+    "wrong shape": (
+        lambda: _rehash({**_doc(), "u_h": _doc()["u_h"][:3]}),
+        "field u_h has shape (3, 406)",
+    ),
+    "ragged": (
+        lambda: _rehash({**_doc(), "points": [[1.0, 2.0], [3.0]]}),
+        "field points is not a rectangular",
+    ),
+    "not numbers": (
+        lambda: _rehash({**_doc(), "reaction_kN": ["a"] * 10}),
+        "field reaction_kN is not",
+    ),
+    "bad settings": (
+        lambda: _rehash({**_doc(), "settings": {**_doc()["settings"], "colour": 1}}),
+        "field settings: ",
+    ),
+    "out-of-range settings": (
+        lambda: _rehash({**_doc(), "settings": {**_doc()["settings"], "noise_um": -1}}),
+        "field settings: noise_um",
+    ),
+    "settings not an object": (
+        lambda: _rehash({**_doc(), "settings": [1]}),
+        "field settings must be",
+    ),
 }
 
 

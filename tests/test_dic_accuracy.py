@@ -1,4 +1,5 @@
 """DIC accuracy: rigid sub-pixel translations (Fourier shift), homogeneous strain + rotation."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -40,12 +41,16 @@ def test_translation_with_grey_level_noise_sigma_2():
 
 def _affine_images(F, noise=0.0, size=240, seed=3):
     """Reference and deformed images of one pattern under x = X0 + F (X - X0)."""
-    pat = SpecklePattern.random((-20, size + 20, -20, size + 20), 5.0, 0.32, 0.2, 2.0, rng=seed).blurred(0.67)
+    pat = SpecklePattern.random(
+        (-20, size + 20, -20, size + 20), 5.0, 0.32, 0.2, 2.0, rng=seed
+    ).blurred(0.67)
     x0 = np.array([size / 2, size / 2])
     G = F - np.eye(2)
 
     def disp(X, Y):
-        return G[0, 0] * (X - x0[0]) + G[0, 1] * (Y - x0[1]), G[1, 0] * (X - x0[0]) + G[1, 1] * (Y - x0[1])
+        return G[0, 0] * (X - x0[0]) + G[0, 1] * (Y - x0[1]), G[1, 0] * (X - x0[0]) + G[1, 1] * (
+            Y - x0[1]
+        )
 
     rng = np.random.default_rng(seed)
     ref = acquire(render(pat, (size, size)), 8, noise, rng)
@@ -57,7 +62,8 @@ def _affine_images(F, noise=0.0, size=240, seed=3):
 def test_homogeneous_strain_and_rotation_recovered_in_gradients(noise):
     theta = 0.01  # rad, small rotation
     R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-    U = np.array([[1.005, 0.0], [0.0, 1.0 - 0.0015]])  # 0.5 % stretch along x, Poisson-like contraction
+    # 0.5 % stretch along x, Poisson-like contraction
+    U = np.array([[1.005, 0.0], [0.0, 1.0 - 0.0015]])
     F = R @ U
     ref, de, disp = _affine_images(F, noise)
     pts = grid_points(ref.shape, 21, 10, (30, 30, 210, 210))

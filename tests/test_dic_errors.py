@@ -1,4 +1,5 @@
 """Bad inputs give clear errors; failed points are flagged; image I/O; the CLI."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -73,7 +74,8 @@ def test_points_on_a_destroyed_region_are_flagged(images):
     ref, de = images
     bad = de.copy()
     rng = np.random.default_rng(0)
-    bad[:, :64] = np.clip(128 + 2 * rng.standard_normal((128, 64)), 0, 255).astype(np.uint8)  # noise only
+    # noise only
+    bad[:, :64] = np.clip(128 + 2 * rng.standard_normal((128, 64)), 0, 255).astype(np.uint8)
     pts = grid_points(ref.shape, 21, 10)
     r = Correlator(ref, pts, DICConfig()).correlate(bad)
     left = r.x + 10 < 64  # subsets entirely in the destroyed half
@@ -154,8 +156,14 @@ def test_scipy_and_numba_backends_agree(images, order):
 
 @pytest.mark.parametrize(
     "name, dtype, compression",
-    [("a.tif", np.uint8, "packbits"), ("b.tiff", np.uint16, "packbits"), ("c.tif", np.uint16, "zlib"),
-     ("d.png", np.uint8, None), ("e.png", np.uint16, None), ("f.bmp", np.uint8, None)],
+    [
+        ("a.tif", np.uint8, "packbits"),
+        ("b.tiff", np.uint16, "packbits"),
+        ("c.tif", np.uint16, "zlib"),
+        ("d.png", np.uint8, None),
+        ("e.png", np.uint16, None),
+        ("f.bmp", np.uint8, None),
+    ],
 )
 def test_image_round_trip(tmp_path, name, dtype, compression):
     rng = np.random.default_rng(0)
@@ -196,29 +204,54 @@ def test_cli_writes_csv(tmp_path, images, capsys):
     write_image(tmp_path / "ref.tif", ref, "packbits")
     write_image(tmp_path / "def.png", de)
     out = tmp_path / "out.csv"
-    rc = cli(["dic", str(tmp_path / "ref.tif"), str(tmp_path / "def.png"), "--subset", "21", "--step", "10",
-              "--roi", "10,10,118,118", "--csv", str(out), "--no-progress"])
+    rc = cli(
+        [
+            "dic",
+            str(tmp_path / "ref.tif"),
+            str(tmp_path / "def.png"),
+            "--subset",
+            "21",
+            "--step",
+            "10",
+            "--roi",
+            "10,10,118,118",
+            "--csv",
+            str(out),
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     lines = out.read_text().splitlines()
     assert lines[0] == "x_px,y_px,u_px,v_px,std_u_px,std_v_px,zncc,converged"  # units in the header
     rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
     assert len(rows) == len(grid_points(ref.shape, 21, 10, (10, 10, 118, 118)))
-    assert rows[:, 7].all() and np.allclose(rows[:, 2], 0.4, atol=0.03) and np.allclose(rows[:, 3], -0.3, atol=0.03)
-    # the per-point standard deviations the correlator computes: positive, small against the 0.03 px check
+    assert (
+        rows[:, 7].all()
+        and np.allclose(rows[:, 2], 0.4, atol=0.03)
+        and np.allclose(rows[:, 3], -0.3, atol=0.03)
+    )
+    # the per-point standard deviations the correlator computes: positive, small against the 0.03 px
+    # check
     assert np.all(rows[:, 4:6] > 0) and np.all(rows[:, 4:6] < 0.03)
     assert rows[:, 0].min() - 10 >= 10 and rows[:, 0].max() + 10 < 118
 
 
 @pytest.mark.parametrize(
     "extra, match",
-    [(["--roi", "0,0,500,50"], "outside the image"), (["--subset", "61", "--roi", "0,0,60,60"], "larger than the ROI"),
-     (["--subset", "8"], "odd integer")],
+    [
+        (["--roi", "0,0,500,50"], "outside the image"),
+        (["--subset", "61", "--roi", "0,0,60,60"], "larger than the ROI"),
+        (["--subset", "8"], "odd integer"),
+    ],
 )
 def test_cli_bad_arguments_exit_2(tmp_path, images, capsys, extra, match):
     ref, de = images
     write_image(tmp_path / "ref.png", ref)
     write_image(tmp_path / "def.png", de)
-    assert cli(["dic", str(tmp_path / "ref.png"), str(tmp_path / "def.png"), "--no-progress", *extra]) == 2
+    assert (
+        cli(["dic", str(tmp_path / "ref.png"), str(tmp_path / "def.png"), "--no-progress", *extra])
+        == 2
+    )
     assert match in capsys.readouterr().err
 
 

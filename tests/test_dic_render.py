@@ -1,4 +1,6 @@
-"""Speckle rendering, inverse mapping, symmetry, and render-and-correlate of a known FE-like field."""
+"""Speckle rendering, inverse mapping, symmetry, and render-and-correlate of a known FE-like
+field."""
+
 from __future__ import annotations
 
 import json
@@ -9,7 +11,14 @@ import pytest
 from problems.dic import _kernels
 from problems.dic.correlate import DICConfig
 from problems.dic.pipeline import measure_front_face, pixel_displacement
-from problems.dic.speckle import CameraConfig, SpeckleConfig, SpecklePattern, blob_field, face_pattern, render
+from problems.dic.speckle import (
+    CameraConfig,
+    SpeckleConfig,
+    SpecklePattern,
+    blob_field,
+    face_pattern,
+    render,
+)
 from problems.dic.warp import inverse_map, mirror_quarter_field
 
 
@@ -45,13 +54,17 @@ def test_inverse_map_refuses_a_fold():
 
 
 def test_quarter_field_is_mirrored_odd_and_even():
-    full = mirror_quarter_field(lambda y, z: (0.01 * y + 0.002 * z, -0.003 * z + 0.001 * y), 75.0, 150.0)
+    full = mirror_quarter_field(
+        lambda y, z: (0.01 * y + 0.002 * z, -0.003 * z + 0.001 * y), 75.0, 150.0
+    )
     y = np.array([10.0, -10.0, 80.0, -80.0])
     z = np.array([20.0, 20.0, 160.0, 160.0])
     uy, uz = full(y, z)
     assert uy[1] == pytest.approx(-uy[0]) and uz[1] == pytest.approx(uz[0])
     # outside the face: clamped onto it (y = +-75, z = 150)
-    assert uy[2] == pytest.approx(0.01 * 75 + 0.002 * 150) and uz[3] == pytest.approx(-0.003 * 150 + 0.001 * 75)
+    assert uy[2] == pytest.approx(0.01 * 75 + 0.002 * 150) and uz[3] == pytest.approx(
+        -0.003 * 150 + 0.001 * 75
+    )
 
 
 def test_pixel_displacement_signs_and_camera_mapping():
@@ -62,7 +75,8 @@ def test_pixel_displacement_signs_and_camera_mapping():
     disp = pixel_displacement(lambda yy, zz: (0.3 + 0 * yy, -0.6 + 0 * zz), cam)
     ux, uy = disp(np.array([80.0, 20.0]), np.array([50.0, 50.0]))  # right half, left half
     assert ux[0] == pytest.approx(0.3 / 1.5) and ux[1] == pytest.approx(-0.3 / 1.5)  # u_y odd
-    assert uy[0] == pytest.approx(0.6 / 1.5) and uy[1] == pytest.approx(0.6 / 1.5)  # down in the image
+    # down in the image
+    assert uy[0] == pytest.approx(0.6 / 1.5) and uy[1] == pytest.approx(0.6 / 1.5)
 
 
 def test_speckle_defaults_give_about_half_dark_pixels():
@@ -111,15 +125,31 @@ def test_render_and_correlate_reproduces_known_field_within_stated_uncertainty(t
     assert 0.7 < np.sqrt(np.mean(z**2)) < 1.4, np.sqrt(np.mean(z**2))
     assert np.max(np.abs(z)) < 4.5
     assert np.all(m.u_v[1] < 0)  # compression: the face moves down
-    # images, setup and the subset figure's panels written (drawn on the bench side); setup regenerates
-    # the same configuration
-    assert len(m.image_paths) == 3 and m.subsets_path and (tmp_path / "dic_subsets.npz").stat().st_size > 0
+    # images, setup and the subset figure's panels written (drawn on the bench side); setup
+    # regenerates the same configuration
+    assert (
+        len(m.image_paths) == 3
+        and m.subsets_path
+        and (tmp_path / "dic_subsets.npz").stat().st_size > 0
+    )
     from bench.dic_figures import render_subsets
 
-    assert render_subsets(tmp_path) == tmp_path / "dic_subsets.png" and (tmp_path / "dic_subsets.png").stat().st_size > 0
+    assert (
+        render_subsets(tmp_path) == tmp_path / "dic_subsets.png"
+        and (tmp_path / "dic_subsets.png").stat().st_size > 0
+    )
     setup = json.loads((tmp_path / "dic_setup.json").read_text())
-    assert setup["seed"] == 7 and CameraConfig(**{**setup["camera"], "pixels": tuple(setup["camera"]["pixels"]),
-                                                   "face_mm": tuple(setup["camera"]["face_mm"])}) == cam
+    assert (
+        setup["seed"] == 7
+        and CameraConfig(
+            **{
+                **setup["camera"],
+                "pixels": tuple(setup["camera"]["pixels"]),
+                "face_mm": tuple(setup["camera"]["face_mm"]),
+            }
+        )
+        == cam
+    )
     cov = m.covariance()
     assert cov.shape == (2, len(grid), 2, 2) and np.allclose(cov[..., 0, 0], m.std_h**2)
 

@@ -1,24 +1,29 @@
 """Extended Drucker-Prager: hardening tests, return-mapping properties, apex, failure flags."""
+
 import math
-from problems.materials.drucker_prager import FORMS
-from problems.materials.hardening import HARDENINGS
-from tests.support import VARIANTS, material
 
 import numpy as np
 import pytest
 
-from problems.materials.point_driver import run_material_point
 from problems.materials import drucker_prager as dp
+from problems.materials.drucker_prager import FORMS
+from problems.materials.hardening import HARDENINGS
 from problems.materials.invariants import M_VEC, deviator, mises, pressure
+from problems.materials.point_driver import run_material_point
 from problems.materials.verification import typical_parameters
+from tests.support import VARIANTS, material
 
 PATH = {"compression": "uniaxial-compression", "tension": "uniaxial-tension", "shear": "shear"}
 
 
-
 def _alternative(form, hardening):
     """A second parameter set away from the typical one (stiffer, steeper, other K/psi/b)."""
-    over = {"E": 42_000.0, "sigma0": typical_parameters(form, hardening)["sigma0"] * 1.3, "H": 400.0, "psi": 25.0}
+    over = {
+        "E": 42_000.0,
+        "sigma0": typical_parameters(form, hardening)["sigma0"] * 1.3,
+        "H": 400.0,
+        "psi": 25.0,
+    }
     if form == "linear":
         over.update(K=0.778, beta=28.0)
     elif form == "hyperbolic":
@@ -37,8 +42,13 @@ def test_hardening_test_yields_at_sigma0_with_slope_H(form, hardening, alternati
     mat = material(form, hardening, **(_alternative(form, hardening) if alternative else {}))
     s0, H, E, G = mat.law.sigma0, mat.law.H, mat.E, mat.shear_modulus
     modulus = G if hardening == "shear" else E
-    res = run_material_point(mat, PATH[hardening], 4.0 * s0 / modulus, 37)  # no step lands on sigma0
-    eps, sig, eqps = np.abs(res.column("eps_axial")), np.abs(res.column("sig_axial")), res.column("eqps")
+    # no step lands on sigma0
+    res = run_material_point(mat, PATH[hardening], 4.0 * s0 / modulus, 37)
+    eps, sig, eqps = (
+        np.abs(res.column("eps_axial")),
+        np.abs(res.column("sig_axial")),
+        res.column("eqps"),
+    )
     plastic = eqps > 0
     assert 15 <= plastic.sum() <= 35  # both regimes are exercised
     # elastic part: Hooke, below sigma0; the first plastic step starts from sigma0
@@ -88,7 +98,9 @@ def test_return_lands_on_the_surface_along_dG(form, hardening, psi):
     rng = np.random.default_rng(11)
     mat = material(form, hardening, psi=psi)
     n = 300
-    de, sig_n, st_n = _random_plastic_states(mat, n, rng, compressive=(psi == 0.0 and form != "linear"))
+    de, sig_n, st_n = _random_plastic_states(
+        mat, n, rng, compressive=(psi == 0.0 and form != "linear")
+    )
     up = mat.update(de, sig_n, st_n)
     assert up.ok.all()
     d_eqps = up.state[:, 0] - st_n[:, 0]
@@ -113,7 +125,9 @@ def test_return_lands_on_the_surface_along_dG(form, hardening, psi):
     else:  # q_hat sigma_bar d eqps = sigma : d eps_pl
         sbar = mat.yield_stress(up.state[smooth, 0])
         work = np.einsum("ni,ni->n", up.stress[smooth], d_ep)
-        np.testing.assert_allclose(mat.eqps_rule.q_hat * sbar * d_eqps[smooth], work, rtol=1e-8, atol=1e-14 * sbar.max())
+        np.testing.assert_allclose(
+            mat.eqps_rule.q_hat * sbar * d_eqps[smooth], work, rtol=1e-8, atol=1e-14 * sbar.max()
+        )
 
 
 def is_apex(stress):
@@ -140,7 +154,10 @@ def apex_trials(mat, n, rng, beyond, spread):
     u = rng.uniform(*beyond, n)
     v = rng.uniform(*spread, n)
     p_apex = -yf.d_hat * s0 / yf.tan_beta
-    den = mat.bulk_modulus * mat.potential.tan_psi * yf.tan_beta + yf.d_hat * mat.eqps_rule.c * mat.law.H
+    den = (
+        mat.bulk_modulus * mat.potential.tan_psi * yf.tan_beta
+        + yf.d_hat * mat.eqps_rule.c * mat.law.H
+    )
     dlam = u * s0 * yf.tan_beta / den
     q = v * 3.0 * mat.shear_modulus * dlam
     return -(p_apex - u * s0)[:, None] * M_VEC + q[:, None] * random_deviators(n, rng)
@@ -164,17 +181,24 @@ def test_linear_cone_returns_to_its_apex(hardening, K):
     tb, tp, c = mat.yield_function.tan_beta, mat.potential.tan_psi, mat.eqps_rule.c
     eqps = up.state[apex, 0]
     p = pressure(up.stress[apex])
-    np.testing.assert_allclose(p, -mat.yield_function.d_hat * mat.yield_stress(eqps) / tb, rtol=1e-12)
+    np.testing.assert_allclose(
+        p, -mat.yield_function.d_hat * mat.yield_stress(eqps) / tb, rtol=1e-12
+    )
     d_ep = up.state[apex, 1:]
-    np.testing.assert_allclose(deviator(d_ep * np.array([1, 1, 1, .5, .5, .5])) * np.array([1, 1, 1, 2, 2, 2]),
-                               deviator(de[apex] * np.array([1, 1, 1, .5, .5, .5])) * np.array([1, 1, 1, 2, 2, 2]),
-                               atol=1e-14)
+    np.testing.assert_allclose(
+        deviator(d_ep * np.array([1, 1, 1, 0.5, 0.5, 0.5])) * np.array([1, 1, 1, 2, 2, 2]),
+        deviator(de[apex] * np.array([1, 1, 1, 0.5, 0.5, 0.5])) * np.array([1, 1, 1, 2, 2, 2]),
+        atol=1e-14,
+    )
     dlam = d_ep[:, :3].sum(axis=1) / tp
     np.testing.assert_allclose(eqps, c * dlam, rtol=1e-10)
     # the smooth returns are genuinely off the apex and on the surface
     q = mises(up.stress[~apex])
     assert q.min() > 0.0
-    assert np.abs(mat.yield_value(up.stress[~apex], up.state[~apex, 0])).max() < 1e-10 * mat.law.sigma0 * 10
+    assert (
+        np.abs(mat.yield_value(up.stress[~apex], up.state[~apex, 0])).max()
+        < 1e-10 * mat.law.sigma0 * 10
+    )
     if K == 1.0:
         q_tr = mises(de @ mat.stiffness.T)
         np.testing.assert_array_less(q_tr[apex], 3.0 * mat.shear_modulus * dlam * (1 + 1e-12))
@@ -183,7 +207,9 @@ def test_linear_cone_returns_to_its_apex(hardening, K):
     unit = random_deviators(1, np.random.default_rng(2))[0]
     q_apex = apex_trials(mat, 1, np.random.default_rng(1), (1.0, 1.0), (1.0, 1.0))
     amps = np.linspace(0.0, 1.6, 301) * mises(q_apex)[0]
-    out = mat.update(trial_strain(mat, base + amps[:, None] * unit), np.zeros((301, 6)), mat.initial_state(301))
+    out = mat.update(
+        trial_strain(mat, base + amps[:, None] * unit), np.zeros((301, 6)), mat.initial_state(301)
+    )
     at_apex = is_apex(out.stress)
     assert out.ok.all() and at_apex.any() and not at_apex.all()
     jumps = np.abs(np.diff(out.stress, axis=0)).max(axis=1)
@@ -207,7 +233,9 @@ def test_unreturnable_points_are_flagged_not_raised():
     """psi = 0 and H = 0: no flow can bring the apex to a trial beyond it. The point is flagged
     (ok False) and keeps the trial stress, elastic tangent and old state; the others are fine."""
     mat = material("linear", "compression", psi=0.0, H=0.0)
-    de = np.array([[2e-3, 2e-3, 2e-3, 0, 0, 0], [-1e-3, 2e-4, 2e-4, 0, 0, 0], [1e-5, 0, 0, 0, 0, 0]])
+    de = np.array(
+        [[2e-3, 2e-3, 2e-3, 0, 0, 0], [-1e-3, 2e-4, 2e-4, 0, 0, 0], [1e-5, 0, 0, 0, 0, 0]]
+    )
     st = mat.initial_state(3)
     up = mat.update(de, np.zeros((3, 6)), st)
     assert up.ok.tolist() == [False, True, True]
@@ -221,8 +249,11 @@ def test_elastic_points_cost_no_newton_work(monkeypatch):
     mat = material("linear", "compression")
     calls = []
     original = dp.DruckerPrager._plastic_return
-    monkeypatch.setattr(dp.DruckerPrager, "_plastic_return",
-                        lambda self, sig, *a: calls.append(len(sig)) or original(self, sig, *a))
+    monkeypatch.setattr(
+        dp.DruckerPrager,
+        "_plastic_return",
+        lambda self, sig, *a: calls.append(len(sig)) or original(self, sig, *a),
+    )
     rng = np.random.default_rng(2)
     de = rng.normal(size=(1000, 6)) * 1e-5  # all well inside the surface
     up = mat.update(de, np.zeros((1000, 6)), mat.initial_state(1000))
@@ -240,6 +271,6 @@ def test_batch_equals_pointwise(form):
     de, sig_n, st_n = _random_plastic_states(mat, 20, rng)
     batch = mat.update(de, sig_n, st_n)
     for i in range(0, 20, 4):
-        one = mat.update(de[i:i + 1], sig_n[i:i + 1], st_n[i:i + 1])
+        one = mat.update(de[i : i + 1], sig_n[i : i + 1], st_n[i : i + 1])
         np.testing.assert_allclose(one.stress[0], batch.stress[i], rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(one.tangent[0], batch.tangent[i], rtol=1e-9, atol=1e-9)

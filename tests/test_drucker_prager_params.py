@@ -1,19 +1,27 @@
 """Extended Drucker-Prager: public API, parameter validation, surface constants."""
+
 import math
 import pickle
-from problems.materials.drucker_prager import FORMS
-from problems.materials.hardening import HARDENINGS
-from tests.support import VARIANTS, material
 
 import numpy as np
 import pytest
 
 from problems.materials import drucker_prager as dp
 from problems.materials.base import Material
-from problems.materials.hardening import REFERENCE_TESTS
-from problems.materials.invariants import HESS_J2, deviator, grad_j2, grad_j3, hess_j3, j2, j3, mises, third_invariant_r
-from problems.materials.verification import typical_parameters, voigt_rotations, rotation_matrix
-
+from problems.materials.hardening import HARDENINGS, REFERENCE_TESTS
+from problems.materials.invariants import (
+    HESS_J2,
+    deviator,
+    grad_j2,
+    grad_j3,
+    hess_j3,
+    j2,
+    j3,
+    mises,
+    third_invariant_r,
+)
+from problems.materials.verification import rotation_matrix, typical_parameters, voigt_rotations
+from tests.support import VARIANTS
 
 
 def test_form_parameters_are_the_published_contract():
@@ -41,13 +49,37 @@ def test_typical_parameters_build_a_picklable_material(form, hardening):
     np.testing.assert_array_equal(a.tangent, b.tangent)
 
 
-@pytest.mark.parametrize("name,value", [
-    ("E", 0.0), ("E", -1.0), ("E", math.inf), ("nu", 0.5), ("nu", -1.0), ("beta", 0.0), ("beta", 90.0),
-    ("psi", -0.1), ("psi", 90.0), ("K", 0.777), ("K", 1.0001), ("sigma0", 0.0), ("H", -1.0),
-    ("pt0", 0.0), ("a", 0.0), ("b", 0.0), ("eccentricity", 0.0), ("E", math.nan),
-])
+@pytest.mark.parametrize(
+    "name,value",
+    [
+        ("E", 0.0),
+        ("E", -1.0),
+        ("E", math.inf),
+        ("nu", 0.5),
+        ("nu", -1.0),
+        ("beta", 0.0),
+        ("beta", 90.0),
+        ("psi", -0.1),
+        ("psi", 90.0),
+        ("K", 0.777),
+        ("K", 1.0001),
+        ("sigma0", 0.0),
+        ("H", -1.0),
+        ("pt0", 0.0),
+        ("a", 0.0),
+        ("b", 0.0),
+        ("eccentricity", 0.0),
+        ("E", math.nan),
+    ],
+)
 def test_out_of_range_values_name_the_parameter_and_range(name, value):
-    form = {"K": "linear", "beta": "linear", "pt0": "hyperbolic", "a": "exponent", "b": "exponent"}.get(name, "hyperbolic")
+    form = {
+        "K": "linear",
+        "beta": "linear",
+        "pt0": "hyperbolic",
+        "a": "exponent",
+        "b": "exponent",
+    }.get(name, "hyperbolic")
     params = {**typical_parameters(form, "compression"), name: value}
     with pytest.raises(ValueError, match=rf"{name} = .*allowed .*{name}"):
         dp.validate_parameters(form, "compression", params)
@@ -58,7 +90,9 @@ def test_out_of_range_values_name_the_parameter_and_range(name, value):
 def test_missing_unknown_and_non_numeric_parameters():
     params = typical_parameters("linear", "compression")
     with pytest.raises(ValueError, match="missing parameter.*'K'"):
-        dp.validate_parameters("linear", "compression", {k: v for k, v in params.items() if k != "K"})
+        dp.validate_parameters(
+            "linear", "compression", {k: v for k, v in params.items() if k != "K"}
+        )
     with pytest.raises(ValueError, match="unknown parameter.*'pt0'"):
         dp.validate_parameters("linear", "compression", {**params, "pt0": 2.5})
     with pytest.raises(ValueError, match="beta = 'steep' is not a number"):
@@ -78,7 +112,9 @@ def test_form_specific_well_posedness():
         dp.validate_parameters("linear", "compression", {**lin, "beta": 72.0})
     with pytest.raises(ValueError, match=r"psi = 75 deg"):
         dp.validate_parameters("linear", "compression", {**lin, "psi": 75.0})
-    dp.validate_parameters("linear", "tension", {**typical_parameters("linear", "tension"), "beta": 80.0})
+    dp.validate_parameters(
+        "linear", "tension", {**typical_parameters("linear", "tension"), "beta": 80.0}
+    )
     # hyperbolic: l0 = (S^2 - A^2) / 2A > 0; compression upper bound sigma0/tan(beta) - sigma0/3
     hyp = typical_parameters("hyperbolic", "compression")
     hi = 20.0 / math.tan(math.radians(35.0)) - 20.0 / 3.0
@@ -101,8 +137,14 @@ def test_form_specific_well_posedness():
 def test_yield_constants_match_the_definitions(hardening):
     K, tb, tp = 0.85, math.tan(math.radians(35.0)), math.tan(math.radians(15.0))
     mat = dp.make_material("linear", hardening, typical_parameters("linear", hardening))
-    d_hat = {"compression": 1 - tb / 3, "tension": 1 / K + tb / 3, "shear": math.sqrt(3) / 2 * (1 + 1 / K)}[hardening]
-    c = {"compression": 1 - tp / 3, "tension": 1 / K + tp / 3, "shear": 0.5 * (1 + 1 / K)}[hardening]
+    d_hat = {
+        "compression": 1 - tb / 3,
+        "tension": 1 / K + tb / 3,
+        "shear": math.sqrt(3) / 2 * (1 + 1 / K),
+    }[hardening]
+    c = {"compression": 1 - tp / 3, "tension": 1 / K + tp / 3, "shear": 0.5 * (1 + 1 / K)}[
+        hardening
+    ]
     assert mat.yield_function.d_hat == pytest.approx(d_hat, rel=1e-14)
     assert mat.eqps_rule.c == pytest.approx(c, rel=1e-14)
 
@@ -116,8 +158,11 @@ def test_surfaces_pass_through_the_reference_state(form, hardening):
     s0, H = params["sigma0"], params["H"]
     for eqps in (0.0, 0.7 * s0 / H):
         sbar = s0 + H * eqps
-        stress = {"compression": [-sbar, 0, 0, 0, 0, 0], "tension": [sbar, 0, 0, 0, 0, 0],
-                  "shear": [0, 0, 0, 0, 0, sbar]}[hardening]
+        stress = {
+            "compression": [-sbar, 0, 0, 0, 0, 0],
+            "tension": [sbar, 0, 0, 0, 0, 0],
+            "shear": [0, 0, 0, 0, 0, sbar],
+        }[hardening]
         assert mat.yield_value(np.array([stress]), eqps)[0] == pytest.approx(0.0, abs=1e-12 * sbar)
     if form == "hyperbolic":
         pt0 = params["pt0"]
@@ -126,7 +171,9 @@ def test_surfaces_pass_through_the_reference_state(form, hardening):
         pt0 = params["a"] * (t.q_hat * s0) ** params["b"] - t.p_hat * s0
     else:
         return
-    assert mat.yield_value(np.array([[pt0, pt0, pt0, 0, 0, 0]]), 0.0)[0] == pytest.approx(0.0, abs=1e-12 * s0)
+    assert mat.yield_value(np.array([[pt0, pt0, pt0, 0, 0, 0]]), 0.0)[0] == pytest.approx(
+        0.0, abs=1e-12 * s0
+    )
 
 
 def test_invariants_and_their_derivatives():
@@ -134,11 +181,17 @@ def test_invariants_and_their_derivatives():
     sig = rng.normal(size=(5, 6)) * 10.0
     s = deviator(sig)
     h = 1e-5
-    for f, grad in ((lambda x: j2(deviator(x)), grad_j2(s)), (lambda x: j3(deviator(x)), grad_j3(s))):
+    for f, grad in (
+        (lambda x: j2(deviator(x)), grad_j2(s)),
+        (lambda x: j3(deviator(x)), grad_j3(s)),
+    ):
         fd = np.stack([(f(sig + h * e) - f(sig - h * e)) / (2 * h) for e in np.eye(6)], axis=1)
         np.testing.assert_allclose(fd, grad, rtol=0, atol=1e-8 * np.abs(grad).max())
     for g, hess in ((grad_j2, np.broadcast_to(HESS_J2, (5, 6, 6))), (grad_j3, hess_j3(s))):
-        fd = np.stack([(g(deviator(sig + h * e)) - g(deviator(sig - h * e))) / (2 * h) for e in np.eye(6)], axis=2)
+        fd = np.stack(
+            [(g(deviator(sig + h * e)) - g(deviator(sig - h * e))) / (2 * h) for e in np.eye(6)],
+            axis=2,
+        )
         np.testing.assert_allclose(fd, hess, rtol=0, atol=1e-8 * np.abs(hess).max())
     # r keeps its sign: -sigma_c in uniaxial compression, +sigma_t in tension, 0 in pure shear
     probe = np.array([[-20.0, 0, 0, 0, 0, 0], [3.0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 7.0]])
@@ -168,14 +221,23 @@ def test_apex_polar_factor_is_the_gauge_of_the_flow_cone():
         y = y @ Ts.T  # not in principal axes
         expected = 2.0 / 3.0 * mises(y) * _polar_factor(lode_xi(y), K)
         for i in range(4):
-            Y = np.array([[y[i, 0], y[i, 5], y[i, 4]], [y[i, 5], y[i, 1], y[i, 3]], [y[i, 4], y[i, 3], y[i, 2]]])
+            Y = np.array(
+                [
+                    [y[i, 0], y[i, 5], y[i, 4]],
+                    [y[i, 5], y[i, 1], y[i, 3]],
+                    [y[i, 4], y[i, 3], y[i, 2]],
+                ]
+            )
             w, V = np.linalg.eigh(Y)
             phi = np.linspace(0.0, 2.0 * np.pi, 200_001)
             princ = (2.0 / 3.0) * np.cos(phi[:, None] - 2.0 * np.pi / 3.0 * np.arange(3)[None, :])
             S = np.einsum("ij,nj,kj->nik", V, princ, V)  # coaxial deviators with q = 1
-            s_v = np.stack([S[:, 0, 0], S[:, 1, 1], S[:, 2, 2], S[:, 1, 2], S[:, 0, 2], S[:, 0, 1]], axis=1)
+            s_v = np.stack(
+                [S[:, 0, 0], S[:, 1, 1], S[:, 2, 2], S[:, 1, 2], S[:, 0, 2], S[:, 0, 1]], axis=1
+            )
             ratio = (s_v[:, :3] @ y[i, :3] + 2.0 * s_v[:, 3:] @ y[i, 3:]) / lode.value(s_v)
-            assert ratio.max() == pytest.approx(expected[i], rel=1e-8)  # brute-force grid error ~1e-9
+            # brute-force grid error ~1e-9
+            assert ratio.max() == pytest.approx(expected[i], rel=1e-8)
             rand = deviator(rng.normal(size=(20_000, 6)))
             r_ratio = (rand[:, :3] @ y[i, :3] + 2.0 * rand[:, 3:] @ y[i, 3:]) / lode.value(rand)
             assert r_ratio.max() <= expected[i] * (1 + 1e-12)

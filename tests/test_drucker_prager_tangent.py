@@ -6,10 +6,8 @@ Finite differences are central, with a step relative to the increment's largest 
 two orders smaller than E so the same round-off in the stress weighs 100x more; the truncation
 error stays < 1e-8 either way. Comparisons are Frobenius-norm relative per point.
 """
+
 import math
-from problems.materials.drucker_prager import FORMS
-from problems.materials.hardening import HARDENINGS
-from tests.support import VARIANTS, material
 
 import numpy as np
 import pytest
@@ -17,12 +15,15 @@ import pytest
 from problems.materials import drucker_prager as dp
 from problems.materials.invariants import M_VEC, mises
 from problems.materials.verification import (
-    fd_tangent, relative_difference, rotation_matrix, typical_parameters, voigt_rotations,
+    fd_tangent,
+    relative_difference,
+    rotation_matrix,
+    voigt_rotations,
 )
+from tests.support import VARIANTS, material
 from tests.test_drucker_prager import apex_trials, is_apex, random_deviators, trial_strain
 
 TOL = 1e-6
-
 
 
 def _yielded_states(mat, n, rng):
@@ -63,7 +64,9 @@ def test_tangent_matches_finite_differences(form, hardening):
     f_trial = mat.yield_value(sig + de @ mat.stiffness.T, st[:, 0])
     plastic = f_trial > 1e-2 * s0
     up, err = _check(mat, de[plastic], sig[plastic], st[plastic], 1e-6)
-    went = (up.state[:, 0] > st[plastic, 0]) & (mises(up.stress) > 0.1 * mises(sig[plastic] + de[plastic] @ mat.stiffness.T))
+    went = (up.state[:, 0] > st[plastic, 0]) & (
+        mises(up.stress) > 0.1 * mises(sig[plastic] + de[plastic] @ mat.stiffness.T)
+    )
     assert went.sum() >= 20
     assert err[went].max() < TOL
 
@@ -71,29 +74,48 @@ def test_tangent_matches_finite_differences(form, hardening):
     n = 60
     if form == "linear":
         trials = apex_trials(mat, n, rng, (0.2, 2.0), (0.0, 2.0))
-        up, err = _check(mat, trial_strain(mat, trials), np.zeros((n, 6)), mat.initial_state(n), 1e-5)
+        up, err = _check(
+            mat, trial_strain(mat, trials), np.zeros((n, 6)), mat.initial_state(n), 1e-5
+        )
         apex = is_apex(up.stress)
         near = ~apex & (mises(up.stress) < 0.5 * mises(trials))
         assert apex.sum() >= 10 and near.sum() >= 5
         checked = apex | near
-        # at the apex the tangent is volumetric: K_b d_hat c H / (K_b tan psi tan beta + d_hat c H) m m
+        # at the apex the tangent is volumetric:
+        # K_b d_hat c H / (K_b tan psi tan beta + d_hat c H) m m
         yf = mat.yield_function
         dhcH = yf.d_hat * mat.eqps_rule.c * mat.law.H
-        k_alg = mat.bulk_modulus * dhcH / (mat.bulk_modulus * mat.potential.tan_psi * yf.tan_beta + dhcH)
-        np.testing.assert_allclose(up.tangent[apex], np.broadcast_to(k_alg * np.outer(M_VEC, M_VEC), (apex.sum(), 6, 6)))
+        k_alg = (
+            mat.bulk_modulus
+            * dhcH
+            / (mat.bulk_modulus * mat.potential.tan_psi * yf.tan_beta + dhcH)
+        )
+        np.testing.assert_allclose(
+            up.tangent[apex], np.broadcast_to(k_alg * np.outer(M_VEC, M_VEC), (apex.sum(), 6, 6))
+        )
     else:
         # trial p beyond the tension strength, small q: returns to within a few % of q = 0
-        pt = mat.params["pt0"] if form == "hyperbolic" else mat.yield_function.tension_strength(s0)[0]
+        pt = (
+            mat.params["pt0"]
+            if form == "hyperbolic"
+            else mat.yield_function.tension_strength(s0)[0]
+        )
         p_tr = -pt - rng.uniform(0.2, 3.0, n) * s0
-        trials = -p_tr[:, None] * M_VEC + rng.uniform(0.0, 2.0, n)[:, None] * s0 * random_deviators(n, rng)
-        up, err = _check(mat, trial_strain(mat, trials), np.zeros((n, 6)), mat.initial_state(n), 1e-5)
+        trials = -p_tr[:, None] * M_VEC + rng.uniform(0.0, 2.0, n)[:, None] * s0 * random_deviators(
+            n, rng
+        )
+        up, err = _check(
+            mat, trial_strain(mat, trials), np.zeros((n, 6)), mat.initial_state(n), 1e-5
+        )
         near = (up.state[:, 0] > 0) & (mises(up.stress) < 0.05 * mises(trials))
         assert near.sum() >= 30
         checked = near
     assert err[checked].max() < TOL
 
 
-@pytest.mark.parametrize("form,hardening", [("linear", "compression"), ("linear", "tension"), ("hyperbolic", "shear")])
+@pytest.mark.parametrize(
+    "form,hardening", [("linear", "compression"), ("linear", "tension"), ("hyperbolic", "shear")]
+)
 def test_tangent_is_non_symmetric_unless_associated(form, hardening):
     rng = np.random.default_rng(8)
     for psi, symmetric in ((15.0, False), (35.0, form == "linear")):
@@ -104,7 +126,9 @@ def test_tangent_is_non_symmetric_unless_associated(form, hardening):
         up = mat.update(de, sig, st)
         D = up.tangent[(up.state[:, 0] > st[:, 0]) & ~is_apex(up.stress)]  # the apex tangent is m m
         assert len(D) >= 10
-        asym = np.linalg.norm(D - D.transpose(0, 2, 1), axis=(1, 2)) / np.linalg.norm(D, axis=(1, 2))
+        asym = np.linalg.norm(D - D.transpose(0, 2, 1), axis=(1, 2)) / np.linalg.norm(
+            D, axis=(1, 2)
+        )
         if symmetric:  # psi = beta: associated flow, symmetric algorithmic tangent
             assert asym.max() < 1e-10
         else:
@@ -147,7 +171,11 @@ def _von_mises_return(de, sig_n, eqps_n, E, nu, sigma0, H):
 def test_linear_form_reduces_to_von_mises():
     """K = 1, beta -> 0, psi = 0, compression hardening: d = sigma_c, t = q, c = 1."""
     E, nu, s0, H = 30_000.0, 0.2, 20.0, 1_500.0
-    mat = dp.make_material("linear", "compression", {"E": E, "nu": nu, "beta": 1e-9, "K": 1.0, "psi": 0.0, "sigma0": s0, "H": H})
+    mat = dp.make_material(
+        "linear",
+        "compression",
+        {"E": E, "nu": nu, "beta": 1e-9, "K": 1.0, "psi": 0.0, "sigma0": s0, "H": H},
+    )
     rng = np.random.default_rng(6)
     n = 200
     sig_n = rng.normal(size=(n, 6)) * 5.0
@@ -165,7 +193,11 @@ def test_linear_form_reduces_to_von_mises():
     fd = np.empty((n, 6, 6))
     for k in range(6):
         e = np.eye(6)[k] * h[:, None]
-        fd[:, :, k] = (_von_mises_return(de + e, sig_n, eqps_n, E, nu, s0, H)[0]
-                       - _von_mises_return(de - e, sig_n, eqps_n, E, nu, s0, H)[0]) / (2 * h[:, None])
+        fd[:, :, k] = (
+            _von_mises_return(de + e, sig_n, eqps_n, E, nu, s0, H)[0]
+            - _von_mises_return(de - e, sig_n, eqps_n, E, nu, s0, H)[0]
+        ) / (2 * h[:, None])
     assert relative_difference(up.tangent, fd).max() < TOL
-    assert math.isclose(mat.eqps_rule.c, 1.0) and math.isclose(mat.yield_function.d_hat, 1.0, rel_tol=1e-10)
+    assert math.isclose(mat.eqps_rule.c, 1.0) and math.isclose(
+        mat.yield_function.d_hat, 1.0, rel_tol=1e-10
+    )

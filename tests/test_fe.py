@@ -1,4 +1,5 @@
 """Verification of the FE model of the cube test: patch test, analytic answers, convergence."""
+
 import json
 
 import numpy as np
@@ -7,10 +8,10 @@ import scipy.sparse.linalg as spla
 
 from problems.fe.assembly import element_forces, element_matrices
 from problems.fe.element import gradients, shape_functions
-from problems.fe.newton import Loading, NewtonSettings, discretise, run
-from problems.materials import LinearElastic, MaterialUpdate
 from problems.fe.front_face import front_face_operator, measurement_grid
 from problems.fe.mesh import MESH_PRESETS, box_mesh, distort, parse_mesh
+from problems.fe.newton import Loading, NewtonSettings, discretise, run
+from problems.materials import LinearElastic, MaterialUpdate
 
 E, NU = 30_000.0, 0.2
 
@@ -47,7 +48,13 @@ def test_patch_test_distorted_mesh_reproduces_linear_field_exactly():
     """Boundary nodes follow u = A x + c; the interior of a distorted mesh must follow it too."""
     mesh = distort(box_mesh(3, 3, 4), 0.25, seed=1)
     disc = discretise(mesh)
-    K = disc.pattern.matrix(element_matrices(disc.B, np.broadcast_to(LinearElastic(E, NU).stiffness, (mesh.n_elements, 8, 6, 6)), disc.dV))
+    K = disc.pattern.matrix(
+        element_matrices(
+            disc.B,
+            np.broadcast_to(LinearElastic(E, NU).stiffness, (mesh.n_elements, 8, 6, 6)),
+            disc.dV,
+        )
+    )
     u_exact, A = _linear_field(mesh.nodes)
     g = mesh.grid_index()
     interior = g[1:-1, 1:-1, 1:-1].ravel()
@@ -61,7 +68,9 @@ def test_patch_test_distorted_mesh_reproduces_linear_field_exactly():
     # every Gauss point sees the same constant strain: B-bar preserves constant strain states
     eps = np.einsum("egia,ea->egi", disc.B, u[disc.pattern.edofs])
     sym = 0.5 * (A + A.T)
-    expected = np.array([sym[0, 0], sym[1, 1], sym[2, 2], 2 * sym[1, 2], 2 * sym[0, 2], 2 * sym[0, 1]])
+    expected = np.array(
+        [sym[0, 0], sym[1, 1], sym[2, 2], 2 * sym[1, 2], 2 * sym[0, 2], 2 * sym[0, 1]]
+    )
     assert np.max(np.abs(eps - expected)) < 1e-14
     # and the interior is in equilibrium
     f = disc.pattern.vector(element_forces(disc.B, eps @ LinearElastic(E, NU).stiffness.T, disc.dV))
@@ -105,9 +114,16 @@ def test_friction_plates_symmetric_response():
 
 
 def test_friction_reaction_converges_under_refinement():
-    """Monotone convergence at an observed rate between 1 and 2 (the plate-edge singularity keeps it below 2)."""
-    F = np.array([run(discretise(box_mesh(n, n, 2 * n)), LinearElastic(E, NU), Loading(1.5, 1)).reaction_kN[-1]
-                  for n in (2, 4, 8)])
+    """Monotone convergence at an observed rate between 1 and 2 (the plate-edge singularity keeps it
+    below 2)."""
+    F = np.array(
+        [
+            run(
+                discretise(box_mesh(n, n, 2 * n)), LinearElastic(E, NU), Loading(1.5, 1)
+            ).reaction_kN[-1]
+            for n in (2, 4, 8)
+        ]
+    )
     d = -np.diff(F)
     assert np.all(d > 0)  # stiffness decreases monotonically (conforming displacement FE)
     rate = np.log2(d[0] / d[1])
@@ -121,9 +137,11 @@ def test_b_bar_does_not_lock_for_nearly_incompressible_material():
     F = {}
     for n in (2, 4):
         m = box_mesh(n, n, 2 * n)
-        F[n] = tuple(run(discretise(m, use_b_bar=b), mat, load).reaction_kN[-1] for b in (True, False))
-    assert abs(F[2][0] / F[4][0] - 1) < 0.03   # B-bar: mesh-insensitive
-    assert F[4][1] / F[4][0] > 10.0            # full-integration B: locked
+        F[n] = tuple(
+            run(discretise(m, use_b_bar=b), mat, load).reaction_kN[-1] for b in (True, False)
+        )
+    assert abs(F[2][0] / F[4][0] - 1) < 0.03  # B-bar: mesh-insensitive
+    assert F[4][1] / F[4][0] > 10.0  # full-integration B: locked
 
 
 class _BrittleMaterial(LinearElastic):
@@ -141,7 +159,12 @@ class _BrittleMaterial(LinearElastic):
 
 def test_failing_increments_are_cut_and_recover():
     disc = discretise(box_mesh(2, 2, 4))
-    r = run(disc, _BrittleMaterial(limit=1.5 / 150 / 4 * 1.2), Loading(1.5, 2), NewtonSettings(max_cuts=8))
+    r = run(
+        disc,
+        _BrittleMaterial(limit=1.5 / 150 / 4 * 1.2),
+        Loading(1.5, 2),
+        NewtonSettings(max_cuts=8),
+    )
     assert r.converged and r.cuts >= 1 and len(r.snapshots_mm) == 2
     assert np.isclose(r.snapshots_mm[-1], 1.5)
 
@@ -158,8 +181,15 @@ def test_front_face_operator_interpolates_bilinear_fields_exactly():
     mesh = box_mesh(3, 5, 7)
     pts = np.random.default_rng(2).uniform([0, 0], [75, 150], (50, 2))
     W = front_face_operator(mesh, pts)
-    f = 2.0 + 0.3 * mesh.nodes[:, 1] - 0.1 * mesh.nodes[:, 2] + 1e-3 * mesh.nodes[:, 1] * mesh.nodes[:, 2]
-    assert np.allclose(W @ f, 2.0 + 0.3 * pts[:, 0] - 0.1 * pts[:, 1] + 1e-3 * pts[:, 0] * pts[:, 1], atol=1e-12)
+    f = (
+        2.0
+        + 0.3 * mesh.nodes[:, 1]
+        - 0.1 * mesh.nodes[:, 2]
+        + 1e-3 * mesh.nodes[:, 1] * mesh.nodes[:, 2]
+    )
+    assert np.allclose(
+        W @ f, 2.0 + 0.3 * pts[:, 0] - 0.1 * pts[:, 1] + 1e-3 * pts[:, 0] * pts[:, 1], atol=1e-12
+    )
     with pytest.raises(ValueError, match="front-face points"):
         front_face_operator(mesh, [[80.0, 10.0]])
 
@@ -201,10 +231,36 @@ def test_forward_cli_writes_promised_json(tmp_path):
     from bench.cli import main
 
     out = tmp_path / "r.json"
-    assert main(["forward", "--mesh", "2,2,3", "--snapshots", "2", "--param", "E=20000", "nu=0.25",
-                 "--plates", "frictionless", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "forward",
+                "--mesh",
+                "2,2,3",
+                "--snapshots",
+                "2",
+                "--param",
+                "E=20000",
+                "nu=0.25",
+                "--plates",
+                "frictionless",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc = json.loads(out.read_text())
-    for key in ("mesh", "snapshots_mm", "reaction_kN", "front_face", "converged", "increments", "iterations", "wall_s"):
+    for key in (
+        "mesh",
+        "snapshots_mm",
+        "reaction_kN",
+        "front_face",
+        "converged",
+        "increments",
+        "iterations",
+        "wall_s",
+    ):
         assert key in doc
     assert doc["mesh"]["elements"] == 12 and doc["mesh"]["dofs"] == 3 * 3 * 3 * 4
     assert np.isclose(doc["reaction_kN"][-1], 20000 * 150**2 * 1.5 / 150 / 1000, rtol=1e-10)

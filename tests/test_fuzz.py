@@ -13,6 +13,7 @@ one line.
   an input that stops it before any computation (a bad case, a missing file): exit 2 with one line,
   never a traceback or an internal error.
 """
+
 from __future__ import annotations
 
 import io
@@ -32,8 +33,10 @@ SEED = 20240611
 
 # --------------------------------------------------------------------------- evaluators
 
-def _random_vectors(rng: np.random.Generator, lower, upper, reference, n: int,
-                    pool=None) -> list[np.ndarray]:
+
+def _random_vectors(
+    rng: np.random.Generator, lower, upper, reference, n: int, pool=None
+) -> list[np.ndarray]:
     """``n`` scaled points z = x / reference: special values, far outside, slightly outside and
     (from ``pool``, if given, so that the model runs only a few times) inside the box."""
     d = len(reference)
@@ -96,7 +99,7 @@ def test_fe_evaluator_flags_every_bad_point(fe_objective):
     points = _random_vectors(rng, obj.lower, obj.upper, obj.reference, 1200, pool=pool)
     evs = [obj.evaluate(z) for z in points[:600]]  # one at a time ...
     for k in range(600, 1200, 50):  # ... and in batches (one mapper call each)
-        evs += obj.evaluate_many(np.array(points[k:k + 50]))
+        evs += obj.evaluate_many(np.array(points[k : k + 50]))
     assert len(evs) == 1200
     _check_flagged(evs)
     # the model ran only at the pool points
@@ -108,8 +111,17 @@ def test_fe_evaluator_flags_every_bad_point(fe_objective):
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-@pytest.mark.parametrize("name", ["analytic-smooth", "analytic-multimodal", "analytic-rastrigin",
-                                  "analytic-linear", "analytic-infeasible", "analytic-failing"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "analytic-smooth",
+        "analytic-multimodal",
+        "analytic-rastrigin",
+        "analytic-linear",
+        "analytic-infeasible",
+        "analytic-failing",
+    ],
+)
 def test_analytic_evaluators_flag_every_bad_point(name):
     from problems.inverse.analytic import analytic_objective
 
@@ -120,8 +132,11 @@ def test_analytic_evaluators_flag_every_bad_point(name):
     _check_flagged(evs)
     costs = obj.costs(np.array(points[:200]))
     assert np.all(np.isfinite(costs)) and np.all(costs <= FAILURE_COST)
-    inside = [z for z in points
-              if np.all(np.isfinite(z)) and np.all((obj.lower_z <= z) & (z <= obj.upper_z))]
+    inside = [
+        z
+        for z in points
+        if np.all(np.isfinite(z)) and np.all((obj.lower_z <= z) & (z <= obj.upper_z))
+    ]
     for z in inside[:5]:
         J = obj.jacobian(z)
         assert J.shape == (obj.n_residuals, obj.n_params) and np.all(np.isfinite(J))
@@ -131,15 +146,53 @@ def test_analytic_evaluators_flag_every_bad_point(name):
 
 # --------------------------------------------------------------------------- suite files
 
-VALID_SUITE = {"suite": {"name": "fz", "cases": ["analytic-linear"], "methods": ["lm"],
-                         "budgets": [10], "seeds": [0, 1], "starts": ["default", "random"],
-                         "random_starts": 2, "mesh": "coarse"},
-               "data": {"noise_um": 0.5}, "options": {"lm": {"xtol": 1e-8}}}
+VALID_SUITE = {
+    "suite": {
+        "name": "fz",
+        "cases": ["analytic-linear"],
+        "methods": ["lm"],
+        "budgets": [10],
+        "seeds": [0, 1],
+        "starts": ["default", "random"],
+        "random_starts": 2,
+        "mesh": "coarse",
+    },
+    "data": {"noise_um": 0.5},
+    "options": {"lm": {"xtol": 1e-8}},
+}
 
-JUNK = [0, -1, 1, 2**70, -2**70, 1.5, float("nan"), float("inf"), -float("inf"), "", "x", "all",
-        "coarse", "0,0,0", True, False, [], [1, -1], ["lm", "lm"], ["analytic-linear", 3], [[1]],
-        {}, {"a": 1}, [{"b": 2}], "lm",
-        "nlopt:NOPE", "paper:eighth", "2,2,3:eighth", [0.5], ["random"]]
+JUNK = [
+    0,
+    -1,
+    1,
+    2**70,
+    -(2**70),
+    1.5,
+    float("nan"),
+    float("inf"),
+    -float("inf"),
+    "",
+    "x",
+    "all",
+    "coarse",
+    "0,0,0",
+    True,
+    False,
+    [],
+    [1, -1],
+    ["lm", "lm"],
+    ["analytic-linear", 3],
+    [[1]],
+    {},
+    {"a": 1},
+    [{"b": 2}],
+    "lm",
+    "nlopt:NOPE",
+    "paper:eighth",
+    "2,2,3:eighth",
+    [0.5],
+    ["random"],
+]
 
 
 def _toml_value(v) -> str:
@@ -188,8 +241,17 @@ def _mutate_suite(rng: random.Random) -> dict:
             body = body.setdefault(rng.choice(["lm", "de", "nope"]), {})
             keys = ["xtol", "ftol", "scheme", "max_nfev", "x_scale", "bogus"]
         elif table == "data":
-            keys = ["noise_um", "resolution_um", "seed", "mesh", "tier", "snapshots",
-                    "displacement_mm", "route", "bogus"]
+            keys = [
+                "noise_um",
+                "resolution_um",
+                "seed",
+                "mesh",
+                "tier",
+                "snapshots",
+                "displacement_mm",
+                "route",
+                "bogus",
+            ]
         else:
             keys = list(VALID_SUITE["suite"]) + ["description", "bogus"]
         key = rng.choice(keys)
@@ -243,6 +305,7 @@ def test_random_suite_files_are_a_suite_or_one_clear_error(tmp_path):
 
 # --------------------------------------------------------------------------- data files
 
+
 @pytest.fixture(scope="module")
 def data_text():
     from problems.inverse.data import default_path
@@ -264,8 +327,19 @@ def test_garbled_and_mutated_data_files_are_loaded_or_rejected_in_one_line(tmp_p
     rng = random.Random(SEED)
     good = json.loads(data_text)
     path = tmp_path / "d.json"
-    fields = ["case", "settings", "parameters", "points", "snapshots_mm", "u_h", "u_v",
-              "reaction_kN", "std_u_mm", "meta", "format"]
+    fields = [
+        "case",
+        "settings",
+        "parameters",
+        "points",
+        "snapshots_mm",
+        "u_h",
+        "u_v",
+        "reaction_kN",
+        "std_u_mm",
+        "meta",
+        "format",
+    ]
     values = JUNK + [[[1.0, float("nan")]], [[float("inf")] * 2] * 3, "linear-shear", None]
     accepted = rejected = 0
     for k in range(300):
@@ -306,6 +380,7 @@ def test_garbled_and_mutated_data_files_are_loaded_or_rejected_in_one_line(tmp_p
 
 # --------------------------------------------------------------------------- command line
 
+
 def _run(argv: list[str]) -> tuple[int, str, str]:
     out, err = io.StringIO(), io.StringIO()
     with redirect_stdout(out), redirect_stderr(err):
@@ -331,11 +406,42 @@ def _subparsers():
     return sub.choices
 
 
-CANDIDATES = ["0", "-1", "-0", "1", "2", "3", "1.5", "0.5", "-0.5", "nan", "NaN", "inf", "-inf",
-              "1e999", "1e-320", "abc", "", " ", "99999999999999999999", "0x10", "1,2", "1,,2", ",",
-              "2,2,3:eighth", "bogus:quarter", "0,1,1", "coarse", "tcp://", "tcp://host:0",
-              "host:99999", "/", "/nonexistent/file.json",
-              "x.unknown", "out.png"]
+CANDIDATES = [
+    "0",
+    "-1",
+    "-0",
+    "1",
+    "2",
+    "3",
+    "1.5",
+    "0.5",
+    "-0.5",
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "1e999",
+    "1e-320",
+    "abc",
+    "",
+    " ",
+    "99999999999999999999",
+    "0x10",
+    "1,2",
+    "1,,2",
+    ",",
+    "2,2,3:eighth",
+    "bogus:quarter",
+    "0,1,1",
+    "coarse",
+    "tcp://",
+    "tcp://host:0",
+    "host:99999",
+    "/",
+    "/nonexistent/file.json",
+    "x.unknown",
+    "out.png",
+]
 
 
 def test_every_typed_option_rejects_each_value_its_type_rejects(tmp_path):
@@ -347,8 +453,12 @@ def test_every_typed_option_rejects_each_value_its_type_rejects(tmp_path):
     n_checked = 0
     for name, sub in _subparsers().items():
         for action in sub._actions:
-            if (not action.option_strings or action.nargs == 0 or action.type in (None, str)
-                    or action.choices):
+            if (
+                not action.option_strings
+                or action.nargs == 0
+                or action.type in (None, str)
+                or action.choices
+            ):
                 continue
             flag = max(action.option_strings, key=len)
             rejected = []
@@ -370,19 +480,53 @@ def test_every_typed_option_rejects_each_value_its_type_rejects(tmp_path):
 #: given
 #: (commands not listed whose first positional argument is a case get "no-such-case")
 ANCHORS = {
-    "cases": [], "solvers": [], "crosscheck": ["--render"], "data": ["no-such-case"],
+    "cases": [],
+    "solvers": [],
+    "crosscheck": ["--render"],
+    "data": ["no-such-case"],
     "dic": ["/nonexistent/ref.png"],
-    "forward": ["no-such-case"], "gsa": ["no-such-case"], "identifiability": ["no-such-case"],
-    "identify": ["no-such-case"], "material": ["no-such-case"], "model-error": ["no-such-case"],
+    "forward": ["no-such-case"],
+    "gsa": ["no-such-case"],
+    "identifiability": ["no-such-case"],
+    "identify": ["no-such-case"],
+    "material": ["no-such-case"],
+    "model-error": ["no-such-case"],
     "objective": ["no-such-case"],
-    "report": ["/nonexistent/results"], "run": ["/nonexistent/suite.toml"],
+    "report": ["/nonexistent/results"],
+    "run": ["/nonexistent/suite.toml"],
     "sensitivity": ["no-such-case"],
-    "surrogate": ["no-such-case"], "uncertainty": ["no-such-case"],
+    "surrogate": ["no-such-case"],
+    "uncertainty": ["no-such-case"],
 }
 
-GARBAGE = ["--", "-", "--x", "-x", "=", "==", "--=1", "E=", "=3", "E=nan", "p=inf", "NAME=VALUE",
-           "--no-such-option", "\x00", "é", "' ; rm -rf", "{}", "[]", "all", "lm", "nlopt:",
-           "nlopt:LN_NOPE", "coarse", "0", "-1", "nan"]
+GARBAGE = [
+    "--",
+    "-",
+    "--x",
+    "-x",
+    "=",
+    "==",
+    "--=1",
+    "E=",
+    "=3",
+    "E=nan",
+    "p=inf",
+    "NAME=VALUE",
+    "--no-such-option",
+    "\x00",
+    "é",
+    "' ; rm -rf",
+    "{}",
+    "[]",
+    "all",
+    "lm",
+    "nlopt:",
+    "nlopt:LN_NOPE",
+    "coarse",
+    "0",
+    "-1",
+    "nan",
+]
 
 
 def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
@@ -398,8 +542,11 @@ def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
         anchor = ANCHORS.get(name, by_case)
         if anchor is None:
             continue  # no known cheap stop: only its typed options are fuzzed (test above)
-        flags = [max(a.option_strings, key=len) for a in sub._actions
-                 if a.option_strings and not set(a.option_strings) & {"-h", "--help", "--version"}]
+        flags = [
+            max(a.option_strings, key=len)
+            for a in sub._actions
+            if a.option_strings and not set(a.option_strings) & {"-h", "--help", "--version"}
+        ]
         for _ in range(40):
             argv = [name, *anchor]
             for _ in range(rng.randint(0, 6)):
@@ -422,7 +569,13 @@ def test_random_garbled_command_lines_are_one_line_errors(tmp_path):
 
 
 def test_top_level_garbage_is_one_line():
-    for argv in (["no-such-command"], ["--no-such-option"], ["cases", "extra"], ["identify"],
-                 ["dic"], ["-"]):
+    for argv in (
+        ["no-such-command"],
+        ["--no-such-option"],
+        ["cases", "extra"],
+        ["identify"],
+        ["dic"],
+        ["-"],
+    ):
         code, _, err = _run(argv)
         _assert_one_line_error(argv, code, err)

@@ -1,4 +1,6 @@
-"""Global sensitivity: Sobol indices of the Ishigami function, Morris screening, failures, box scaling."""
+"""Global sensitivity: Sobol indices of the Ishigami function, Morris screening, failures, box
+scaling."""
+
 import math
 
 import numpy as np
@@ -6,7 +8,13 @@ import pytest
 from SALib.test_functions import Ishigami
 
 from problems.analysis.global_sensitivity import (
-    feasible_scale, morris_screening, scaled_box, sobol_analyze, sobol_indices, sobol_sample, summary_outputs,
+    feasible_scale,
+    morris_screening,
+    scaled_box,
+    sobol_analyze,
+    sobol_indices,
+    sobol_sample,
+    summary_outputs,
 )
 
 NAMES = ("x1", "x2", "x3")
@@ -33,12 +41,21 @@ def test_ishigami_sobol_indices_within_sampling_error():
     short) and below 0.04 (5 RMS)."""
     res = sobol_indices(Ishigami.evaluate, NAMES, LO, HI, 1024, seed=0, outputs=("y",))
     assert res.n_evals == 1024 * 5 and res.n_used == 1024 and not res.warnings
-    for est, conf, exact in ((res.S1[0], res.S1_conf[0], S1_EXACT), (res.ST[0], res.ST_conf[0], ST_EXACT)):
+    for est, conf, exact in (
+        (res.S1[0], res.S1_conf[0], S1_EXACT),
+        (res.ST[0], res.ST_conf[0], ST_EXACT),
+    ):
         err = np.abs(est - exact)
         assert np.all(err <= 1.5 * conf), (est, conf)
         assert np.all(err < 0.04), est
-    assert res.rows()[0] == {"output": "y", "parameter": "x1", "S1": res.S1[0, 0], "S1_conf": res.S1_conf[0, 0],
-                             "ST": res.ST[0, 0], "ST_conf": res.ST_conf[0, 0]}
+    assert res.rows()[0] == {
+        "output": "y",
+        "parameter": "x1",
+        "S1": res.S1[0, 0],
+        "S1_conf": res.S1_conf[0, 0],
+        "ST": res.ST[0, 0],
+        "ST_conf": res.ST_conf[0, 0],
+    }
 
 
 def test_vectorised_evaluator_through_a_mapper_gives_identical_indices():
@@ -82,7 +99,9 @@ def test_constant_output_and_two_outputs():
 
     res = sobol_indices(f, ("a", "b"), [0, 0], [1, 1], 256, seed=0, outputs=("lin", "const"))
     # additive linear: S1 = ST = c_i^2 / sum c^2 = 0.2, 0.8
-    assert np.allclose(res.S1[0], [0.2, 0.8], atol=0.05) and np.allclose(res.ST[0], [0.2, 0.8], atol=0.05)
+    assert np.allclose(res.S1[0], [0.2, 0.8], atol=0.05) and np.allclose(
+        res.ST[0], [0.2, 0.8], atol=0.05
+    )
     assert np.all(np.isnan(res.S1[1])) and any("constant" in w for w in res.warnings)
 
 
@@ -118,21 +137,71 @@ def test_gsa_cli_on_an_analytic_case_and_fe_dry_run(tmp_path, capsys):
     from bench.cli import main
 
     out = tmp_path / "gsa"
-    assert main(["gsa", "analytic-smooth", "--method", "sobol", "--samples", "64", "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "gsa",
+                "analytic-smooth",
+                "--method",
+                "sobol",
+                "--samples",
+                "64",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "384 evaluations planned" in text and "cost: 384 forward evaluations" in text
     doc = json.loads((out / "gsa_sobol.json").read_text())
     assert doc["cost"]["fe_evaluations"] == 64 * 6 and len(doc["indices"]) == 4
-    assert main(["gsa", "analytic-smooth", "--method", "morris", "--samples", "8", "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "gsa",
+                "analytic-smooth",
+                "--method",
+                "morris",
+                "--samples",
+                "8",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert (out / "gsa_morris.png").stat().st_size > 0 and (out / "samples_morris.csv").exists()
     for png in ("gsa_morris.png", "gsa_sobol.png"):
         (out / png).unlink()
-    assert main(["gsa", "analytic-smooth", "--method", "morris", "--render", "--out", str(out)]) == 0
+    assert (
+        main(["gsa", "analytic-smooth", "--method", "morris", "--render", "--out", str(out)]) == 0
+    )
     assert (out / "gsa_morris.png").exists() and not (out / "gsa_sobol.png").exists()
     assert main(["gsa", "analytic-smooth", "--render", "--out", str(tmp_path / "nothing")]) == 2
     # FE case, dry run: the planned cost and the automatically shrunk feasible box, no FE run
-    assert main(["gsa", "exponent-compression", "--samples", "16", "--dry-run", "--data", "synthetic",
-                 "--mesh", "2,2,4", "--workers", "1", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "gsa",
+                "exponent-compression",
+                "--samples",
+                "16",
+                "--dry-run",
+                "--data",
+                "synthetic",
+                "--mesh",
+                "2,2,4",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "128 evaluations planned" in text and "box scaled by" in text
     assert main(["gsa", "analytic-smooth", "--box-scale", "2", "--out", str(out)]) == 2

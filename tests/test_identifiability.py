@@ -1,9 +1,15 @@
 """Fisher information and Laplace covariance against closed forms on linear models."""
+
 import numpy as np
 import pytest
 
 from problems.analysis.identifiability import (
-    analyse_jacobian, correlation_matrix, fisher_information, identifiability, laplace_covariance, refine_mode,
+    analyse_jacobian,
+    correlation_matrix,
+    fisher_information,
+    identifiability,
+    laplace_covariance,
+    refine_mode,
 )
 from problems.inverse.protocol import ForwardResult
 from tests.support import evaluator
@@ -89,8 +95,12 @@ def test_singular_fisher_uses_the_pseudo_inverse_and_says_so():
     assert ident.pinv and ident.rank == 2
     assert ident.condition > 1e12 or ident.condition == np.inf
     assert any("pseudo-inverse" in w and "not identifiable" in w for w in ident.warnings)
-    assert np.allclose(ident.cov_z, np.linalg.pinv(ident.fisher_z, rcond=1e-12, hermitian=True), rtol=1e-6,
-                       atol=1e-12 * np.abs(ident.cov_z).max())
+    assert np.allclose(
+        ident.cov_z,
+        np.linalg.pinv(ident.fisher_z, rcond=1e-12, hermitian=True),
+        rtol=1e-6,
+        atol=1e-12 * np.abs(ident.cov_z).max(),
+    )
     w = ident.weakest  # null direction: a and c with opposite signs, b absent
     assert abs(w["b"]) < 1e-6 and w["a"] * w["c"] < 0
 
@@ -101,7 +111,8 @@ def test_zero_jacobian_column_is_reported():
     ident = analyse_jacobian(Jz, REF, names=("a", "b", "c"))
     assert ident.rank == 2 and ident.condition == np.inf
     assert any("do not depend on b" in w for w in ident.warnings)
-    assert ident.std_percent[1] < 1e-9 * ident.std_percent.max()  # pinv: no variance in the unidentifiable direction, flagged
+    # pinv: no variance in the unidentifiable direction, flagged
+    assert ident.std_percent[1] < 1e-9 * ident.std_percent.max()
 
 
 def test_helpers_and_input_checks():
@@ -139,7 +150,20 @@ def test_identifiability_cli_on_analytic_cases(tmp_path, capsys):
     from bench.cli import main
 
     out = tmp_path / "ident"
-    assert main(["identifiability", "analytic-smooth", "analytic-linear", "--scheme", "central", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "identifiability",
+                "analytic-smooth",
+                "analytic-linear",
+                "--scheme",
+                "central",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "analytic-smooth: cond(J^T J) =" in text and "analytic-linear" in text
     doc = json.loads((out / "analytic-linear" / "identifiability.json").read_text())
@@ -156,13 +180,22 @@ def test_identifiability_cli_on_analytic_cases(tmp_path, capsys):
     assert (out / "summary.md").exists() and (out / "std_percent.png").exists()
     for png in (out / "std_percent.png", out / "analytic-smooth" / "correlation.png"):
         png.unlink()
-    assert main(["identifiability", "analytic-smooth", "analytic-linear", "--render", "--out", str(out)]) == 0
-    assert (out / "std_percent.png").exists() and (out / "analytic-smooth" / "correlation.png").exists()
+    assert (
+        main(
+            ["identifiability", "analytic-smooth", "analytic-linear", "--render", "--out", str(out)]
+        )
+        == 0
+    )
+    assert (out / "std_percent.png").exists() and (
+        out / "analytic-smooth" / "correlation.png"
+    ).exists()
     assert main(["identifiability", "analytic-smooth", "--x", "E=1e9", "--out", str(out)]) == 2
     assert main(["identifiability", "analytic-smooth", "analytic-linear", "--x", "E=3e4"]) == 2
 
 
-def test_default_output_goes_under_the_results_root_not_the_current_directory(tmp_path, monkeypatch):
+def test_default_output_goes_under_the_results_root_not_the_current_directory(
+    tmp_path, monkeypatch
+):
     from bench.cli import main
 
     root, cwd = tmp_path / "root", tmp_path / "cwd"
@@ -170,7 +203,9 @@ def test_default_output_goes_under_the_results_root_not_the_current_directory(tm
     monkeypatch.chdir(cwd)
     monkeypatch.setenv("FEMUBENCH_RESULTS_DIR", str(root))
     assert main(["identifiability", "analytic-linear", "--no-figures"]) == 0
-    assert (root / "studies" / "identifiability" / "analytic-linear" / "identifiability.json").exists()
+    assert (
+        root / "studies" / "identifiability" / "analytic-linear" / "identifiability.json"
+    ).exists()
     assert not any(cwd.iterdir())
     assert main(["identifiability", "analytic-linear", "--render"]) == 0
     assert (root / "studies" / "identifiability" / "analytic-linear" / "correlation.png").exists()

@@ -1,4 +1,5 @@
 """The one JSON encoding: numpy to Python, non-finite floats as strings, exact round trip."""
+
 import math
 
 import numpy as np
@@ -8,10 +9,14 @@ from problems.io import jsonio
 
 
 def test_round_trip_of_numpy_and_non_finite_values():
-    doc = {"a": np.array([1.5, np.nan, np.inf]), "b": np.float32(2.0), "c": (np.int64(3), -math.inf),
-           4: [True, None, "text"]}
+    doc = {
+        "a": np.array([1.5, np.nan, np.inf]),
+        "b": np.float32(2.0),
+        "c": (np.int64(3), -math.inf),
+        4: [True, None, "text"],
+    }
     text = jsonio.dumps(doc, sort_keys=True)
-    assert "NaN" not in text and "Infinity" not in text        # strict JSON
+    assert "NaN" not in text and "Infinity" not in text  # strict JSON
     back = jsonio.loads(text)
     assert back["a"][0] == 1.5 and math.isnan(back["a"][1]) and back["a"][2] == math.inf
     assert back["b"] == 2.0 and back["c"] == [3, -math.inf]

@@ -1,10 +1,16 @@
 """The linear solvers of the Newton corrections: same answers, flagged failures, the interface."""
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from problems.fe.linear_solver import (LINEAR_SOLVERS, SingularMatrixError, cholmod_available, gmres,
-                                       make_linear_solver)
+from problems.fe.linear_solver import (
+    LINEAR_SOLVERS,
+    SingularMatrixError,
+    cholmod_available,
+    gmres,
+    make_linear_solver,
+)
 from problems.fe.mesh import box_mesh
 from problems.fe.newton import BoundaryConditions, Loading, NewtonSettings, _Newton, discretise, run
 from problems.materials import LinearElastic, MaterialUpdate
@@ -29,16 +35,24 @@ def _rel(a, b):
 def test_cholmod_gmres_and_superlu_give_the_same_plastic_newton_answer():
     disc = discretise(box_mesh(6, 6, 12))
     tight = dict(rtol_force=1e-10, rtol_displacement=1e-10)
-    ref = run(disc, _plastic(), Loading(1.5, 5), NewtonSettings(linear_solver="superlu", assembly="numpy", **tight))
-    new = run(disc, _plastic(), Loading(1.5, 5), NewtonSettings(linear_solver="cholmod-gmres", **tight))
+    ref = run(
+        disc,
+        _plastic(),
+        Loading(1.5, 5),
+        NewtonSettings(linear_solver="superlu", assembly="numpy", **tight),
+    )
+    new = run(
+        disc, _plastic(), Loading(1.5, 5), NewtonSettings(linear_solver="cholmod-gmres", **tight)
+    )
     assert ref.converged and new.converged
-    assert new.state[-1, :, 0].max() > 1e-3                        # really plastic
+    assert new.state[-1, :, 0].max() > 1e-3  # really plastic
     assert ref.timing["krylov_iterations"] == 0 and new.timing["krylov_iterations"] > 0
-    assert new.timing["factorisations"] < new.iterations           # the preconditioner is reused
+    assert new.timing["factorisations"] < new.iterations  # the preconditioner is reused
     assert _rel(new.reaction_kN, ref.reaction_kN) < 1e-10
     assert _rel(new.displacements, ref.displacements) < 1e-10
     assert _rel(new.stress, ref.stress) < 1e-9
-    assert new.iterations == ref.iterations                        # inexact solves cost no Newton iteration
+    # inexact solves cost no Newton iteration
+    assert new.iterations == ref.iterations
 
 
 class _Singular(LinearElastic):
@@ -51,8 +65,12 @@ class _Singular(LinearElastic):
 
 @pytest.mark.parametrize("solver", ["superlu", pytest.param("cholmod-gmres", marks=needs_cholmod)])
 def test_singular_tangent_is_a_flagged_failure_not_an_exception(solver):
-    r = run(discretise(box_mesh(2, 2, 4)), _Singular(E, NU), Loading(1.5, 2),
-            NewtonSettings(linear_solver=solver, max_cuts=2))
+    r = run(
+        discretise(box_mesh(2, 2, 4)),
+        _Singular(E, NU),
+        Loading(1.5, 2),
+        NewtonSettings(linear_solver=solver, max_cuts=2),
+    )
     assert not r.converged
     assert "singular tangent" in r.message and "snapshot 1/2" in r.message
     assert len(r.snapshots_mm) == 0
@@ -66,14 +84,19 @@ def test_factorise_singular_matrix_raises_singular_matrix_error(solver):
 
 
 def test_settings_name_the_bad_value_and_the_allowed_ones():
-    with pytest.raises(ValueError, match=r"linear_solver = 'mumps' is unknown; allowed: auto, cholmod-gmres, superlu"):
+    with pytest.raises(
+        ValueError,
+        match=r"linear_solver = 'mumps' is unknown; allowed: auto, cholmod-gmres, superlu",
+    ):
         NewtonSettings(linear_solver="mumps")
     with pytest.raises(ValueError, match=r"assembly = 'dense' is unknown; allowed: fused, numpy"):
         NewtonSettings(assembly="dense")
     with pytest.raises(ValueError, match="unknown; allowed"):
         make_linear_solver("umfpack")
     assert set(LINEAR_SOLVERS) == {"auto", "cholmod-gmres", "superlu"}
-    assert make_linear_solver("auto").name == ("cholmod-gmres" if cholmod_available() else "superlu")
+    assert make_linear_solver("auto").name == (
+        "cholmod-gmres" if cholmod_available() else "superlu"
+    )
 
 
 def _tangent_block(material, disc, plates="friction"):
@@ -81,16 +104,18 @@ def _tangent_block(material, disc, plates="friction"):
     bc = BoundaryConditions(disc, plates)
     newton = _Newton(disc, material, bc, NewtonSettings())
     n = disc.n_points
-    strain = np.tile([1e-3, 1e-3, -5e-3, 1e-3, 0.0, 0.0], (n, 1)) * np.linspace(0.5, 1.5, n)[:, None]
+    strain = (
+        np.tile([1e-3, 1e-3, -5e-3, 1e-3, 0.0, 0.0], (n, 1)) * np.linspace(0.5, 1.5, n)[:, None]
+    )
     upd = material.update(strain, np.zeros((n, 6)), material.initial_state(n))
-    assert upd.ok.all() and upd.state[:, 0].min() > 0            # every point plastic
+    assert upd.ok.all() and upd.state[:, 0].min() > 0  # every point plastic
     return bc.free_block(newton._tangent(upd.tangent))
 
 
 @pytest.mark.parametrize("solver", ["superlu", pytest.param("cholmod-gmres", marks=needs_cholmod)])
 def test_factor_solves_one_or_several_right_hand_sides(solver):
     A = _tangent_block(_plastic(), discretise(box_mesh(3, 3, 6)))
-    assert abs(A - A.T).max() > 1e-3 * abs(A).max()              # non-symmetric
+    assert abs(A - A.T).max() > 1e-3 * abs(A).max()  # non-symmetric
     f = make_linear_solver(solver).factorise(A)
     rng = np.random.default_rng(1)
     B = rng.standard_normal((A.shape[0], 7))
@@ -98,7 +123,9 @@ def test_factor_solves_one_or_several_right_hand_sides(solver):
     assert X.shape == B.shape
     assert np.linalg.norm(A @ X - B) / np.linalg.norm(B) < 1e-10
     x = f.solve(B[:, 2], 1e-12)
-    assert x.shape == (A.shape[0],) and np.allclose(x, X[:, 2], rtol=1e-8, atol=1e-12 * np.abs(X).max())
+    assert x.shape == (A.shape[0],) and np.allclose(
+        x, X[:, 2], rtol=1e-8, atol=1e-12 * np.abs(X).max()
+    )
 
 
 @needs_cholmod
@@ -108,12 +135,12 @@ def test_preconditioner_reuse_and_stale_factor_detection():
     solver = make_linear_solver("cholmod-gmres")
     f = solver.factorise(A)
     A2 = A.copy()
-    A2.data *= 1.0 + 0.05 * np.random.default_rng(2).standard_normal(A2.nnz)   # a nearby matrix
+    A2.data *= 1.0 + 0.05 * np.random.default_rng(2).standard_normal(A2.nnz)  # a nearby matrix
     g = f.for_matrix(A2)
     b = np.ones(A.shape[0])
     x = g.solve(b, 1e-11)
     assert np.linalg.norm(A2 @ x - b) / np.linalg.norm(b) < 1e-10 and g.krylov_iterations > 1
-    solver.factorise(A2)   # overwrites the numeric factorisation f and g were using
+    solver.factorise(A2)  # overwrites the numeric factorisation f and g were using
     with pytest.raises(RuntimeError, match="overwritten"):
         g.solve(b, 1e-11)
 
@@ -125,8 +152,11 @@ def test_increment_exposes_a_factor_of_the_converged_tangent():
     bc = BoundaryConditions(disc, "friction")
     newton = _Newton(disc, mat, bc, NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10))
     u0 = np.zeros(disc.pattern.n_dofs)
-    inc = newton.increment(u0, np.zeros((disc.n_points, 6)), mat.initial_state(disc.n_points), None, -0.5)
-    assert inc.ok and inc.factor is not None and not inc.factor_at_converged   # plastic: the tangent moved
+    inc = newton.increment(
+        u0, np.zeros((disc.n_points, 6)), mat.initial_state(disc.n_points), None, -0.5
+    )
+    # plastic: the tangent moved
+    assert inc.ok and inc.factor is not None and not inc.factor_at_converged
     f = newton.converged_factor(inc)
     K = bc.free_block(newton._tangent(inc.tangent))
     b = np.random.default_rng(3).standard_normal((K.shape[0], 3))
@@ -136,7 +166,9 @@ def test_increment_exposes_a_factor_of_the_converged_tangent():
     # elastic: the predictor's factor is formed at the converged tangent already
     el = LinearElastic(E, NU)
     n2 = _Newton(disc, el, bc, NewtonSettings())
-    inc = n2.increment(u0, np.zeros((disc.n_points, 6)), el.initial_state(disc.n_points), None, -0.5)
+    inc = n2.increment(
+        u0, np.zeros((disc.n_points, 6)), el.initial_state(disc.n_points), None, -0.5
+    )
     assert inc.ok and inc.factor_at_converged and n2.converged_factor(inc) is inc.factor
 
 

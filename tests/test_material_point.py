@@ -1,4 +1,5 @@
 """Material-point driver and the ``femubench material`` command."""
+
 import argparse
 import csv
 import math
@@ -7,10 +8,9 @@ import numpy as np
 import pytest
 
 from bench.commands import material as cmd
-from problems.materials.point_driver import COLUMNS, PATHS, run_material_point
 from problems.materials.drucker_prager import make_material
 from problems.materials.elastic import LinearElastic
-from problems.materials.verification import typical_parameters
+from problems.materials.point_driver import COLUMNS, PATHS, run_material_point
 from tests.support import material
 
 
@@ -33,7 +33,9 @@ def test_elastic_paths_follow_hooke(path):
     np.testing.assert_allclose(sig, modulus * eps, rtol=1e-10)
     np.testing.assert_array_equal(res.column("eqps"), 0.0)
     if path.startswith("uniaxial"):
-        np.testing.assert_allclose(res.strain[:, 1:3], -nu * eps[:, None] * np.ones((1, 2)), rtol=1e-10)
+        np.testing.assert_allclose(
+            res.strain[:, 1:3], -nu * eps[:, None] * np.ones((1, 2)), rtol=1e-10
+        )
         assert np.abs(res.stress[:, 1:]).max() < 1e-10 * np.abs(sig).max()
         np.testing.assert_allclose(res.column("q"), np.abs(sig), rtol=1e-12)
         np.testing.assert_allclose(res.column("p"), -sig / 3, rtol=1e-12)
@@ -53,7 +55,9 @@ def test_dilatant_shear_frees_the_normal_strains():
     assert (vol[plastic] > 0).all()
     assert np.abs(res.stress[:, :5]).max() < 1e-9
     gamma_pl = res.column("eps_axial") - res.column("sig_axial") / mat.shear_modulus
-    np.testing.assert_allclose(res.column("eqps")[plastic], gamma_pl[plastic] / math.sqrt(3), rtol=1e-8)
+    np.testing.assert_allclose(
+        res.column("eqps")[plastic], gamma_pl[plastic] / math.sqrt(3), rtol=1e-8
+    )
 
 
 @pytest.mark.parametrize("form", ["linear", "hyperbolic", "exponent"])
@@ -61,10 +65,15 @@ def test_hydrostatic_tension_caps_at_the_tensile_strength(form):
     """Hydrostatic extension yields at p = -pt0 (hyperbolic, exponent) or at the cone's apex
     p = -d/tan(beta) (linear) and then follows the hardening of that point."""
     mat = _dp(form, "compression")
-    p0 = {"linear": mat.yield_function.d_hat * mat.law.sigma0 / mat.yield_function.tan_beta
-          if form == "linear" else None,
-          "hyperbolic": mat.params.get("pt0"),
-          "exponent": mat.yield_function.tension_strength(mat.law.sigma0)[0] if form == "exponent" else None}[form]
+    p0 = {
+        "linear": mat.yield_function.d_hat * mat.law.sigma0 / mat.yield_function.tan_beta
+        if form == "linear"
+        else None,
+        "hyperbolic": mat.params.get("pt0"),
+        "exponent": mat.yield_function.tension_strength(mat.law.sigma0)[0]
+        if form == "exponent"
+        else None,
+    }[form]
     res = run_material_point(mat, "hydrostatic", 20 * p0 / mat.E, 40)
     p, eqps = res.column("p"), res.column("eqps")
     plastic = eqps > 0
@@ -78,7 +87,9 @@ def test_hydrostatic_tension_caps_at_the_tensile_strength(form):
     if form == "linear":  # -p = d_hat (sigma0 + H eqps) / tan(beta): intercept p0
         slope, intercept = np.polyfit(eqps[plastic], -p[plastic], 1)
         assert intercept == pytest.approx(p0, rel=1e-9)
-        assert slope == pytest.approx(mat.yield_function.d_hat * mat.law.H / mat.yield_function.tan_beta, rel=1e-9)
+        assert slope == pytest.approx(
+            mat.yield_function.d_hat * mat.law.H / mat.yield_function.tan_beta, rel=1e-9
+        )
 
 
 class _Fussy:
@@ -94,7 +105,9 @@ class _Fussy:
     def update(self, de, sig, st):
         self.calls += 1
         up = self.inner.update(de, sig, st)
-        return type(up)(up.stress, up.tangent, up.state, up.ok & (np.abs(de).max(axis=1) <= self.limit))
+        return type(up)(
+            up.stress, up.tangent, up.state, up.ok & (np.abs(de).max(axis=1) <= self.limit)
+        )
 
 
 def test_failed_steps_are_bisected():
@@ -128,8 +141,28 @@ def _cli(argv):
 
 def test_cli_prints_the_table_and_writes_csv(tmp_path, capsys):
     out = tmp_path / "mp.csv"
-    assert _cli(["linear", "--hardening", "tension", "--path", "uniaxial-tension", "--strain", "0.002",
-                 "--steps", "6", "--param", "E=25000", "--param", "psi=10", "--csv", str(out)]) == 0
+    assert (
+        _cli(
+            [
+                "linear",
+                "--hardening",
+                "tension",
+                "--path",
+                "uniaxial-tension",
+                "--strain",
+                "0.002",
+                "--steps",
+                "6",
+                "--param",
+                "E=25000",
+                "--param",
+                "psi=10",
+                "--csv",
+                str(out),
+            ]
+        )
+        == 0
+    )
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0].startswith("# linear-tension along uniaxial-tension") and "E=25000" in lines[0]
     assert lines[1].split() == list(COLUMNS) and len(lines) == 8
@@ -138,7 +171,11 @@ def test_cli_prints_the_table_and_writes_csv(tmp_path, capsys):
     assert rows[0] == list(COLUMNS) and len(rows) == 7
     assert float(rows[-1][1]) == pytest.approx(0.002, rel=1e-14)
     # the command runs the same driver as the library
-    mat = make_material("linear", "tension", {**cmd.reference_parameters("linear", "tension"), "E": 25000.0, "psi": 10.0})
+    mat = make_material(
+        "linear",
+        "tension",
+        {**cmd.reference_parameters("linear", "tension"), "E": 25000.0, "psi": 10.0},
+    )
     ref = run_material_point(mat, "uniaxial-tension", 0.002, 6)
     np.testing.assert_allclose([float(r[2]) for r in rows[1:]], ref.column("sig_axial"), rtol=1e-15)
 

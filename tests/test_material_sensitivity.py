@@ -18,6 +18,7 @@ the response to some parameters is weak, so round-off weighs more (up to 1e-6 wi
 h^2 truncation at 7e-7 with h = 1e-4 |p|. The test checks that the step is in the clean range:
 the references with h and h/2 agree with each other to the tolerance as well as with the DDM.
 """
+
 import re
 
 import numpy as np
@@ -26,7 +27,11 @@ import pytest
 from problems.inverse.cases import CASES
 from problems.materials import _kernels as K
 from problems.materials import drucker_prager as dp
-from problems.materials.base import DifferentiableMaterial, isotropic_stiffness, isotropic_stiffness_derivatives
+from problems.materials.base import (
+    DifferentiableMaterial,
+    isotropic_stiffness,
+    isotropic_stiffness_derivatives,
+)
 from problems.materials.ddm import kernel_parameter_jacobian, run_path_sensitivity
 from problems.materials.elastic import LinearElastic
 
@@ -55,7 +60,9 @@ def general_paths(rng, n=6):
 def tension_paths():
     """Six increments of hydrostatic tension, with small deviatoric parts: the linear cone's
     apex (and near-apex smooth returns), the hyperbolic/exponent tip; unloading and reloading."""
-    dirs = np.array([[1, 1, 1, 0, 0, 0], [1, 1, 1, 0.1, 0, 0], [1, 0.9, 1.1, 0, 0.05, 0], [1, 1, 1, 0, 0, 0.3]])
+    dirs = np.array(
+        [[1, 1, 1, 0, 0, 0], [1, 1, 1, 0.1, 0, 0], [1, 0.9, 1.1, 0, 0.05, 0], [1, 1, 1, 0, 0, 0.3]]
+    )
     profile = np.array([0.5, 0.5, 0.5, -0.8, 0.6, 0.5])
     return profile[:, None, None] * dirs[None] * 4e-4
 
@@ -76,8 +83,13 @@ def _fd(case, params, name, rel, increments):
     """Fourth-order central differences (stress, state) of the whole path with respect to one
     parameter: (8 (f(h) - f(-h)) - (f(2h) - f(-2h))) / (12 h), h = rel |p|."""
     h = rel * abs(params[name])
-    f = {j: _stress_path(dp.make_material(case.form, case.hardening, {**params, name: params[name] + j * h}),
-                         increments) for j in (-2, -1, 1, 2)}
+    f = {
+        j: _stress_path(
+            dp.make_material(case.form, case.hardening, {**params, name: params[name] + j * h}),
+            increments,
+        )
+        for j in (-2, -1, 1, 2)
+    }
     d = (8.0 * (f[1] - f[-1]) - (f[2] - f[-2])) / (12.0 * h)
     return d[..., :6], d[..., 6:]
 
@@ -95,19 +107,28 @@ def path_errors(name, increments):
     out = {}
     for k, pname in enumerate(mat.parameter_names):
         # insensitive: a 100 % change moves the response by less than 0.1 % of its magnitude
-        floor_s, floor_q = (1e-3 * np.abs(a).max(axis=(0, 2)) / abs(params[pname]) for a in (res.stress, res.state))
+        floor_s, floor_q = (
+            1e-3 * np.abs(a).max(axis=(0, 2)) / abs(params[pname]) for a in (res.stress, res.state)
+        )
         fd_s, fd_q = _fd(case, params, pname, REL_STEP, increments)
         fd2_s, fd2_q = _fd(case, params, pname, 0.5 * REL_STEP, increments)
-        out[pname] = (_column_error(res.dstress[:, :, k], fd_s, floor_s).max(),
-                      _column_error(res.dstate[:, :, k], fd_q, floor_q).max(),
-                      max(_column_error(fd2_s, fd_s, floor_s).max(), _column_error(fd2_q, fd_q, floor_q).max()))
+        out[pname] = (
+            _column_error(res.dstress[:, :, k], fd_s, floor_s).max(),
+            _column_error(res.dstate[:, :, k], fd_q, floor_q).max(),
+            max(
+                _column_error(fd2_s, fd_s, floor_s).max(), _column_error(fd2_q, fd_q, floor_q).max()
+            ),
+        )
     return res, out
 
 
 def _kinds(res):
-    """Per increment and point: 'e' elastic, 'P' plastic (smooth), 'A' exactly hydrostatic plastic."""
+    """Per increment and point: 'e' elastic, 'P' plastic (smooth), 'A' exactly hydrostatic
+    plastic."""
     plastic = np.diff(res.state[:, :, 0], axis=0, prepend=0.0) > 0.0
-    hydro = np.all(res.stress[..., 3:] == 0.0, axis=-1) & np.all(res.stress[..., :3] == res.stress[..., :1], axis=-1)
+    hydro = np.all(res.stress[..., 3:] == 0.0, axis=-1) & np.all(
+        res.stress[..., :3] == res.stress[..., :1], axis=-1
+    )
     return np.where(plastic & hydro, "A", np.where(plastic, "P", "e"))
 
 
@@ -135,7 +156,11 @@ def test_ddm_matches_finite_differences_in_hydrostatic_tension(name):
 
 
 def _random_history(rng, n, n_p):
-    return rng.normal(size=(n, n_p, 6)), rng.normal(size=(n, n_p, 7)) * 1e-4, rng.normal(size=(n, n_p, 6)) * 1e-5
+    return (
+        rng.normal(size=(n, n_p, 6)),
+        rng.normal(size=(n, n_p, 7)) * 1e-4,
+        rng.normal(size=(n, n_p, 6)) * 1e-5,
+    )
 
 
 @pytest.mark.parametrize("name", ["linear-compression", "hyperbolic-tension", "exponent-shear"])
@@ -157,8 +182,9 @@ def test_elastic_points(name):
         expected[:, names.index(name_p)] += de @ dD.T
     np.testing.assert_allclose(dsig, expected, rtol=1e-14, atol=1e-14 * np.abs(expected).max())
     np.testing.assert_array_equal(dst, dst_old)
-    dsig, dst = mat.sensitivity(de, sig_n, st_n, up, np.zeros_like(dsig_old), np.zeros_like(dst_old),
-                                np.zeros_like(dde))
+    dsig, dst = mat.sensitivity(
+        de, sig_n, st_n, up, np.zeros_like(dsig_old), np.zeros_like(dst_old), np.zeros_like(dde)
+    )
     plastic_params = [k for k, p in enumerate(names) if p not in ("E", "nu")]
     assert (dsig[:, plastic_params] == 0.0).all() and (dst == 0.0).all()
     assert (np.abs(dsig[:, [names.index("E"), names.index("nu")]]).max(axis=(1, 2)) > 0).all()
@@ -173,14 +199,23 @@ def test_apex_does_not_depend_on_K_under_compression_hardening():
     up = mat.update(de, np.zeros((n, 6)), mat.initial_state(n))
     assert up.ok.all() and (up.state[:, 0] > 0).all() and (up.stress[:, 3:] == 0).all()
     P = len(mat.parameter_names)
-    dsig, dst = mat.sensitivity(de, np.zeros((n, 6)), mat.initial_state(n), up, np.zeros((n, P, 6)),
-                                np.zeros((n, P, 7)), np.zeros((n, P, 6)))
+    dsig, dst = mat.sensitivity(
+        de,
+        np.zeros((n, 6)),
+        mat.initial_state(n),
+        up,
+        np.zeros((n, P, 6)),
+        np.zeros((n, P, 7)),
+        np.zeros((n, P, 6)),
+    )
     k = mat.parameter_names.index("K")
     assert (dsig[:, k] == 0.0).all() and (dst[:, k] == 0.0).all()
     assert np.abs(dsig[:, mat.parameter_names.index("beta"), :3]).min() > 0.0
 
 
-@pytest.mark.parametrize("name", ["linear-tension", "hyperbolic-compression", "exponent-compression"])
+@pytest.mark.parametrize(
+    "name", ["linear-tension", "hyperbolic-compression", "exponent-compression"]
+)
 def test_strain_increment_derivative_goes_through_the_consistent_tangent(name):
     """dstress = T ddeps + (the rest): the ddeps part of the sensitivity is the update's tangent."""
     _, _, mat = _reference(name)
@@ -203,14 +238,32 @@ def test_strain_increment_derivative_goes_through_the_consistent_tangent(name):
 
 def test_failed_points_get_nan():
     """psi = 0, H = 0: a trial beyond the apex cannot be returned (ok False): NaN derivatives."""
-    mat = dp.make_material("linear", "compression", {**CASES["linear-compression"].material_parameters(
-        CASES["linear-compression"].reference), "psi": 0.0, "H": 0.0})
-    de = np.array([[2e-3, 2e-3, 2e-3, 0, 0, 0], [-1e-3, 2e-4, 2e-4, 0, 0, 0], [1e-5, 0, 0, 0, 0, 0]])
+    mat = dp.make_material(
+        "linear",
+        "compression",
+        {
+            **CASES["linear-compression"].material_parameters(
+                CASES["linear-compression"].reference
+            ),
+            "psi": 0.0,
+            "H": 0.0,
+        },
+    )
+    de = np.array(
+        [[2e-3, 2e-3, 2e-3, 0, 0, 0], [-1e-3, 2e-4, 2e-4, 0, 0, 0], [1e-5, 0, 0, 0, 0, 0]]
+    )
     up = mat.update(de, np.zeros((3, 6)), mat.initial_state(3))
     assert up.ok.tolist() == [False, True, True]
     P = len(mat.parameter_names)
-    dsig, dst = mat.sensitivity(de, np.zeros((3, 6)), mat.initial_state(3), up, np.zeros((3, P, 6)),
-                                np.zeros((3, P, 7)), np.zeros((3, P, 6)))
+    dsig, dst = mat.sensitivity(
+        de,
+        np.zeros((3, 6)),
+        mat.initial_state(3),
+        up,
+        np.zeros((3, P, 6)),
+        np.zeros((3, P, 7)),
+        np.zeros((3, P, 6)),
+    )
     assert np.isnan(dsig[0]).all() and np.isnan(dst[0]).all()
     assert np.isfinite(dsig[1:]).all() and np.isfinite(dst[1:]).all()
 
@@ -232,7 +285,9 @@ def test_kernel_parameter_jacobian_matches_the_mapping(name):
         plus = dp.make_material(case.form, case.hardening, {**params, pname: params[pname] + h})
         minus = dp.make_material(case.form, case.hardening, {**params, pname: params[pname] - h})
         fd = (theta(plus) - theta(minus)) / (2 * h)
-        np.testing.assert_allclose(jac[:, k], fd, rtol=1e-7, atol=1e-9 * np.abs(fd).max(), err_msg=pname)
+        np.testing.assert_allclose(
+            jac[:, k], fd, rtol=1e-7, atol=1e-9 * np.abs(fd).max(), err_msg=pname
+        )
 
 
 def test_parameter_names_and_protocol():
@@ -252,10 +307,22 @@ def test_linear_elastic_sensitivity():
     de, sig_n = rng.normal(size=(n, 6)) * 1e-4, rng.normal(size=(n, 6))
     up = mat.update(de, sig_n, mat.initial_state(n))
     zero = np.zeros((n, 2, 6))
-    dsig, dst = mat.sensitivity(de, sig_n, mat.initial_state(n), up, zero, np.zeros((n, 2, 0)), zero)
+    dsig, dst = mat.sensitivity(
+        de, sig_n, mat.initial_state(n), up, zero, np.zeros((n, 2, 0)), zero
+    )
     assert dst.shape == (n, 2, 0)
     for k, (E, nu) in enumerate(((1.0, 0.0), (0.0, 1.0))):
         h = 1e-6 * (mat.E if E else mat.nu)
-        plus = LinearElastic(mat.E + h * E, mat.nu + h * nu).update(de, sig_n, mat.initial_state(n)).stress
-        minus = LinearElastic(mat.E - h * E, mat.nu - h * nu).update(de, sig_n, mat.initial_state(n)).stress
-        np.testing.assert_allclose(dsig[:, k], (plus - minus) / (2 * h), rtol=1e-7, atol=1e-9 * np.abs(dsig[:, k]).max())
+        plus = (
+            LinearElastic(mat.E + h * E, mat.nu + h * nu)
+            .update(de, sig_n, mat.initial_state(n))
+            .stress
+        )
+        minus = (
+            LinearElastic(mat.E - h * E, mat.nu - h * nu)
+            .update(de, sig_n, mat.initial_state(n))
+            .stress
+        )
+        np.testing.assert_allclose(
+            dsig[:, k], (plus - minus) / (2 * h), rtol=1e-7, atol=1e-9 * np.abs(dsig[:, k]).max()
+        )

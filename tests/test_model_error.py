@@ -1,8 +1,16 @@
-"""Model-error treatments: the honesty rule, one-point and BAE corrections on analytic model pairs."""
+"""Model-error treatments: the honesty rule, one-point and BAE corrections on analytic model
+pairs."""
+
 import numpy as np
 import pytest
 
-from problems.inverse.model_error import Correction, HonestyError, bae_statistics, check_honest, one_point
+from problems.inverse.model_error import (
+    Correction,
+    HonestyError,
+    bae_statistics,
+    check_honest,
+    one_point,
+)
 from problems.inverse.problem import LeastSquaresProblem
 from problems.inverse.protocol import ForwardResult
 
@@ -25,7 +33,8 @@ class Coarse:
 
 
 class Fine(Coarse):
-    """The 'high-fidelity model': the coarse one plus a parameter-dependent bias b(x) = 0.01 x0 T + 0.003."""
+    """The 'high-fidelity model': the coarse one plus a parameter-dependent bias
+    b(x) = 0.01 x0 T + 0.003."""
 
     def values(self, x):
         return super().values(x) + 0.01 * x[0] * T + 0.003
@@ -37,7 +46,8 @@ def test_honesty_rule_refuses_the_data_discretisation_in_the_loop():
         check_honest("fine/eighth", "model-error", forward="coarse/eighth", hifi="fine/eighth")
     with pytest.raises(HonestyError, match="forward"):
         check_honest("coarse/eighth", "model-error", forward="coarse/eighth")
-    check_honest("coarse/eighth", "consistent", forward="coarse/eighth")   # the labelled consistent tier
+    # the labelled consistent tier
+    check_honest("coarse/eighth", "consistent", forward="coarse/eighth")
 
 
 def test_one_point_correction_removes_the_bias_at_its_point_and_is_charged():
@@ -60,11 +70,15 @@ def test_bae_statistics_mean_and_covariance_of_the_model_error():
     np.testing.assert_allclose(c.factor @ c.factor.T, np.cov(E.T), atol=1e-12)
     assert c.n_hifi == 40 and c.n_failed == 0
     # same seed, same statistics
-    assert bae_statistics(Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=40, seed=1).hash == c.hash
+    assert (
+        bae_statistics(Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=40, seed=1).hash == c.hash
+    )
 
 
 def test_correction_round_trip_and_tamper_detection(tmp_path):
-    c = bae_statistics(Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=8, seed=0, provenance={"hifi": "f"})
+    c = bae_statistics(
+        Fine(), Coarse(), [1.0, 0.5], [3.0, 1.5], samples=8, seed=0, provenance={"hifi": "f"}
+    )
     path = tmp_path / "bae.npz"
     c.save(path)
     back = Correction.load(path)
@@ -81,7 +95,9 @@ def _objective(correction, data):
     from problems.inverse.evaluator import Evaluator
 
     shift = 0.0 if correction is None else correction.shift
-    ev = Evaluator(LeastSquaresProblem(Coarse(), data - shift, [1.0, 0.5], [3.0, 1.5], [2.0, 1.0], sigma=1e-3))
+    ev = Evaluator(
+        LeastSquaresProblem(Coarse(), data - shift, [1.0, 0.5], [3.0, 1.5], [2.0, 1.0], sigma=1e-3)
+    )
     if correction is not None:
         ev.charge("hifi", correction.n_hifi, correction.hifi_wall_s)
     return ev
@@ -95,10 +111,18 @@ def test_iterated_correction_converges_to_the_truth_where_one_point_does_not():
     data = Fine().values(truth)
     plain = solve(_objective(None, data), "lm", budget=200, x0=x0)
     once = solve(_objective(one_point(Fine(), Coarse(), x0), data), "lm", budget=200, x0=x0)
-    it = solve_iterated(lambda c: _objective(c, data), lambda x: one_point(Fine(), Coarse(), x), "lm",
-                        budget=400, x0=x0, tol=1e-6)
-    err = {k: np.max(np.abs(np.asarray(r.x) / truth - 1)) for k, r in
-           {"none": plain, "one-point": once, "iterated": it}.items()}
+    it = solve_iterated(
+        lambda c: _objective(c, data),
+        lambda x: one_point(Fine(), Coarse(), x),
+        "lm",
+        budget=400,
+        x0=x0,
+        tol=1e-6,
+    )
+    err = {
+        k: np.max(np.abs(np.asarray(r.x) / truth - 1))
+        for k, r in {"none": plain, "one-point": once, "iterated": it}.items()
+    }
     assert err["iterated"] < 1e-6 < err["one-point"] < err["none"]
     assert it.extra["correction_converged"] and len(it.extra["correction_rounds"]) >= 2
     assert it.charges["hifi"]["n"] == len(it.extra["correction_rounds"])
@@ -106,6 +130,7 @@ def test_iterated_correction_converges_to_the_truth_where_one_point_does_not():
 
 
 # --- on the FE model (tiny meshes) -------------------------------------------------------------
+
 
 def _fe_data(mesh, tier="model-error"):
     from problems.inverse.data import make_data
@@ -119,15 +144,21 @@ def test_build_objective_refuses_the_data_mesh_in_the_loop_and_labels_the_tiers(
     data = _fe_data("2,2,4")
     with pytest.raises(HonestyError, match="forward model uses discretisation 2,2,4"):
         build_objective("linear-compression", mesh="2,2,4", data=data)
-    with pytest.raises(HonestyError, match="forward"):          # the quarter model of the same mesh too
+    with pytest.raises(HonestyError, match="forward"):
+        # the quarter model of the same mesh too
         build_objective("linear-compression", mesh="2,2,4:quarter", data=data)
     corr = Correction("one-point", shift=np.zeros(1))
     with pytest.raises(HonestyError, match="hifi model"):
-        build_objective("linear-compression", mesh="1,1,2", data=data, correction=corr, hifi_mesh="2,2,4")
+        build_objective(
+            "linear-compression", mesh="1,1,2", data=data, correction=corr, hifi_mesh="2,2,4"
+        )
     obj = build_objective("linear-compression", mesh="1,1,2", data=data)
     assert obj.provenance["data_tier"] == "model-error" and obj.provenance["data_mesh"] == "2,2,4"
     consistent = _fe_data("1,1,2", tier="consistent")
-    assert build_objective("linear-compression", mesh="1,1,2", data=consistent).provenance["data_tier"] == "consistent"
+    assert (
+        build_objective("linear-compression", mesh="1,1,2", data=consistent).provenance["data_tier"]
+        == "consistent"
+    )
     with pytest.raises(ValueError, match="consistent-tier data were made on mesh 1,1,2"):
         build_objective("linear-compression", mesh="2,2,4", data=consistent)
 
@@ -158,4 +189,6 @@ def test_one_point_fe_correction_is_applied_and_charged():
     fixed = build_objective(case, mesh="1,1,2", data=data, correction=corr, hifi_mesh="1,1,4")
     assert fixed.charges["hifi"]["n"] == 1 and fixed.provenance["treatment"] == "one-point"
     z = np.ones(6)
-    np.testing.assert_allclose(fixed.residual(z) - plain.residual(z), fixed.whiten(-corr.shift), rtol=1e-12)
+    np.testing.assert_allclose(
+        fixed.residual(z) - plain.residual(z), fixed.whiten(-corr.shift), rtol=1e-12
+    )

@@ -1,4 +1,5 @@
 """The model-error study on tiny meshes: rows, resumption, torn files, the figure."""
+
 import json
 
 import numpy as np
@@ -16,9 +17,17 @@ def data():
 
 def test_study_rows_resume_and_render(tmp_path, data):
     seen = []
-    run = run_model_error("linear-compression", meshes=("1,1,2",), treatments=("none", "one-point"),
-                          margins=(0.0, 40.0), budget=40, out=tmp_path, data=data, hifi_mesh="1,1,4",
-                          progress=lambda cfg, row: seen.append(cfg.key))
+    run = run_model_error(
+        "linear-compression",
+        meshes=("1,1,2",),
+        treatments=("none", "one-point"),
+        margins=(0.0, 40.0),
+        budget=40,
+        out=tmp_path,
+        data=data,
+        hifi_mesh="1,1,4",
+        progress=lambda cfg, row: seen.append(cfg.key),
+    )
     assert len(run.rows) == 4 and len(seen) == 4
     none = next(r for r in run.rows if r["treatment"] == "none" and r["plate_margin_mm"] == 0)
     point = next(r for r in run.rows if r["treatment"] == "one-point" and r["plate_margin_mm"] == 0)
@@ -29,8 +38,16 @@ def test_study_rows_resume_and_render(tmp_path, data):
     # resumption: nothing recomputed; a torn file is recomputed and kept aside
     torn = tmp_path / f"{run.rows[0]['mesh']}__none__margin0__fe.json"
     torn.write_text('{"case": "linear-comp')
-    again = run_model_error("linear-compression", meshes=("1,1,2",), treatments=("none", "one-point"),
-                            margins=(0.0, 40.0), budget=40, out=tmp_path, data=data, hifi_mesh="1,1,4")
+    again = run_model_error(
+        "linear-compression",
+        meshes=("1,1,2",),
+        treatments=("none", "one-point"),
+        margins=(0.0, 40.0),
+        budget=40,
+        out=tmp_path,
+        data=data,
+        hifi_mesh="1,1,4",
+    )
     assert json.loads(torn.read_text())["treatment"] == "none"
     assert (tmp_path / f"{torn.stem}.json.corrupt").exists() and len(again.rows) == 4
     assert (tmp_path / "summary.csv").read_text().count("\n") == 5

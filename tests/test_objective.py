@@ -1,4 +1,6 @@
-"""The weighted least-squares objective: whitening, counting, cache, budget, failures, Jacobian, mapper."""
+"""The weighted least-squares objective: whitening, counting, cache, budget, failures, Jacobian,
+mapper."""
+
 from __future__ import annotations
 
 import math
@@ -40,8 +42,16 @@ class Quadratic:
 def make(sigma=None, covariance=None, **kw):
     model = Quadratic()
     data = model.values(np.array([1.0, 1.0])) + np.array([0.01, -0.02, 0.03, 0.0])
-    obj = evaluator(model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0],
-                    sigma=sigma, covariance=covariance, **kw)
+    obj = evaluator(
+        model,
+        data,
+        lower=[0.5, 0.5],
+        upper=[2.0, 2.0],
+        reference=[1.0, 1.0],
+        sigma=sigma,
+        covariance=covariance,
+        **kw,
+    )
     return obj, model
 
 
@@ -93,8 +103,13 @@ def test_cost_split_sums_to_total():
 
 def test_scaling_and_bounds():
     model = Quadratic()
-    obj = evaluator(model, model.values(np.array([2.0, 3.0])), lower=[1.0, 1.5], upper=[4.0, 6.0],
-                    reference=[2.0, 3.0])
+    obj = evaluator(
+        model,
+        model.values(np.array([2.0, 3.0])),
+        lower=[1.0, 1.5],
+        upper=[4.0, 6.0],
+        reference=[2.0, 3.0],
+    )
     np.testing.assert_allclose(obj.lower_z, [0.5, 0.5])
     np.testing.assert_allclose(obj.upper_z, [2.0, 2.0])
     np.testing.assert_allclose(obj.to_physical([1.5, 0.5]), [3.0, 1.5])
@@ -134,7 +149,12 @@ def test_infeasible_counted_not_run_and_failed_counted():
     assert ev.residual @ ev.residual == pytest.approx(FAILURE_COST, rel=1e-12)
     assert obj.best is None
     ev = obj.evaluate([2.5, 1.0])  # outside the box: infeasible, counted, not run
-    assert not ev.feasible and "outside the bounds" in ev.message and model.calls == 1 and obj.n_infeasible == 2
+    assert (
+        not ev.feasible
+        and "outside the bounds" in ev.message
+        and model.calls == 1
+        and obj.n_infeasible == 2
+    )
 
 
 def test_model_exception_becomes_failure():
@@ -210,7 +230,8 @@ def test_fd_steps_flipped_inward_at_the_bound():
 def test_mapper_called_once_per_batch():
     mapper = CountingMapper()
     obj, _ = make(mapper=mapper)
-    obj.costs([[1.0, 1.0], [1.1, 1.0], [1.0, 1.9], [1.0, 1.0]])  # 2 new feasible, 1 infeasible, 1 repeat
+    # 2 new feasible, 1 infeasible, 1 repeat
+    obj.costs([[1.0, 1.0], [1.1, 1.0], [1.0, 1.9], [1.0, 1.0]])
     assert (mapper.calls, mapper.items) == (1, 2)
     obj.jacobian(np.array([1.0, 1.0]))
     assert (mapper.calls, mapper.items) == (2, 4)
@@ -229,10 +250,19 @@ def test_model_and_worker_function_pickle():
 def test_invalid_inputs_raise_value_error():
     model = Quadratic()
     with pytest.raises(ValueError, match="not both"):
-        evaluator(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], sigma=1.0,
-                  covariance=np.eye(4))
+        evaluator(
+            model,
+            np.zeros(4),
+            lower=[0, 0],
+            upper=[1, 1],
+            reference=[1, 1],
+            sigma=1.0,
+            covariance=np.eye(4),
+        )
     with pytest.raises(ValueError, match="positive definite"):
-        evaluator(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], covariance=-np.eye(4))
+        evaluator(
+            model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[1, 1], covariance=-np.eye(4)
+        )
     with pytest.raises(ValueError, match="non-zero"):
         evaluator(model, np.zeros(4), lower=[0, 0], upper=[1, 1], reference=[0, 1])
     obj, _ = make()
@@ -256,21 +286,34 @@ class ExactQuadratic(Quadratic):
 def test_exact_jacobian_is_used_and_charged_as_one_run_in_forward_equivalents():
     model = ExactQuadratic()
     data = model.values(np.array([1.0, 1.0])) + np.array([0.01, -0.02, 0.03, 0.0])
-    obj = evaluator(model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[2.0, 1.0], sigma=[0.1, 0.2, 0.1, 0.5])
+    obj = evaluator(
+        model,
+        data,
+        lower=[0.5, 0.5],
+        upper=[2.0, 2.0],
+        reference=[2.0, 1.0],
+        sigma=[0.1, 0.2, 0.1, 0.5],
+    )
     assert obj.exact_jacobian
     z = np.array([0.6, 1.1])
-    obj.cost(z + 0.01)                      # one plain run: 1 s, the forward-equivalent unit
+    obj.cost(z + 0.01)  # one plain run: 1 s, the forward-equivalent unit
     J = obj.jacobian(z)
     x = obj.to_physical(z)
     expected = -model.jacobian(x) / np.array([0.1, 0.2, 0.1, 0.5])[:, None] * np.array([2.0, 1.0])
     np.testing.assert_allclose(J, expected, rtol=1e-14)
-    fd = evaluator(Quadratic(), data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[2.0, 1.0],
-                   sigma=[0.1, 0.2, 0.1, 0.5]).jacobian(z, scheme="central", rel_step=1e-6)
+    fd = evaluator(
+        Quadratic(),
+        data,
+        lower=[0.5, 0.5],
+        upper=[2.0, 2.0],
+        reference=[2.0, 1.0],
+        sigma=[0.1, 0.2, 0.1, 0.5],
+    ).jacobian(z, scheme="central", rel_step=1e-6)
     np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-8)
-    assert obj.n_evals == 2                 # the run with sensitivities is one evaluation ...
-    assert obj.forward_equivalents() == pytest.approx(1.0 + 3.0)   # ... costing 3 plain runs
+    assert obj.n_evals == 2  # the run with sensitivities is one evaluation ...
+    assert obj.forward_equivalents() == pytest.approx(1.0 + 3.0)  # ... costing 3 plain runs
     assert obj.log[-1]["kind"] == "jacobian"
-    obj.jacobian(z)                         # cached with its Jacobian: no new run
+    obj.jacobian(z)  # cached with its Jacobian: no new run
     assert obj.n_evals == 2 and obj.n_cache_hits == 1
     cost, grad = obj.gradient(z)
     np.testing.assert_allclose(grad, 2.0 * J.T @ obj.residual(z), rtol=1e-14)
@@ -284,25 +327,35 @@ def test_low_rank_plus_diagonal_covariance_whitens_like_the_full_one():
     V = rng.normal(size=(m, k))
     d = rng.normal(size=m)
     ref = np.ones(2)
-    full = LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref,
-                               covariance=np.diag(sigma**2) + V @ V.T)
-    low = LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, sigma=sigma, covariance_factor=V)
+    full = LeastSquaresProblem(
+        Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, covariance=np.diag(sigma**2) + V @ V.T
+    )
+    low = LeastSquaresProblem(
+        Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, sigma=sigma, covariance_factor=V
+    )
     cinv = np.linalg.inv(np.diag(sigma**2) + V @ V.T)
     assert low.whiten(d) @ low.whiten(d) == pytest.approx(d @ cinv @ d, rel=1e-12)
     assert full.whiten(d) @ full.whiten(d) == pytest.approx(d @ cinv @ d, rel=1e-12)
     D = rng.normal(size=(m, 2))
     np.testing.assert_allclose(low.whiten(D)[:, 1], low.whiten(D[:, 1]), rtol=1e-13)
     with pytest.raises(ValueError, match="covariance_factor"):
-        LeastSquaresProblem(Quadratic(), np.zeros(m), [0.5, 0.5], [2, 2], ref, covariance=np.eye(m),
-                            covariance_factor=V)
+        LeastSquaresProblem(
+            Quadratic(),
+            np.zeros(m),
+            [0.5, 0.5],
+            [2, 2],
+            ref,
+            covariance=np.eye(m),
+            covariance_factor=V,
+        )
 
 
 def test_charges_survive_reset_and_convert_to_forward_equivalents():
     model = ExactQuadratic()
     obj = evaluator(model, np.zeros(4), lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0])
-    obj.charge("hifi", 2, 10.0)            # two high-fidelity runs, 5 s each
+    obj.charge("hifi", 2, 10.0)  # two high-fidelity runs, 5 s each
     obj.reset()
-    obj.costs([[1.0, 1.0], [1.1, 1.0]])    # plain runs of 1 s each
+    obj.costs([[1.0, 1.0], [1.1, 1.0]])  # plain runs of 1 s each
     assert obj.charges == {"hifi": {"n": 2, "wall_s": 10.0}}
     assert obj.charged_equivalents() == {"hifi": pytest.approx(10.0)}
 

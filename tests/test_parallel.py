@@ -1,4 +1,5 @@
 """The shared parallel mapper: sequential for one worker, a real Dask cluster otherwise."""
+
 import pytest
 
 from bench.parallel import mapper, sequential_map

@@ -1,4 +1,5 @@
 """Progress bars fed by the evaluator's observer hook, and the running-time warning."""
+
 from __future__ import annotations
 
 import io

@@ -1,5 +1,6 @@
 """A final parameter on a bound of its box is flagged: in Table 1 (marker and footnote) and in the
 history figure (the box as a bracket, a ring around the final value)."""
+
 from __future__ import annotations
 
 import math
@@ -20,10 +21,23 @@ def _runs(values_E: list[float]) -> pd.DataFrame:
     ref = dict(zip(case.names, case.reference))
     rows = []
     for seed, e in enumerate(values_E):
-        rows.append({"case": CASE, "method": "lm", "budget": 100, "seed": seed, "start": "default",
-                     "start_index": 0, "crashed": False, "cost": 1.0, "n_evals": 10,
-                     "x.E": e, "err.E": 100.0 * (e / ref["E"] - 1),
-                     "x.psi": ref["psi"], "err.psi": 0.0})
+        rows.append(
+            {
+                "case": CASE,
+                "method": "lm",
+                "budget": 100,
+                "seed": seed,
+                "start": "default",
+                "start_index": 0,
+                "crashed": False,
+                "cost": 1.0,
+                "n_evals": 10,
+                "x.E": e,
+                "err.E": 100.0 * (e / ref["E"] - 1),
+                "x.psi": ref["psi"],
+                "err.psi": 0.0,
+            }
+        )
     runs = pd.DataFrame(rows)
     runs.attrs["parameters"] = ["E", "psi"]
     return runs
@@ -64,12 +78,27 @@ def test_history_figure_draws_the_box_and_rings_a_final_value_on_a_bound(monkeyp
     box = T.normalised_box(CASE)
     it = np.arange(1, 21)
     cost = np.geomspace(1e4, 1.0, 20)
-    hist = pd.DataFrame({"iteration": it, "cost": cost, "best_cost": cost,
-                         "xn.E": np.linspace(1.1, box["E"][0], 20),
-                         "xn.psi": np.linspace(0.9, 1.0, 20)})
-    run = pd.Series({"case": CASE, "method": "lm", "budget": 100, "seed": 0, "start": "default",
-                     "start_index": 0,
-                     "n_evals": 20, "status": "converged"})
+    hist = pd.DataFrame(
+        {
+            "iteration": it,
+            "cost": cost,
+            "best_cost": cost,
+            "xn.E": np.linspace(1.1, box["E"][0], 20),
+            "xn.psi": np.linspace(0.9, 1.0, 20),
+        }
+    )
+    run = pd.Series(
+        {
+            "case": CASE,
+            "method": "lm",
+            "budget": 100,
+            "seed": 0,
+            "start": "default",
+            "start_index": 0,
+            "n_evals": 20,
+            "status": "converged",
+        }
+    )
     F.history_figure(run, hist, ["E", "psi"], tmp_path / "h")
     ax = figs[0].axes[0]
     rings = [ln for ln in ax.get_lines() if ln.get_label() == "on a bound"]

@@ -1,17 +1,20 @@
 """Local sensitivities (eqs. 16-18) against closed forms on an analytic [u_h, u_v, r] model."""
+
 import numpy as np
 import pytest
 
+from problems.analysis.sensitivity import (
+    ModelFields,
+    local_sensitivities,
+    snapshot_sensitivities,
+)
 from problems.inverse import layout
 from problems.inverse.protocol import ForwardResult
-from problems.analysis.sensitivity import (
-    ModelFields, local_sensitivities, snapshot_sensitivities,
-)
 
 N, M = 6, 5
-T = np.linspace(0.2, 1.2, N)           # "load" of each snapshot
-G = np.linspace(1.0, 2.0, M)           # spatial shape of u_h
-H = np.cos(np.linspace(0.0, 1.0, M))   # spatial shape of u_v
+T = np.linspace(0.2, 1.2, N)  # "load" of each snapshot
+G = np.linspace(1.0, 2.0, M)  # spatial shape of u_h
+H = np.cos(np.linspace(0.0, 1.0, M))  # spatial shape of u_v
 X_REF = np.array([2.0, 0.7, 5.0])
 
 
@@ -25,13 +28,17 @@ def fields(x):
 
 
 def closed_form(delta):
-    """Exact finite-difference values of eqs. 16-18 for ``fields`` (per snapshot), [param][measure]."""
+    """Exact finite-difference values of eqs. 16-18 for ``fields`` (per snapshot),
+    [param][measure]."""
     x1, x2, x3 = X_REF
     d = delta
     return {
         0: {"ux": np.full(N, -1.0), "uy": np.full(N, -(2.0 + d)), "r": np.zeros(N)},
-        1: {"ux": (1.0 - np.exp(x2 * d * T)) / d, "uy": np.zeros(N),
-            "r": x2 * T / (1.0 + x2 * (1.0 + d) * T)},
+        1: {
+            "ux": (1.0 - np.exp(x2 * d * T)) / d,
+            "uy": np.zeros(N),
+            "r": x2 * T / (1.0 + x2 * (1.0 + d) * T),
+        },
         2: {"ux": np.zeros(N), "uy": np.zeros(N), "r": np.full(N, -1.0)},
     }
 
@@ -135,7 +142,9 @@ def test_rows_and_snapshot_rows():
     s = local_sensitivities(fields, X_REF, names=("a", "b", "c"))
     rows = s.rows()
     assert [r["parameter"] for r in rows] == ["a", "b", "c"]
-    assert rows[0]["sum_abs"] == pytest.approx(abs(rows[0]["s_ux"]) + abs(rows[0]["s_uy"]) + abs(rows[0]["s_r"]))
+    assert rows[0]["sum_abs"] == pytest.approx(
+        abs(rows[0]["s_ux"]) + abs(rows[0]["s_uy"]) + abs(rows[0]["s_r"])
+    )
     assert len(s.snapshot_rows()) == 3 * N
     assert s.smallest("r") in ("a", "b")  # s_r(a) = 0
 
@@ -154,7 +163,12 @@ def test_sensitivity_cli_on_a_tiny_fe_mesh(tmp_path, capsys):
     assert [r["parameter"] for r in rows] == ["E", "psi", "sigma0", "H", "a", "b"]
     assert all(np.isfinite(float(r[k])) for r in rows for k in ("s_ux", "s_uy", "s_r"))
     assert len(list(csv.DictReader((out / "sensitivity_snapshots.csv").open()))) == 6 * 10
-    for name in ("sensitivity.png", "sensitivity_snapshots.png", "sensitivity.md", "sensitivity.json"):
+    for name in (
+        "sensitivity.png",
+        "sensitivity_snapshots.png",
+        "sensitivity.md",
+        "sensitivity.json",
+    ):
         assert (out / name).stat().st_size > 0
     (out / "sensitivity.png").unlink()
     assert main(["sensitivity", "exponent-compression", "--render", "--out", str(out)]) == 0

@@ -1,4 +1,5 @@
-"""Fig. 5 on the FE model: local sensitivities of exponent-compression (coarse mesh). Slow: 22 FE runs.
+"""Fig. 5 on the FE model: local sensitivities of exponent-compression (coarse mesh). Slow: 22 FE
+runs.
 
 The paper reports that the exponent form's ``a`` barely moves the measurements. On this
 implementation it does not come out smallest (measured, coarse mesh, delta = 0.01, sum of
@@ -10,8 +11,10 @@ dF/dq = a b q^(b-1), which ``b`` changes (1 + b ln sigma_bar) ~ 6 times more str
 relative step. Hence ``a`` and ``b`` have the same sensitivity *pattern*, with ``s(b) ~ 6 s(a)``
 in every measure, and ``a`` lies mid-table rather than last. But the two patterns are collinear, so
 the Fisher information makes ``a`` the least identifiable parameter (corr(a, b) = -0.999): the
-paper's conclusion holds for identifiability, not for the size of s. These assertions pin those facts.
+paper's conclusion holds for identifiability, not for the size of s. These assertions pin those
+facts.
 """
+
 import numpy as np
 import pytest
 
@@ -25,9 +28,14 @@ def both_sides():
     plus, _ = fe_sensitivities("exponent-compression", mesh="coarse", delta=0.01)
     minus, _ = fe_sensitivities("exponent-compression", mesh="coarse", delta=-0.01)
     for s in (plus, minus):
-        print(f"delta {s.delta:+g}: " + ", ".join(
-            f"{r['parameter']} (s_ux {r['s_ux']:.3g}, s_uy {r['s_uy']:.3g}, s_r {r['s_r']:.3g}, sum {r['sum_abs']:.3g})"
-            for r in s.rows()))
+        print(
+            f"delta {s.delta:+g}: "
+            + ", ".join(
+                f"{r['parameter']} (s_ux {r['s_ux']:.3g}, s_uy {r['s_uy']:.3g}, s_r "
+                f"{r['s_r']:.3g}, sum {r['sum_abs']:.3g})"
+                for r in s.rows()
+            )
+        )
     return plus, minus
 
 
@@ -35,9 +43,9 @@ def test_all_six_sensitivities_are_finite_and_one_sided_steps_agree(both_sides):
     plus, minus = both_sides
     assert plus.names == ("E", "psi", "sigma0", "H", "a", "b")
     assert np.all(np.isfinite(plus.total_abs)) and not plus.messages
-    # +-1 % steps give the same sums to within 5 % (measured <= 3 %): the step is in the linear range,
-    # far above FE noise. Except b (measured 36.1 vs 41.3): a 1 % step in b is a ~6 % step in the
-    # meridian slope, so the curvature of the response shows.
+    # +-1 % steps give the same sums to within 5 % (measured <= 3 %): the step is in the linear
+    # range, far above FE noise. Except b (measured 36.1 vs 41.3): a 1 % step in b is a ~6 % step in
+    # the meridian slope, so the curvature of the response shows.
     assert np.allclose(plus.total_abs[:5], minus.total_abs[:5], rtol=0.05)
     assert plus.total_abs[5] == pytest.approx(minus.total_abs[5], rel=0.2)
 
@@ -78,7 +86,9 @@ def test_fisher_information_makes_a_the_least_identifiable():
 
     ident, _, _ = case_identifiability("exponent-compression", mesh="coarse", data="synthetic")
     sd = dict(zip(ident.names, ident.std_percent))
-    print("Laplace sd %:", {k: round(v, 4) for k, v in sd.items()}, "cond", f"{ident.condition:.3g}")
+    print(
+        "Laplace sd %:", {k: round(v, 4) for k, v in sd.items()}, "cond", f"{ident.condition:.3g}"
+    )
     assert max(sd, key=sd.get) == "a"
     assert abs(ident.weakest["a"]) > 0.9
     rho = ident.correlation

@@ -1,4 +1,5 @@
 """Every registered method through the real objective: budget, counts, JSON, seeds, convergence."""
+
 from __future__ import annotations
 
 import json
@@ -9,9 +10,9 @@ import pytest
 
 from problems.inverse.analytic import ANALYTIC_CASES, analytic_objective
 from problems.inverse.protocol import ForwardResult
-from tests.support import evaluator
 from solvers import METHODS, RunResult, solve
 from solvers.base import FAMILIES, get_method
+from tests.support import evaluator
 
 ALL = sorted(METHODS)
 LOCAL = [m for m in ALL if METHODS[m].family == "local"]
@@ -36,13 +37,32 @@ def _comparable(res: RunResult) -> dict:
 
 
 def test_registry_lists_the_required_methods():
-    required = {"lm", "gauss-newton", "ga", "de", "pso", "sa", "mcmc", "multistart-lm", "pso+lm",
-                "nlopt:BOBYQA", "nlopt:SBPLX", "nlopt:NELDERMEAD", "nlopt:CRS2_LM", "nlopt:DIRECT_L",
-                "nlopt:ESCH", "nlopt:ISRES", "nlopt:MLSL"}
+    required = {
+        "lm",
+        "gauss-newton",
+        "ga",
+        "de",
+        "pso",
+        "sa",
+        "mcmc",
+        "multistart-lm",
+        "pso+lm",
+        "nlopt:BOBYQA",
+        "nlopt:SBPLX",
+        "nlopt:NELDERMEAD",
+        "nlopt:CRS2_LM",
+        "nlopt:DIRECT_L",
+        "nlopt:ESCH",
+        "nlopt:ISRES",
+        "nlopt:MLSL",
+    }
     assert required <= set(METHODS)
     for name, info in METHODS.items():
         assert info.name == name and info.family in FAMILIES and info.library
-        assert all(isinstance(v, tuple) and len(v) == 2 and isinstance(v[1], str) for v in info.options.values())
+        assert all(
+            isinstance(v, tuple) and len(v) == 2 and isinstance(v[1], str)
+            for v in info.options.values()
+        )
         json.dumps(info.to_dict())
     assert METHODS["mcmc"].family == "sampling" and METHODS["lm"].family == "local"
 
@@ -53,11 +73,16 @@ def test_budget_never_exceeded_and_counts_match(method, budget):
     for name in ("analytic-failing", "analytic-infeasible"):
         obj = analytic_objective(name)
         case = ANALYTIC_CASES[name]
-        x0 = case.reference * np.array([0.8, 1.18, 1.2, 1.6])  # next to the failing/infeasible regions
+        # next to the failing/infeasible regions
+        x0 = case.reference * np.array([0.8, 1.18, 1.2, 1.6])
         res = solve(obj, method, budget=budget, seed=1, x0=x0)
         assert res.n_evals <= budget
         assert res.n_evals == obj.n_evals == sum(1 for e in obj.log if not e["cached"])
-        assert (res.n_failed, res.n_infeasible, res.n_cache_hits) == (obj.n_failed, obj.n_infeasible, obj.n_cache_hits)
+        assert (res.n_failed, res.n_infeasible, res.n_cache_hits) == (
+            obj.n_failed,
+            obj.n_infeasible,
+            obj.n_cache_hits,
+        )
         assert res.status in ("converged", "budget", "max_iterations", "failed", "stalled")
         if obj.best is not None:
             assert res.cost == obj.best.cost and np.allclose(res.x, obj.best.x, rtol=0, atol=0)
@@ -70,8 +95,12 @@ def test_json_round_trip_and_history(method):
     res = solve(obj, method, budget=90, seed=2, x0=SMOOTH.start)
     back = RunResult.from_json(json.dumps(json.loads(res.to_json())))
     assert back == res
-    assert back.x_normalised == pytest.approx(list(np.array(res.x) / np.array(res.reference)), rel=1e-15)
-    assert back.method == method and back.budget == 90 and back.parameter_names == list(SMOOTH.names)
+    assert back.x_normalised == pytest.approx(
+        list(np.array(res.x) / np.array(res.reference)), rel=1e-15
+    )
+    assert (
+        back.method == method and back.budget == 90 and back.parameter_names == list(SMOOTH.names)
+    )
     assert len(res.history) >= 1
     n_evals = [row["n_evals"] for row in res.history]
     best = [row["best_cost"] for row in res.history]
@@ -83,8 +112,10 @@ def test_json_round_trip_and_history(method):
 
 @pytest.mark.parametrize("method", ALL)
 def test_same_seed_same_run(method):
-    runs = [solve(analytic_objective("analytic-multimodal"), method, budget=70, seed=s, x0=MULTI.start)
-            for s in (5, 5, 6)]
+    runs = [
+        solve(analytic_objective("analytic-multimodal"), method, budget=70, seed=s, x0=MULTI.start)
+        for s in (5, 5, 6)
+    ]
     a, b, c = (_comparable(r) for r in runs)
     assert a == b  # bit for bit
     a.pop("seed"), c.pop("seed")
@@ -152,8 +183,15 @@ def test_mcmc_recovers_the_linear_gaussian_posterior():
     obj = analytic_objective("analytic-linear", noise=1.0, seed=11)
     mean, cov = obj.model.posterior(obj.data)
     std = np.sqrt(np.diag(cov))
-    res = solve(obj, "mcmc", budget=32 * 1200 + 32, seed=4, x0=ANALYTIC_CASES["analytic-linear"].start,
-                n_walkers=32, init="lhs")  # default moves: DE mixture, tau ~ 11 steps
+    res = solve(
+        obj,
+        "mcmc",
+        budget=32 * 1200 + 32,
+        seed=4,
+        x0=ANALYTIC_CASES["analytic-linear"].start,
+        n_walkers=32,
+        init="lhs",
+    )  # default moves: DE mixture, tau ~ 11 steps
     ex = res.extra
     got_mean = np.array([ex["mean"][n] for n in obj.names])
     got_std = np.array([ex["std"][n] for n in obj.names])
@@ -207,7 +245,9 @@ def test_all_failed_run_reports_failed():
     x0 = ANALYTIC_CASES["analytic-failing"].reference.copy()
     x0[1] = 25.0
     res = solve(obj, "lm", budget=50, x0=x0)
-    assert res.status == "failed" and not res.success and res.cost == float("inf") and res.n_evals == 1
+    assert (
+        res.status == "failed" and not res.success and res.cost == float("inf") and res.n_evals == 1
+    )
     assert res.x == list(x0)
 
 
@@ -218,7 +258,9 @@ def test_hybrids_report_their_phases():
     assert len(starts) == 4 and starts[0]["x0"] == pytest.approx(list(MULTI.start))
     assert sum(s["n_evals"] for s in starts) == res.n_evals
     assert min(s["cost"] for s in starts) == res.cost
-    res = solve(analytic_objective("analytic-multimodal"), "pso+lm", budget=300, seed=3, x0=MULTI.start)
+    res = solve(
+        analytic_objective("analytic-multimodal"), "pso+lm", budget=300, seed=3, x0=MULTI.start
+    )
     phases = [row["phase"] for row in res.history]
     assert phases[0] == "pso" and phases[-1] == "lm"
     assert res.extra["pso_evals"] <= 150
@@ -236,7 +278,8 @@ def test_population_methods_evaluate_one_batch_per_generation():
         Mapper.calls = 0
         obj = analytic_objective("analytic-smooth", mapper=Mapper())
         res = solve(obj, method, budget=200, seed=0, **{size: 20})
-        assert Mapper.calls <= len(res.history) + 1  # one mapper call per generation (the last may be cut)
+        # one mapper call per generation (the last may be cut)
+        assert Mapper.calls <= len(res.history) + 1
         assert res.n_evals / Mapper.calls > 15
 
 

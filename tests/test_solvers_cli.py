@@ -1,4 +1,5 @@
 """The ``solvers``, ``identify`` and ``objective`` sub-commands (analytic cases: no FE)."""
+
 from __future__ import annotations
 
 import json
@@ -16,7 +17,11 @@ def test_solvers_json_lists_every_method(capsys):
     listed = json.loads(capsys.readouterr().out)
     assert {m["name"] for m in listed} == set(METHODS)
     lm = next(m for m in listed if m["name"] == "lm")
-    assert lm["library"] == "scipy" and lm["family"] == "local" and lm["options"]["rel_step"]["default"] == 1e-6
+    assert (
+        lm["library"] == "scipy"
+        and lm["family"] == "local"
+        and lm["options"]["rel_step"]["default"] == 1e-6
+    )
 
 
 def test_solvers_table_filters_by_family(capsys):
@@ -39,21 +44,44 @@ def test_format_identification_table():
 
 def test_identify_writes_run_result_plus_errors(tmp_path, capsys):
     out = tmp_path / "run.json"
-    code = main(["identify", "analytic-multimodal", "--solver", "multistart-lm", "--budget", "250", "--seed", "1",
-                 "--option", "n_starts=6", "--json", str(out)])
+    code = main(
+        [
+            "identify",
+            "analytic-multimodal",
+            "--solver",
+            "multistart-lm",
+            "--budget",
+            "250",
+            "--seed",
+            "1",
+            "--option",
+            "n_starts=6",
+            "--json",
+            str(out),
+        ]
+    )
     assert code == 0
     text = capsys.readouterr().out
     assert "omega" in text and "forward evaluations" in text
     doc = json.loads(out.read_text())
     errors = doc.pop("errors_percent")
     res = RunResult.from_dict(doc)  # the rest is exactly a RunResult
-    assert res.n_evals <= 250 and res.options["n_starts"] == 6 and res.extra["case"] == "analytic-multimodal"
-    assert errors == pytest.approx({n: 100 * (xn - 1) for n, xn in zip(res.parameter_names, res.x_normalised)})
+    assert (
+        res.n_evals <= 250
+        and res.options["n_starts"] == 6
+        and res.extra["case"] == "analytic-multimodal"
+    )
+    assert errors == pytest.approx(
+        {n: 100 * (xn - 1) for n, xn in zip(res.parameter_names, res.x_normalised)}
+    )
     assert abs(errors["omega"]) < 1e-3  # found the global minimum
 
 
 def test_identify_random_start_and_bad_input(capsys):
-    assert main(["identify", "analytic-smooth", "--solver", "lm", "--start", "random", "--seed", "3"]) == 0
+    assert (
+        main(["identify", "analytic-smooth", "--solver", "lm", "--start", "random", "--seed", "3"])
+        == 0
+    )
     assert main(["identify", "analytic-smooth", "--solver", "nope"]) == 2
     assert "unknown" in capsys.readouterr().err
     assert main(["identify", "analytic-smooth", "--solver", "lm", "--option", "bogus=1"]) == 2

@@ -1,4 +1,5 @@
 """LM on the FE model (slow): exact coarse-mesh data, default start, every parameter to 0.1 %."""
+
 from __future__ import annotations
 
 import pytest
@@ -6,18 +7,25 @@ import pytest
 
 @pytest.mark.slow
 def test_lm_recovers_linear_compression_on_the_coarse_mesh():
+    from problems.inverse.build import build_objective
     from problems.inverse.cases import get_case
     from problems.inverse.data import make_data
-    from problems.inverse.build import build_objective
     from problems.inverse.starts import start_point
     from solvers import solve
 
     case = get_case("linear-compression")
-    data = make_data(case, mesh="coarse", resolution_um=0, noise_um=0, force_resolution_kN=0, tier="consistent")
+    data = make_data(
+        case, mesh="coarse", resolution_um=0, noise_um=0, force_resolution_kN=0, tier="consistent"
+    )
     objective = build_objective(case, mesh="coarse", data=data)
     budget = 300
     result = solve(objective, "lm", budget=budget, seed=0, x0=start_point(case, kind="default"))
     errors = result.errors_percent()
-    assert all(abs(e) < 0.1 for e in errors.values()), (errors, result.status, result.message, result.n_evals)
+    assert all(abs(e) < 0.1 for e in errors.values()), (
+        errors,
+        result.status,
+        result.message,
+        result.n_evals,
+    )
     assert result.n_evals == objective.n_evals <= budget
     assert result.cost < 1e-6 * objective.cost(objective.to_scaled(result.x0))

@@ -1,5 +1,6 @@
 """Surrogate forward models (POD + RBF / GP): truncation rule, accuracy, failures, extrapolation,
 Jacobian, store/load with hash check, pickling; on a cheap analytic model with the FE protocol."""
+
 from __future__ import annotations
 
 import json
@@ -44,19 +45,29 @@ class ToyModel:
         a, b, c = x
         if a > 1.93:
             return ForwardResult(False, None, "diverged")
-        wave = a * np.sin(2 * np.pi * self.t1 * (1 + 0.3 * b)) + c * self.t1 ** 2
+        wave = a * np.sin(2 * np.pi * self.t1 * (1 + 0.3 * b)) + c * self.t1**2
         decay = a * b * np.exp(-(1 + c * c) * self.t2) + 0.2 * c
         return ForwardResult(True, np.concatenate([wave, decay]))
 
 
 def settings(**kw) -> SurrogateSettings:
-    base = dict(n_train=90, n_holdout=30, seed=3, regression="rbf", tol_sigma=0.05, gp_restarts=0, gp_individual=3)
+    base = dict(
+        n_train=90,
+        n_holdout=30,
+        seed=3,
+        regression="rbf",
+        tol_sigma=0.05,
+        gp_restarts=0,
+        gp_individual=3,
+    )
     return SurrogateSettings(**{**base, **kw})
 
 
 @pytest.fixture(scope="module")
 def rbf_surrogate():
-    return build_surrogate(ToyModel(), LOWER, UPPER, SIGMA, settings=settings(rbf_smoothing=(0.0,)), blocks=BLOCKS)
+    return build_surrogate(
+        ToyModel(), LOWER, UPPER, SIGMA, settings=settings(rbf_smoothing=(0.0,)), blocks=BLOCKS
+    )
 
 
 def test_design_is_seeded_in_the_box_and_local_part_near_the_centre():
@@ -65,9 +76,13 @@ def test_design_is_seeded_in_the_box_and_local_part_near_the_centre():
     np.testing.assert_array_equal(d1.X, d2.X)
     assert np.all(d1.X >= LOWER) and np.all(d1.X <= UPPER)
     local = d1.X[d1.origin == "local"]
-    assert len(local) == 10 and np.all(np.abs(local - [1.5, 0.5, 0.0]) <= 0.1 * (UPPER - LOWER) + 1e-12)
+    assert len(local) == 10 and np.all(
+        np.abs(local - [1.5, 0.5, 0.0]) <= 0.1 * (UPPER - LOWER) + 1e-12
+    )
     sob = make_design(LOWER, UPPER, 12, seed=1, method="sobol")
-    assert sob.X.shape == (12, 3) and not np.allclose(sob.X, make_design(LOWER, UPPER, 12, seed=[1, 1]).X)
+    assert sob.X.shape == (12, 3) and not np.allclose(
+        sob.X, make_design(LOWER, UPPER, 12, seed=[1, 1]).X
+    )
 
 
 def test_pod_truncation_meets_its_criterion_and_is_minimal():
@@ -98,11 +113,17 @@ def test_failed_and_infeasible_training_points_are_recorded_and_excluded(rbf_sur
     assert infeasible.any() and failing.any()
     runs = run_points(model, X, batch=7)
     assert runs.n_infeasible == infeasible.sum() and runs.n_failed == failing.sum()
-    assert runs.n_ok == len(X) - infeasible.sum() - failing.sum() and runs.n_runs == runs.n_ok + runs.n_failed
+    assert (
+        runs.n_ok == len(X) - infeasible.sum() - failing.sum()
+        and runs.n_runs == runs.n_ok + runs.n_failed
+    )
     assert np.all(runs.X[:, 0] <= 1.93) and np.all(runs.X[:, 1] + runs.X[:, 2] <= 1.7)
     assert {m for _, m in runs.failed} == {"diverged"}
     info = rbf_surrogate.info
-    assert info["training"]["n_failed"] == runs.n_failed and info["training"]["n_infeasible"] == runs.n_infeasible
+    assert (
+        info["training"]["n_failed"] == runs.n_failed
+        and info["training"]["n_infeasible"] == runs.n_infeasible
+    )
     assert info["training"]["n_runs"] == runs.n_runs and len(rbf_surrogate.train_z) == runs.n_ok
     assert len(info["failed"]) == runs.n_failed and len(info["infeasible"]) == runs.n_infeasible
     assert info["cost"]["holdout"]["n_runs"] >= 1
@@ -114,11 +135,12 @@ def test_rbf_surrogate_reproduces_training_points_and_generalises(rbf_surrogate)
     model = ToyModel()
     X = sur.lower + sur.train_z * (sur.upper - sur.lower)
     E = (sur.predict(X) - np.array([model(x).values for x in X])) / SIGMA
-    for k, sl in BLOCKS.items():  # interpolation: only the POD truncation remains
+    for _k, sl in BLOCKS.items():  # interpolation: only the POD truncation remains
         assert np.sqrt(np.mean(E[:, sl] ** 2)) <= sur.pod.tol_sigma * (1 + 1e-6)
     val = sur.info["validation"]
     assert val["n_points"] >= 20
-    for k in BLOCKS:  # stated tolerance: hold-out RMS within 2 sigma, 0.2 % of the outputs' range (~1000 sigma)
+    for k in BLOCKS:
+        # stated tolerance: hold-out RMS within 2 sigma, 0.2 % of the outputs' range (~1000 sigma)
         assert val["blocks"][k]["rms_sigma"] < 2.0, val["blocks"]
     assert sur.hold_out_variance.shape == (300,) and np.all(sur.hold_out_variance >= 0)
     assert val["speed_ratio"] > 0 and val["surrogate_eval_s"] > 0
@@ -139,7 +161,9 @@ def test_rbf_and_gp_fits_match_their_libraries():
     g = fit_gp(Z, A, nu=2.5, n_individual=1, restarts=0)
     c = g.components[0]
     kernel = ConstantKernel(c.amplitude, "fixed") * Matern(c.length_scale, "fixed", nu=2.5)
-    gp = GaussianProcessRegressor(kernel, normalize_y=True, optimizer=None, alpha=1e-10).fit(Z, A[:, :1])
+    gp = GaussianProcessRegressor(kernel, normalize_y=True, optimizer=None, alpha=1e-10).fit(
+        Z, A[:, :1]
+    )
     np.testing.assert_allclose(c.predict(Zq)[:, 0], gp.predict(Zq).ravel(), rtol=1e-4, atol=1e-6)
 
 
@@ -167,29 +191,55 @@ def test_gp_surrogate_jacobian_and_auto_selection():
     model = ToyModel()
     runs = run_points(model, make_design(LOWER, UPPER, 50, seed=5).X)
     fast = dict(gp_individual=1, rbf_kernels=(("thin_plate_spline", 1.0), ("cubic", 1.0)))
-    sur = fit_surrogate(runs, LOWER, UPPER, SIGMA, names=model.names, settings=settings(regression="auto", **fast),
-                        blocks=BLOCKS, checker=model)
+    sur = fit_surrogate(
+        runs,
+        LOWER,
+        UPPER,
+        SIGMA,
+        names=model.names,
+        settings=settings(regression="auto", **fast),
+        blocks=BLOCKS,
+        checker=model,
+    )
     sel = sur.info["selection"]
     assert sel["chosen"] == sur.kind and set(sel["scores"]) == {"rbf", "gp"}
     assert sel["n_fit"] + sel["n_selection"] == runs.n_ok
-    gp = fit_surrogate(runs, LOWER, UPPER, SIGMA, names=model.names, settings=settings(regression="gp", **fast),
-                       blocks=BLOCKS, checker=model)
+    gp = fit_surrogate(
+        runs,
+        LOWER,
+        UPPER,
+        SIGMA,
+        names=model.names,
+        settings=settings(regression="gp", **fast),
+        blocks=BLOCKS,
+        checker=model,
+    )
     assert gp.kind == "gp"
     x = np.array([1.41, 0.37, -0.22])
     res = gp(x, jacobian=True)
-    # a GP mean with a tiny nugget is ill-conditioned: central differences are accurate to ~1e-6 only
+    # a GP mean with a tiny nugget is ill-conditioned: central differences are accurate to ~1e-6
+    # only
     J = _fd_jacobian(gp, x, 1e-3)
     assert np.abs(res.jacobian - J).max() <= 1e-5 * np.abs(res.jacobian).max()
     err = (gp.predict(runs.X) - runs.Y) / SIGMA  # nearly interpolates its training points
-    assert np.sqrt(np.mean(err ** 2)) < 0.5
+    assert np.sqrt(np.mean(err**2)) < 0.5
 
 
 def test_extrapolation_is_flagged_and_invalid_points_rejected():
     model = ToyModel()
     lo, hi = np.array([1.2, 0.2, -0.6]), np.array([1.8, 0.8, 0.6])
     runs = run_points(model, make_design(lo, hi, 50, seed=2).X)
-    sur = fit_surrogate(runs, LOWER, UPPER, SIGMA, names=model.names, settings=settings(), blocks=BLOCKS,
-                        design_box=(lo, hi), checker=model)
+    sur = fit_surrogate(
+        runs,
+        LOWER,
+        UPPER,
+        SIGMA,
+        names=model.names,
+        settings=settings(),
+        blocks=BLOCKS,
+        design_box=(lo, hi),
+        checker=model,
+    )
     inside = sur(np.array([1.5, 0.5, 0.0]))
     assert inside.ok and inside.message == ""
     outside = sur(np.array([1.9, 0.5, 0.0]))
@@ -199,7 +249,9 @@ def test_extrapolation_is_flagged_and_invalid_points_rejected():
     assert not sur.extrapolation(np.array([1.5, 0.5, 0.0]))["outside_box"]
     bad = sur(np.array([1.5, 0.9, 0.9]))
     assert not bad.ok and "infeasible" in bad.message
-    assert not sur(np.array([2.5, 0.5, 0.0])).ok and "outside the box" in sur.check(np.array([2.5, 0.5, 0.0]))
+    assert not sur(np.array([2.5, 0.5, 0.0])).ok and "outside the box" in sur.check(
+        np.array([2.5, 0.5, 0.0])
+    )
 
 
 def test_save_load_round_trip_and_tampering(rbf_surrogate, tmp_path):
@@ -208,7 +260,9 @@ def test_save_load_round_trip_and_tampering(rbf_surrogate, tmp_path):
     X = make_design(LOWER, UPPER, 10, seed=9).X
     np.testing.assert_array_equal(back.predict(X), rbf_surrogate.predict(X))
     x = np.array([1.3, 0.4, 0.1])
-    np.testing.assert_array_equal(back(x, jacobian=True).jacobian, rbf_surrogate(x, jacobian=True).jacobian)
+    np.testing.assert_array_equal(
+        back(x, jacobian=True).jacobian, rbf_surrogate(x, jacobian=True).jacobian
+    )
     np.testing.assert_array_equal(back.hold_out_variance, rbf_surrogate.hold_out_variance)
     assert back.hash == rbf_surrogate.hash and len(back.hash) == 64
     assert back.info["training_hash"] == rbf_surrogate.info["training_hash"]
@@ -244,11 +298,16 @@ def test_surrogate_pickles_and_serves_an_evaluator(rbf_surrogate):
     data = ToyModel()(x).values
     sigma = rbf_surrogate.inflated_sigma(SIGMA)
     assert np.all(sigma >= SIGMA)
-    ev = Evaluator(LeastSquaresProblem(rbf_surrogate, data, LOWER, UPPER, np.array([1.5, 0.5, 0.5]), sigma=sigma))
+    ev = Evaluator(
+        LeastSquaresProblem(
+            rbf_surrogate, data, LOWER, UPPER, np.array([1.5, 0.5, 0.5]), sigma=sigma
+        )
+    )
     z = ev.to_scaled(np.array([1.35, 0.45, 0.05]))
     J = ev.jacobian(z)
     assert J.shape == (300, 3) and np.all(np.isfinite(J))
-    assert ev.cost(ev.to_scaled(x)) < 300  # surrogate error within the inflated sigma: chi^2 below m
+    # surrogate error within the inflated sigma: chi^2 below m
+    assert ev.cost(ev.to_scaled(x)) < 300
 
 
 def test_cli_rejects_bad_input(capsys):
@@ -265,14 +324,47 @@ def test_surrogate_of_the_fe_model_on_a_small_mesh(tmp_path):
     from bench.cli import main
 
     out = tmp_path / "sur"
-    assert main(["surrogate", "linear-compression", "--mesh", "3,3,6", "--samples", "40", "--holdout", "10",
-                 "--workers", "1", "--regression", "rbf", "--out", str(out), "--json", str(tmp_path / "s.json"),
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "surrogate",
+                "linear-compression",
+                "--mesh",
+                "3,3,6",
+                "--samples",
+                "40",
+                "--holdout",
+                "10",
+                "--workers",
+                "1",
+                "--regression",
+                "rbf",
+                "--out",
+                str(out),
+                "--json",
+                str(tmp_path / "s.json"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     doc = json.loads((tmp_path / "s.json").read_text())
-    for key in ("holdout", "surrogate_eval_s", "fe_eval_s", "n_train", "n_failed", "hash", "n_modes", "regression"):
+    for key in (
+        "holdout",
+        "surrogate_eval_s",
+        "fe_eval_s",
+        "n_train",
+        "n_failed",
+        "hash",
+        "n_modes",
+        "regression",
+    ):
         assert key in doc
     for block in ("u_h", "u_v", "force"):
-        assert math.isfinite(doc["holdout"][block]["rms_sigma"]) and doc["holdout"][block]["max_sigma"] >= 0
+        assert (
+            math.isfinite(doc["holdout"][block]["rms_sigma"])
+            and doc["holdout"][block]["max_sigma"] >= 0
+        )
     assert doc["fe_eval_s"] > doc["surrogate_eval_s"] > 0
     sur = load(out)
     assert sur.hash == doc["hash"] and sur.n_values == 8130

@@ -1,12 +1,22 @@
-"""The mid-height symmetry: the eighth model (z <= 75 mm, unfolded) gives the quarter model's answers."""
+"""The mid-height symmetry: the eighth model (z <= 75 mm, unfolded) gives the quarter model's
+answers."""
+
 import json
 
 import numpy as np
 import pytest
 
 from problems.fe.front_face import measurement_grid
-from problems.fe.mesh import (MESH_PRESETS, SYMMETRIES, box_mesh, distort, lower_half, mid_height_mirror,
-                              parse_mesh, parse_mesh_spec)
+from problems.fe.mesh import (
+    MESH_PRESETS,
+    SYMMETRIES,
+    box_mesh,
+    distort,
+    lower_half,
+    mid_height_mirror,
+    parse_mesh,
+    parse_mesh_spec,
+)
 from problems.fe.newton import Loading, NewtonSettings, discretise, run
 from problems.inverse.cases import CASES
 from problems.inverse.forward import FORWARD_SETTINGS, case_material, discretisation
@@ -64,7 +74,10 @@ def test_eighth_equals_quarter_on_coarse_through_the_mesh_spec():
     assert de.symmetry == "eighth" and dq.symmetry == "quarter"
     assert de.mesh.shape == (6, 6, 6) and de.full_mesh.shape == dq.mesh.shape == (6, 6, 12)
     assert discretisation("6,6,12:eighth") is de  # one cache entry per model
-    q, e = run(dq, mat, Loading(1.5, 5), FORWARD_SETTINGS), run(de, mat, Loading(1.5, 5), FORWARD_SETTINGS)
+    q, e = (
+        run(dq, mat, Loading(1.5, 5), FORWARD_SETTINGS),
+        run(de, mat, Loading(1.5, 5), FORWARD_SETTINGS),
+    )
     _assert_same(q, e)
 
 
@@ -74,25 +87,35 @@ def test_unfolded_displacements_are_the_mirror_images():
     for u, delta in zip(r.displacements, r.snapshots_mm):
         np.testing.assert_array_equal(u[g, :2], u[g[:, :, ::-1], :2])
         np.testing.assert_allclose(u[g, 2] + u[g[:, :, ::-1], 2], -delta, rtol=0, atol=1e-15)
-        assert np.allclose(u[r.mesh.face("z1"), 2], -delta) and np.allclose(u[r.mesh.face("z0")], 0.0)
+        assert np.allclose(u[r.mesh.face("z1"), 2], -delta) and np.allclose(
+            u[r.mesh.face("z0")], 0.0
+        )
 
 
 def test_frictionless_eighth_matches_closed_form():
     E, nu, delta = 30_000.0, 0.2, 1.5
-    r = run(discretise(box_mesh(2, 2, 4), symmetry="eighth"), LinearElastic(E, nu), Loading(delta, 2, "frictionless"))
-    np.testing.assert_allclose(r.reaction_kN, E * 150.0**2 * r.snapshots_mm / 150.0 / 1000.0, rtol=1e-12)
+    r = run(
+        discretise(box_mesh(2, 2, 4), symmetry="eighth"),
+        LinearElastic(E, nu),
+        Loading(delta, 2, "frictionless"),
+    )
+    np.testing.assert_allclose(
+        r.reaction_kN, E * 150.0**2 * r.snapshots_mm / 150.0 / 1000.0, rtol=1e-12
+    )
     u_h, u_v = r.front_face(POINTS)
     np.testing.assert_allclose(u_v[-1], -delta / 150.0 * POINTS[:, 1], rtol=0, atol=1e-13)
     np.testing.assert_allclose(u_h[-1], nu * delta / 150.0 * POINTS[:, 0], rtol=0, atol=1e-13)
 
 
 def test_mesh_specs_choose_the_eighth_where_exact():
-    assert all(nz % 2 == 0 for _, _, nz in MESH_PRESETS.values())  # every preset has its exact eighth
+    # every preset has its exact eighth
+    assert all(nz % 2 == 0 for _, _, nz in MESH_PRESETS.values())
     for name, shape in MESH_PRESETS.items():
         assert parse_mesh_spec(name).symmetry == "eighth" and parse_mesh_spec(name).shape == shape
         assert parse_mesh_spec(f"{name}:quarter").symmetry == "quarter"
-        assert parse_mesh(f"{name}:quarter").shape == parse_mesh(name).shape == shape  # the quarter mesh either way
-    assert parse_mesh_spec("4,4,7").symmetry == "quarter"   # odd NZ: no mid-height node plane
+        # the quarter mesh either way
+        assert parse_mesh(f"{name}:quarter").shape == parse_mesh(name).shape == shape
+    assert parse_mesh_spec("4,4,7").symmetry == "quarter"  # odd NZ: no mid-height node plane
     assert parse_mesh_spec((4, 4, 8)).symmetry == "eighth"
     assert str(parse_mesh_spec("coarse")) == "6,6,12:eighth"
     with pytest.raises(ValueError, match="needs an even NZ.*NZ = 7"):
@@ -108,8 +131,8 @@ def test_lower_half_keeps_the_element_size_and_is_a_prefix():
     full = parse_mesh("coarse")
     half = lower_half(full)
     assert half.shape == (6, 6, 6) and half.nodes[:, 2].max() == 75.0
-    np.testing.assert_array_equal(half.nodes, full.nodes[:half.n_nodes])
-    np.testing.assert_array_equal(half.elements, full.elements[:half.n_elements])
+    np.testing.assert_array_equal(half.nodes, full.nodes[: half.n_nodes])
+    np.testing.assert_array_equal(half.elements, full.elements[: half.n_elements])
     node_src, node_up, elem_src, elem_up = mid_height_mirror(full)
     assert node_src.max() < half.n_nodes and elem_src.max() < half.n_elements
     assert node_up.sum() == full.n_nodes - half.n_nodes and elem_up.sum() == half.n_elements
@@ -130,7 +153,12 @@ class _Hopeless(LinearElastic):
 
 
 def test_failed_eighth_run_reports_on_the_quarter_mesh():
-    r = run(discretise(box_mesh(2, 2, 4), symmetry="eighth"), _Hopeless(), Loading(1.5, 2), NewtonSettings(max_cuts=1))
+    r = run(
+        discretise(box_mesh(2, 2, 4), symmetry="eighth"),
+        _Hopeless(),
+        Loading(1.5, 2),
+        NewtonSettings(max_cuts=1),
+    )
     assert not r.converged and len(r.snapshots_mm) == 0
     assert r.displacements.shape == (0, r.mesh.n_nodes, 3) and r.mesh.shape == (2, 2, 4)
 
@@ -145,7 +173,9 @@ def test_vtu_and_dic_fields_see_the_whole_height(tmp_path):
     q, e = _pair(box_mesh(2, 2, 4), case_material(case, case.reference), Loading(1.5, 2))
     back = meshio.read(write_vtu(e, tmp_path)[-1])
     assert back.points[:, 2].max() == 150.0 and len(back.points) == q.mesh.n_nodes
-    np.testing.assert_allclose(back.point_data["displacement"], q.displacements[-1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        back.point_data["displacement"], q.displacements[-1], rtol=0, atol=1e-12
+    )
     y, z = np.meshgrid(np.linspace(0, 75, 7), np.linspace(0, 150, 13), indexing="ij")
     for fe, fq in zip(front_face_fields(e), front_face_fields(q)):
         for a, b in zip(fe(y, z), fq(y, z)):
@@ -158,13 +188,37 @@ def test_forward_cli_symmetry_option(tmp_path, capsys):
     docs = {}
     for sym in SYMMETRIES:
         out = tmp_path / f"{sym}.json"
-        assert main(["forward", "--mesh", "2,2,4", "--snapshots", "2", "--symmetry", sym, "--json", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "forward",
+                    "--mesh",
+                    "2,2,4",
+                    "--snapshots",
+                    "2",
+                    "--symmetry",
+                    sym,
+                    "--json",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         docs[sym] = json.loads(out.read_text())
     assert docs["eighth"]["symmetry"] == "eighth" and docs["eighth"]["solved_mesh"]["nz"] == 2
-    assert docs["quarter"]["solved_mesh"]["nz"] == 4 and docs["eighth"]["mesh"] == docs["quarter"]["mesh"]
-    np.testing.assert_allclose(docs["eighth"]["reaction_kN"], docs["quarter"]["reaction_kN"], rtol=1e-10)
-    np.testing.assert_allclose(docs["eighth"]["front_face"]["u_v"], docs["quarter"]["front_face"]["u_v"],
-                               rtol=0, atol=1e-12)
+    assert (
+        docs["quarter"]["solved_mesh"]["nz"] == 4
+        and docs["eighth"]["mesh"] == docs["quarter"]["mesh"]
+    )
+    np.testing.assert_allclose(
+        docs["eighth"]["reaction_kN"], docs["quarter"]["reaction_kN"], rtol=1e-10
+    )
+    np.testing.assert_allclose(
+        docs["eighth"]["front_face"]["u_v"],
+        docs["quarter"]["front_face"]["u_v"],
+        rtol=0,
+        atol=1e-12,
+    )
     capsys.readouterr()
     assert main(["forward", "--mesh", "2,2,4", "--symmetry", "half"]) == 2
     err = capsys.readouterr().err.strip()

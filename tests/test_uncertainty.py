@@ -1,4 +1,5 @@
 """MCMC against Laplace: the verdict rule, and agreement on a linear-Gaussian problem."""
+
 import json
 import warnings
 
@@ -6,8 +7,8 @@ import numpy as np
 import pytest
 
 from bench.studies.uncertainty import compare, verdict
-from problems.inverse.analytic import analytic_model, analytic_objective
 from problems.analysis.identifiability import analyse_jacobian, refine_mode
+from problems.inverse.analytic import analytic_model, analytic_objective
 
 
 def test_verdict_rule():
@@ -31,8 +32,8 @@ def test_compare_rows():
 
 
 def test_mcmc_and_laplace_agree_on_a_linear_gaussian_problem():
-    """y = A x + noise, flat prior on a wide box: the posterior *is* the Laplace Gaussian, so MCMC must
-    agree with it (and both with the closed-form posterior) up to Monte-Carlo error."""
+    """y = A x + noise, flat prior on a wide box: the posterior *is* the Laplace Gaussian, so MCMC
+    must agree with it (and both with the closed-form posterior) up to Monte-Carlo error."""
     from solvers import solve
 
     obj = analytic_objective("analytic-linear", noise=1.0, seed=7)
@@ -59,9 +60,27 @@ def test_uncertainty_cli_on_the_analytic_linear_case(tmp_path, capsys):
     out = tmp_path / "unc"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert main(["uncertainty", "analytic-linear", "--budget", "16000", "--walkers", "16", "--out", str(out)]) == 0
+        assert (
+            main(
+                [
+                    "uncertainty",
+                    "analytic-linear",
+                    "--budget",
+                    "16000",
+                    "--walkers",
+                    "16",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
     text = capsys.readouterr().out
-    assert "agree on every parameter" in text and "cost: Laplace" in text and "MCMC 16000 evaluations" in text
+    assert (
+        "agree on every parameter" in text
+        and "cost: Laplace" in text
+        and "MCMC 16000 evaluations" in text
+    )
     doc = json.loads((out / "uncertainty.json").read_text())
     assert doc["cost"]["mcmc_evaluations"] == 16000 and len(doc["table"]) == 3
     assert all(r["verdict"] == "agree" for r in doc["table"])
@@ -76,7 +95,11 @@ def test_uncertainty_cli_on_the_analytic_linear_case(tmp_path, capsys):
     assert list(backend.metadata["names"]) == doc["names"]
     kept = backend.get_chain(discard=mcmc["burn"], flat=True) * backend.metadata["scale"]
     assert np.allclose(kept.mean(axis=0), [mcmc["mean"][n] for n in doc["names"]])
-    assert 0 < np.mean(backend.accepted / backend.iteration) == pytest.approx(mcmc["acceptance_fraction"])
+    assert (
+        0
+        < np.mean(backend.accepted / backend.iteration)
+        == pytest.approx(mcmc["acceptance_fraction"])
+    )
     # figures are re-drawn from the folder alone
     (out / "corner.png").unlink()
     assert main(["uncertainty", "analytic-linear", "--render", "--out", str(out)]) == 0
