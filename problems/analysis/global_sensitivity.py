@@ -21,6 +21,7 @@ sample points are all feasible.
 :class:`FESummaries` evaluates the FE summary outputs (objective cost, peak plate force in kN,
 lateral bulge = largest front-face u_h at the last snapshot in mm) through any mapper.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,8 +33,11 @@ from typing import Callable, Sequence
 import numpy as np
 
 FE_OUTPUTS = ("cost", "peak_force_kN", "bulge_mm")
-FE_OUTPUT_LABELS = {"cost": "cost (chi-square, -)", "peak_force_kN": "peak force (kN)",
-                    "bulge_mm": "lateral bulge u_h (mm)"}
+FE_OUTPUT_LABELS = {
+    "cost": "cost (chi-square, -)",
+    "peak_force_kN": "peak force (kN)",
+    "bulge_mm": "lateral bulge u_h (mm)",
+}
 
 
 def salib_problem(names: Sequence[str], lower, upper) -> dict:
@@ -42,7 +46,11 @@ def salib_problem(names: Sequence[str], lower, upper) -> dict:
         raise ValueError("names, lower and upper must have the same length")
     if np.any(upper <= lower):
         raise ValueError("every upper bound must exceed its lower bound")
-    return {"num_vars": len(names), "names": list(names), "bounds": np.column_stack([lower, upper]).tolist()}
+    return {
+        "num_vars": len(names),
+        "names": list(names),
+        "bounds": np.column_stack([lower, upper]).tolist(),
+    }
 
 
 def scaled_box(lower, upper, reference, scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -53,8 +61,15 @@ def scaled_box(lower, upper, reference, scale: float) -> tuple[np.ndarray, np.nd
     return ref - scale * (ref - lower), ref + scale * (upper - ref)
 
 
-def feasible_scale(check: Callable[[np.ndarray], str | None], lower, upper, reference, unit_points,
-                   *, iterations: int = 30) -> tuple[float, int]:
+def feasible_scale(
+    check: Callable[[np.ndarray], str | None],
+    lower,
+    upper,
+    reference,
+    unit_points,
+    *,
+    iterations: int = 30,
+) -> tuple[float, int]:
     """Largest box scale s in (0, 1] (bisection) for which every ``unit_points`` row is feasible.
 
     ``unit_points`` (n, d) in [0, 1]^d are mapped into :func:`scaled_box`; ``check(x)`` returns None
@@ -81,16 +96,21 @@ def feasible_scale(check: Callable[[np.ndarray], str | None], lower, upper, refe
     return a, n_full
 
 
-def evaluate(f: Callable[[np.ndarray], np.ndarray], X, *, mapper=None, chunk_size: int | None = None) -> np.ndarray:
-    """``f(X)`` as a 2-D array; with a ``mapper``, ``f`` is applied to chunks of rows in parallel."""
+def evaluate(
+    f: Callable[[np.ndarray], np.ndarray], X, *, mapper=None, chunk_size: int | None = None
+) -> np.ndarray:
+    """``f(X)`` as a 2-D array; with a ``mapper``, ``f`` is applied to chunks of rows in
+    parallel."""
     X = np.atleast_2d(np.asarray(X, float))
     if mapper is None:
         Y = np.asarray(f(X), float)
     else:
         size = chunk_size or max(1, math.ceil(len(X) / 16))
-        chunks = [X[i:i + size] for i in range(0, len(X), size)]
+        chunks = [X[i : i + size] for i in range(0, len(X), size)]
         parts = mapper(f, chunks)
-        Y = np.concatenate([np.asarray(p, float).reshape(len(c), -1) for p, c in zip(parts, chunks)])
+        Y = np.concatenate(
+            [np.asarray(p, float).reshape(len(c), -1) for p, c in zip(parts, chunks)]
+        )
     if Y.ndim == 1:
         Y = Y[:, None]
     if len(Y) != len(X):
@@ -108,12 +128,12 @@ def _keep_groups(Y: np.ndarray, group: int) -> np.ndarray:
 class SobolResult:
     names: tuple[str, ...]
     outputs: tuple[str, ...]
-    S1: np.ndarray          # (k outputs, d)
+    S1: np.ndarray  # (k outputs, d)
     S1_conf: np.ndarray
     ST: np.ndarray
     ST_conf: np.ndarray
     n_base: int
-    n_used: int             # base samples kept (groups without failures)
+    n_used: int  # base samples kept (groups without failures)
     n_evals: int
     conf_level: float
     lower: np.ndarray
@@ -122,16 +142,25 @@ class SobolResult:
     warnings: list[str] = field(default_factory=list)
 
     def rows(self) -> list[dict]:
-        return [{"output": o, "parameter": n, "S1": float(self.S1[j, i]), "S1_conf": float(self.S1_conf[j, i]),
-                 "ST": float(self.ST[j, i]), "ST_conf": float(self.ST_conf[j, i])}
-                for j, o in enumerate(self.outputs) for i, n in enumerate(self.names)]
+        return [
+            {
+                "output": o,
+                "parameter": n,
+                "S1": float(self.S1[j, i]),
+                "S1_conf": float(self.S1_conf[j, i]),
+                "ST": float(self.ST[j, i]),
+                "ST_conf": float(self.ST_conf[j, i]),
+            }
+            for j, o in enumerate(self.outputs)
+            for i, n in enumerate(self.names)
+        ]
 
 
 @dataclass
 class MorrisResult:
     names: tuple[str, ...]
     outputs: tuple[str, ...]
-    mu: np.ndarray          # (k, d)
+    mu: np.ndarray  # (k, d)
     mu_star: np.ndarray
     mu_star_conf: np.ndarray
     sigma: np.ndarray
@@ -145,9 +174,18 @@ class MorrisResult:
     warnings: list[str] = field(default_factory=list)
 
     def rows(self) -> list[dict]:
-        return [{"output": o, "parameter": n, "mu": float(self.mu[j, i]), "mu_star": float(self.mu_star[j, i]),
-                 "mu_star_conf": float(self.mu_star_conf[j, i]), "sigma": float(self.sigma[j, i])}
-                for j, o in enumerate(self.outputs) for i, n in enumerate(self.names)]
+        return [
+            {
+                "output": o,
+                "parameter": n,
+                "mu": float(self.mu[j, i]),
+                "mu_star": float(self.mu_star[j, i]),
+                "mu_star_conf": float(self.mu_star_conf[j, i]),
+                "sigma": float(self.sigma[j, i]),
+            }
+            for j, o in enumerate(self.outputs)
+            for i, n in enumerate(self.names)
+        ]
 
 
 def sobol_sample(names, lower, upper, n_base: int, *, seed: int = 0) -> np.ndarray:
@@ -157,13 +195,29 @@ def sobol_sample(names, lower, upper, n_base: int, *, seed: int = 0) -> np.ndarr
     if n_base < 2:
         raise ValueError(f"n_base = {n_base} is out of range: need at least 2 base samples")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # SALib warns for a non-power-of-2 n_base; we say so ourselves
-        return sobol_sampler.sample(salib_problem(names, lower, upper), int(n_base), calc_second_order=False,
-                                    scramble=True, seed=seed)
+        # SALib warns for a non-power-of-2 n_base; we say so ourselves
+        warnings.simplefilter("ignore")
+        return sobol_sampler.sample(
+            salib_problem(names, lower, upper),
+            int(n_base),
+            calc_second_order=False,
+            scramble=True,
+            seed=seed,
+        )
 
 
-def sobol_analyze(names, lower, upper, Y, *, outputs: Sequence[str] | None = None, seed: int = 0,
-                  conf_level: float = 0.95, num_resamples: int = 200, n_evals: int | None = None) -> SobolResult:
+def sobol_analyze(
+    names,
+    lower,
+    upper,
+    Y,
+    *,
+    outputs: Sequence[str] | None = None,
+    seed: int = 0,
+    conf_level: float = 0.95,
+    num_resamples: int = 200,
+    n_evals: int | None = None,
+) -> SobolResult:
     """S1 and ST per output from the outputs ``Y`` (n_base (d + 2), k) of :func:`sobol_sample`."""
     from SALib.analyze import sobol as sobol_analyzer
 
@@ -173,16 +227,22 @@ def sobol_analyze(names, lower, upper, Y, *, outputs: Sequence[str] | None = Non
     if len(Y) % (d + 2):
         raise ValueError(f"{len(Y)} outputs is not a multiple of d + 2 = {d + 2}")
     n_base = len(Y) // (d + 2)
-    outputs = tuple(outputs) if outputs is not None else tuple(f"y{j + 1}" for j in range(Y.shape[1]))
+    outputs = (
+        tuple(outputs) if outputs is not None else tuple(f"y{j + 1}" for j in range(Y.shape[1]))
+    )
     keep = _keep_groups(Y, d + 2)
     warns = []
     if not keep.all():
-        warns.append(f"{int((~keep).sum())} of {n_base} Saltelli groups contain failed points and were dropped: "
-                     f"the indices are conditional on success")
+        warns.append(
+            f"{int((~keep).sum())} of {n_base} Saltelli groups contain failed points and were "
+            "dropped: the indices are conditional on success"
+        )
     if keep.sum() < 2:
         raise ValueError(f"only {int(keep.sum())} complete Saltelli groups: too many failed points")
     if n_base & (n_base - 1):
-        warns.append(f"n_base = {n_base} is not a power of 2: the Sobol' sequence loses its balance")
+        warns.append(
+            f"n_base = {n_base} is not a power of 2: the Sobol' sequence loses its balance"
+        )
     Yk = Y.reshape(n_base, d + 2, -1)[keep].reshape(-1, Y.shape[1])
     problem = salib_problem(names, lower, upper)
     k = Y.shape[1]
@@ -194,53 +254,117 @@ def sobol_analyze(names, lower, upper, Y, *, outputs: Sequence[str] | None = Non
             continue
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = sobol_analyzer.analyze(problem, y, calc_second_order=False, num_resamples=num_resamples,
-                                         conf_level=conf_level, seed=seed)
+            res = sobol_analyzer.analyze(
+                problem,
+                y,
+                calc_second_order=False,
+                num_resamples=num_resamples,
+                conf_level=conf_level,
+                seed=seed,
+            )
         S1[j], S1c[j], ST[j], STc[j] = res["S1"], res["S1_conf"], res["ST"], res["ST_conf"]
-    return SobolResult(tuple(names), outputs, S1, S1c, ST, STc, n_base, int(keep.sum()),
-                       len(Y) if n_evals is None else n_evals, conf_level, np.asarray(lower, float),
-                       np.asarray(upper, float), warnings=warns)
+    return SobolResult(
+        tuple(names),
+        outputs,
+        S1,
+        S1c,
+        ST,
+        STc,
+        n_base,
+        int(keep.sum()),
+        len(Y) if n_evals is None else n_evals,
+        conf_level,
+        np.asarray(lower, float),
+        np.asarray(upper, float),
+        warnings=warns,
+    )
 
 
-def sobol_indices(f, names, lower, upper, n_base: int, *, outputs=None, seed: int = 0, mapper=None,
-                  chunk_size: int | None = None, conf_level: float = 0.95, num_resamples: int = 200) -> SobolResult:
-    """Sample, evaluate (``f`` vectorised, optionally through ``mapper``) and analyse (see module doc)."""
+def sobol_indices(
+    f,
+    names,
+    lower,
+    upper,
+    n_base: int,
+    *,
+    outputs=None,
+    seed: int = 0,
+    mapper=None,
+    chunk_size: int | None = None,
+    conf_level: float = 0.95,
+    num_resamples: int = 200,
+) -> SobolResult:
+    """Sample, evaluate (``f`` vectorised, optionally through ``mapper``) and analyse
+    (see module doc)."""
     t0 = time.perf_counter()
     X = sobol_sample(names, lower, upper, n_base, seed=seed)
     Y = evaluate(f, X, mapper=mapper, chunk_size=chunk_size)
-    res = sobol_analyze(names, lower, upper, Y, outputs=outputs, seed=seed, conf_level=conf_level,
-                        num_resamples=num_resamples)
+    res = sobol_analyze(
+        names,
+        lower,
+        upper,
+        Y,
+        outputs=outputs,
+        seed=seed,
+        conf_level=conf_level,
+        num_resamples=num_resamples,
+    )
     res.wall_s = time.perf_counter() - t0
     return res
 
 
-def morris_sample(names, lower, upper, n_trajectories: int, *, num_levels: int = 4, seed: int = 0) -> np.ndarray:
+def morris_sample(
+    names, lower, upper, n_trajectories: int, *, num_levels: int = 4, seed: int = 0
+) -> np.ndarray:
     """``n_trajectories (d + 1)`` rows of Morris one-at-a-time trajectories."""
     from SALib.sample import morris as morris_sampler
 
     if n_trajectories < 2:
         raise ValueError(f"n_trajectories = {n_trajectories} is out of range: need at least 2")
-    return morris_sampler.sample(salib_problem(names, lower, upper), int(n_trajectories), num_levels=num_levels,
-                                 seed=seed)
+    return morris_sampler.sample(
+        salib_problem(names, lower, upper), int(n_trajectories), num_levels=num_levels, seed=seed
+    )
 
 
-def morris_analyze(names, lower, upper, X, Y, *, outputs=None, num_levels: int = 4, seed: int = 0,
-                   conf_level: float = 0.95, num_resamples: int = 200, n_evals: int | None = None) -> MorrisResult:
+def morris_analyze(
+    names,
+    lower,
+    upper,
+    X,
+    Y,
+    *,
+    outputs=None,
+    num_levels: int = 4,
+    seed: int = 0,
+    conf_level: float = 0.95,
+    num_resamples: int = 200,
+    n_evals: int | None = None,
+) -> MorrisResult:
     from SALib.analyze import morris as morris_analyzer
 
     d = len(names)
     X, Y = np.asarray(X, float), np.asarray(Y, float)
     Y = Y[:, None] if Y.ndim == 1 else Y
     if len(Y) % (d + 1) or len(X) != len(Y):
-        raise ValueError(f"X ({len(X)} rows) and Y ({len(Y)} rows) must hold whole trajectories of d + 1 = {d + 1}")
+        raise ValueError(
+            f"X ({len(X)} rows) and Y ({len(Y)} rows) must hold whole trajectories of d + 1 = "
+            f"{d + 1}"
+        )
     r = len(Y) // (d + 1)
-    outputs = tuple(outputs) if outputs is not None else tuple(f"y{j + 1}" for j in range(Y.shape[1]))
+    outputs = (
+        tuple(outputs) if outputs is not None else tuple(f"y{j + 1}" for j in range(Y.shape[1]))
+    )
     keep = _keep_groups(Y, d + 1)
     warns = []
     if not keep.all():
-        warns.append(f"{int((~keep).sum())} of {r} Morris trajectories contain failed points and were dropped")
+        warns.append(
+            f"{int((~keep).sum())} of {r} Morris trajectories contain failed points and were "
+            "dropped"
+        )
     if keep.sum() < 2:
-        raise ValueError(f"only {int(keep.sum())} complete Morris trajectories: too many failed points")
+        raise ValueError(
+            f"only {int(keep.sum())} complete Morris trajectories: too many failed points"
+        )
     rows = np.repeat(keep, d + 1)
     Xk, Yk = X[rows], Y[rows]
     problem = salib_problem(names, lower, upper)
@@ -249,27 +373,74 @@ def morris_analyze(names, lower, upper, X, Y, *, outputs=None, num_levels: int =
     for j in range(k):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = morris_analyzer.analyze(problem, Xk, Yk[:, j], num_resamples=num_resamples, conf_level=conf_level,
-                                          num_levels=num_levels, seed=seed)
-        mu[j], mus[j], musc[j], sig[j] = res["mu"], res["mu_star"], res["mu_star_conf"], res["sigma"]
-    return MorrisResult(tuple(names), outputs, mu, mus, musc, sig, r, int(keep.sum()),
-                        len(Y) if n_evals is None else n_evals, num_levels, np.asarray(lower, float),
-                        np.asarray(upper, float), warnings=warns)
+            res = morris_analyzer.analyze(
+                problem,
+                Xk,
+                Yk[:, j],
+                num_resamples=num_resamples,
+                conf_level=conf_level,
+                num_levels=num_levels,
+                seed=seed,
+            )
+        mu[j], mus[j], musc[j], sig[j] = (
+            res["mu"],
+            res["mu_star"],
+            res["mu_star_conf"],
+            res["sigma"],
+        )
+    return MorrisResult(
+        tuple(names),
+        outputs,
+        mu,
+        mus,
+        musc,
+        sig,
+        r,
+        int(keep.sum()),
+        len(Y) if n_evals is None else n_evals,
+        num_levels,
+        np.asarray(lower, float),
+        np.asarray(upper, float),
+        warnings=warns,
+    )
 
 
-def morris_screening(f, names, lower, upper, n_trajectories: int, *, outputs=None, num_levels: int = 4, seed: int = 0,
-                     mapper=None, chunk_size: int | None = None, conf_level: float = 0.95,
-                     num_resamples: int = 200) -> MorrisResult:
+def morris_screening(
+    f,
+    names,
+    lower,
+    upper,
+    n_trajectories: int,
+    *,
+    outputs=None,
+    num_levels: int = 4,
+    seed: int = 0,
+    mapper=None,
+    chunk_size: int | None = None,
+    conf_level: float = 0.95,
+    num_resamples: int = 200,
+) -> MorrisResult:
     t0 = time.perf_counter()
     X = morris_sample(names, lower, upper, n_trajectories, num_levels=num_levels, seed=seed)
     Y = evaluate(f, X, mapper=mapper, chunk_size=chunk_size)
-    res = morris_analyze(names, lower, upper, X, Y, outputs=outputs, num_levels=num_levels, seed=seed,
-                         conf_level=conf_level, num_resamples=num_resamples)
+    res = morris_analyze(
+        names,
+        lower,
+        upper,
+        X,
+        Y,
+        outputs=outputs,
+        num_levels=num_levels,
+        seed=seed,
+        conf_level=conf_level,
+        num_resamples=num_resamples,
+    )
     res.wall_s = time.perf_counter() - t0
     return res
 
 
 # --- FE summary outputs -----------------------------------------------------------------------
+
 
 def summary_outputs(values, n_snapshots: int, n_points: int) -> tuple[float, float]:
     """``(peak force kN, lateral bulge mm)`` of one measurement vector ``[u_h, u_v, r]``.
@@ -283,7 +454,8 @@ def summary_outputs(values, n_snapshots: int, n_points: int) -> tuple[float, flo
 
 
 class FESummaries:
-    """Vectorised evaluator ``X (n, d) physical -> Y (n, 3) = [cost, peak force, bulge]`` of an objective.
+    """Vectorised evaluator ``X (n, d) physical -> Y (n, 3) = [cost, peak force, bulge]`` of an
+    objective.
 
     The forward runs of one call go through ``mapper`` as one batch (``bench.parallel.mapper``, the
     suites' evaluator); infeasible points (box or ``check``) and failed runs give NaN rows.
@@ -308,8 +480,11 @@ class FESummaries:
         Y = np.full((len(X), 3), np.nan)
         feasible = []
         for i, x in enumerate(X):
-            if np.any(x < obj.lower - 1e-9 * np.abs(obj.lower)) or np.any(x > obj.upper + 1e-9 * np.abs(obj.upper)) \
-                    or obj.model.check(x) is not None:
+            if (
+                np.any(x < obj.lower - 1e-9 * np.abs(obj.lower))
+                or np.any(x > obj.upper + 1e-9 * np.abs(obj.upper))
+                or obj.model.check(x) is not None
+            ):
                 self.n_infeasible += 1
             else:
                 feasible.append(i)

@@ -22,6 +22,7 @@ the unidentifiable directions have unbounded variance.
 :func:`refine_mode` polishes a point to the local minimum by Gauss-Newton steps (for a Laplace
 approximation at the MAP rather than at an arbitrary point).
 """
+
 from __future__ import annotations
 
 import math
@@ -73,16 +74,16 @@ class Identifiability:
     """Fisher information and Laplace covariance at one point (see the module docstring)."""
 
     names: tuple[str, ...]
-    reference: np.ndarray          # (n,) the scaling (z = x / reference)
-    x: np.ndarray                  # (n,) physical point where J was taken
-    jacobian_z: np.ndarray         # (m, n) whitened dR/dz
-    fisher_z: np.ndarray           # (n, n) J^T J
-    eigenvalues: np.ndarray        # (n,) of fisher_z, descending
-    eigenvectors: np.ndarray       # (n, n) columns, same order
-    condition: float               # lambda_max / lambda_min (inf if singular)
+    reference: np.ndarray  # (n,) the scaling (z = x / reference)
+    x: np.ndarray  # (n,) physical point where J was taken
+    jacobian_z: np.ndarray  # (m, n) whitened dR/dz
+    fisher_z: np.ndarray  # (n, n) J^T J
+    eigenvalues: np.ndarray  # (n,) of fisher_z, descending
+    eigenvectors: np.ndarray  # (n, n) columns, same order
+    condition: float  # lambda_max / lambda_min (inf if singular)
     rank: int
-    pinv: bool                     # the covariance is a pseudo-inverse
-    cov_z: np.ndarray              # (n, n) Laplace covariance in z
+    pinv: bool  # the covariance is a pseudo-inverse
+    cov_z: np.ndarray  # (n, n) Laplace covariance in z
     rcond: float = DEFAULT_RCOND
     warnings: list[str] = field(default_factory=list)
     n_evals: int = 0
@@ -120,18 +121,34 @@ class Identifiability:
 
     def rows(self) -> list[dict]:
         """One row per parameter: point, Laplace standard deviation (physical and %)."""
-        return [{"parameter": n, "x": float(self.x[i]), "reference": float(self.reference[i]),
-                 "std": float(self.std_x[i]), "std_percent": float(self.std_percent[i])}
-                for i, n in enumerate(self.names)]
+        return [
+            {
+                "parameter": n,
+                "x": float(self.x[i]),
+                "reference": float(self.reference[i]),
+                "std": float(self.std_x[i]),
+                "std_percent": float(self.std_percent[i]),
+            }
+            for i, n in enumerate(self.names)
+        ]
 
     def summary(self) -> dict:
-        return {"names": list(self.names), "condition": self.condition, "rank": self.rank, "pinv": self.pinv,
-                "eigenvalues": self.eigenvalues.tolist(), "std_percent": self.std_percent.tolist(),
-                "weakest_direction": self.weakest, "warnings": list(self.warnings), "n_evals": self.n_evals}
+        return {
+            "names": list(self.names),
+            "condition": self.condition,
+            "rank": self.rank,
+            "pinv": self.pinv,
+            "eigenvalues": self.eigenvalues.tolist(),
+            "std_percent": self.std_percent.tolist(),
+            "weakest_direction": self.weakest,
+            "warnings": list(self.warnings),
+            "n_evals": self.n_evals,
+        }
 
 
-def analyse_jacobian(J_z, reference, *, x=None, names: Sequence[str] | None = None,
-                     rcond: float = DEFAULT_RCOND) -> Identifiability:
+def analyse_jacobian(
+    J_z, reference, *, x=None, names: Sequence[str] | None = None, rcond: float = DEFAULT_RCOND
+) -> Identifiability:
     """Fisher information, eigen-decomposition, condition number and Laplace covariance.
 
     J_z       : (m, n) Jacobian of the *whitened* residual w.r.t. z = x / reference
@@ -157,18 +174,29 @@ def analyse_jacobian(J_z, reference, *, x=None, names: Sequence[str] | None = No
     warns = []
     zero_cols = [names[i] for i in range(n) if not np.any(J[:, i])]
     if zero_cols:
-        warns.append(f"the measurements do not depend on {', '.join(zero_cols)} (zero Jacobian column)")
+        warns.append(
+            f"the measurements do not depend on {', '.join(zero_cols)} (zero Jacobian column)"
+        )
     if used_pinv:
         v = V[:, -1]
         lead = ", ".join(f"{names[i]} {v[i]:+.2f}" for i in np.argsort(-np.abs(v))[:3])
-        warns.append(f"J^T J is singular or ill-conditioned (rank {rank} of {n}, cut-off {rcond:g} lambda_max): "
-                     f"the Laplace covariance is a pseudo-inverse; its standard deviations hold within the "
-                     f"identifiable subspace only, the direction [{lead}] is not identifiable")
+        warns.append(
+            f"J^T J is singular or ill-conditioned (rank {rank} of {n}, cut-off {rcond:g} "
+            "lambda_max): the Laplace covariance is a pseudo-inverse; its standard deviations hold "
+            f"within the identifiable subspace only, the direction [{lead}] is not identifiable"
+        )
     return Identifiability(names, ref, x, J, F, lam, V, cond, rank, used_pinv, cov, rcond, warns)
 
 
-def identifiability(objective, z=None, *, scheme: str = "forward", rel_step: float = 1e-6,
-                    rcond: float = DEFAULT_RCOND, r0=None) -> Identifiability:
+def identifiability(
+    objective,
+    z=None,
+    *,
+    scheme: str = "forward",
+    rel_step: float = 1e-6,
+    rcond: float = DEFAULT_RCOND,
+    r0=None,
+) -> Identifiability:
     """:func:`analyse_jacobian` of ``objective.jacobian(z)`` (z default: 1, the reference).
 
     Costs ``n + 1`` (forward) or ``2 n + 1`` (central) forward evaluations, fewer if cached; the
@@ -177,7 +205,9 @@ def identifiability(objective, z=None, *, scheme: str = "forward", rel_step: flo
     z = np.ones(objective.n_params) if z is None else np.asarray(z, dtype=float).ravel()
     before, failures = objective.n_evals, getattr(objective, "n_jacobian_failures", 0)
     J = objective.jacobian(z, scheme=scheme, rel_step=rel_step, r0=r0)
-    out = analyse_jacobian(J, objective.reference, x=objective.to_physical(z), names=objective.names, rcond=rcond)
+    out = analyse_jacobian(
+        J, objective.reference, x=objective.to_physical(z), names=objective.names, rcond=rcond
+    )
     out.n_evals = objective.n_evals - before
     failed = getattr(objective, "n_jacobian_failures", 0) - failures
     if failed:
@@ -198,8 +228,16 @@ class Refined:
     message: str
 
 
-def refine_mode(objective, z0, *, max_steps: int = 5, tol: float = 1e-6, scheme: str = "forward",
-                rel_step: float = 1e-6, rcond: float = DEFAULT_RCOND) -> Refined:
+def refine_mode(
+    objective,
+    z0,
+    *,
+    max_steps: int = 5,
+    tol: float = 1e-6,
+    scheme: str = "forward",
+    rel_step: float = 1e-6,
+    rcond: float = DEFAULT_RCOND,
+) -> Refined:
     """Gauss-Newton polishing of ``z0`` toward the nearest minimum of ``objective`` (in the box).
 
     Each step solves ``(J^T J) dz = -J^T R`` (pseudo-inverse if singular), projects onto the box

@@ -22,6 +22,7 @@ Everything here is pure: it works for any function ``x -> (u_h (N, m), u_v (N, m
 e.g. :class:`ModelFields` around any forward model whose measurement vector has the layout
 ``[u_h (N x m, snapshot-major), u_v (N x m), r (N)]``.
 """
+
 from __future__ import annotations
 
 import math
@@ -37,8 +38,11 @@ from problems.inverse.evaluator import sequential_map
 MEASURES = ("ux", "uy", "r")
 """Keys of the three sensitivity measures: horizontal field, vertical field, reaction force."""
 
-MEASURE_LABELS = {"ux": "horizontal displacement $u^x$", "uy": "vertical displacement $u^y$",
-                  "r": "reaction force $r$"}
+MEASURE_LABELS = {
+    "ux": "horizontal displacement $u^x$",
+    "uy": "vertical displacement $u^y$",
+    "r": "reaction force $r$",
+}
 
 Fields = tuple[np.ndarray, np.ndarray, np.ndarray]
 
@@ -65,7 +69,9 @@ class ModelFields:
         return layout.unstack(res.values, self.n_snapshots, self.n_points)
 
 
-def snapshot_sensitivities(reference: Fields, perturbed: Fields, delta: float) -> dict[str, np.ndarray]:
+def snapshot_sensitivities(
+    reference: Fields, perturbed: Fields, delta: float
+) -> dict[str, np.ndarray]:
     """Eqs. 16-18 per snapshot: ``{"ux": (N,), "uy": (N,), "r": (N,)}`` for one signed ``delta``.
 
     A snapshot whose reference norm (or force) is zero gives NaN (the ratio is undefined).
@@ -89,13 +95,15 @@ def snapshot_sensitivities(reference: Fields, perturbed: Fields, delta: float) -
 
 @dataclass
 class LocalSensitivities:
-    """Result of :func:`local_sensitivities` (arrays are indexed [parameter] or [parameter, snapshot])."""
+    """Result of :func:`local_sensitivities` (arrays are indexed [parameter] or [parameter,
+    snapshot])."""
 
     names: tuple[str, ...]
     x_ref: np.ndarray
     delta: float
-    deltas: np.ndarray                       # (n,) signed relative step used per parameter (nan: failed)
-    per_snapshot: dict[str, np.ndarray]      # measure -> (n, N)
+    # (n,) signed relative step used per parameter (nan: failed)
+    deltas: np.ndarray
+    per_snapshot: dict[str, np.ndarray]  # measure -> (n, N)
     n_evals: int
     messages: list[str] = field(default_factory=list)
 
@@ -127,25 +135,46 @@ class LocalSensitivities:
         return self.names[int(np.nanargmin(s))]
 
     def rows(self) -> list[dict]:
-        """One row per parameter: summed s_ux, s_uy, s_r, the sum of magnitudes and the step used."""
+        """One row per parameter: summed s_ux, s_uy, s_r, the sum of magnitudes and the step
+        used."""
         s, t = self.summed, self.total_abs
-        return [{"parameter": n, "reference": float(self.x_ref[i]), "delta": float(self.deltas[i]),
-                 "s_ux": float(s["ux"][i]), "s_uy": float(s["uy"][i]), "s_r": float(s["r"][i]),
-                 "sum_abs": float(t[i])} for i, n in enumerate(self.names)]
+        return [
+            {
+                "parameter": n,
+                "reference": float(self.x_ref[i]),
+                "delta": float(self.deltas[i]),
+                "s_ux": float(s["ux"][i]),
+                "s_uy": float(s["uy"][i]),
+                "s_r": float(s["r"][i]),
+                "sum_abs": float(t[i]),
+            }
+            for i, n in enumerate(self.names)
+        ]
 
     def snapshot_rows(self) -> list[dict]:
         """One row per (parameter, snapshot): the per-snapshot terms of eqs. 16-18."""
         out = []
         for i, n in enumerate(self.names):
             for k in range(self.n_snapshots):
-                out.append({"parameter": n, "snapshot": k + 1,
-                            **{f"s_{m}": float(self.per_snapshot[m][i, k]) for m in MEASURES}})
+                out.append(
+                    {
+                        "parameter": n,
+                        "snapshot": k + 1,
+                        **{f"s_{m}": float(self.per_snapshot[m][i, k]) for m in MEASURES},
+                    }
+                )
         return out
 
 
-def local_sensitivities(fields: Callable[[np.ndarray], Fields | None], x_ref, *, delta: float = 0.01,
-                        names: Sequence[str] | None = None, mapper=None,
-                        active: Sequence[int] | None = None) -> LocalSensitivities:
+def local_sensitivities(
+    fields: Callable[[np.ndarray], Fields | None],
+    x_ref,
+    *,
+    delta: float = 0.01,
+    names: Sequence[str] | None = None,
+    mapper=None,
+    active: Sequence[int] | None = None,
+) -> LocalSensitivities:
     """Eqs. 16-18 for every parameter (or the indices ``active``) of ``x_ref``.
 
     fields : ``x -> (u_h (N, m), u_v (N, m), r (N,))`` or ``None`` on failure (it may also raise);

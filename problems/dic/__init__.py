@@ -6,6 +6,7 @@ symmetry), ``imageio`` (TIFF/PNG/BMP), ``interpolate`` (B-splines), ``correlate`
 ``seed`` (FFT guess, neighbour graph), ``pipeline`` (``measure_front_face``), ``subsets`` (the
 data of the Fig.-2-like subset figure, drawn by ``bench.dic_figures``).
 """
+
 from problems.dic.correlate import Correlator, DICConfig, DICResult, grid_points
 from problems.dic.imageio import read_image, write_image
 from problems.dic.pipeline import DICMeasurement, measure_front_face, render_images

@@ -14,6 +14,7 @@ deformed image at the warped subset points (B-spline interpolation) and returns
   temporaries), several times faster. Used when numba is importable, unless the environment
   variable ``FEMUBENCH_DIC_BACKEND=scipy`` is set. Both agree to rounding (tested).
 """
+
 from __future__ import annotations
 
 import os
@@ -83,7 +84,9 @@ if numba is not None:
             w[1] = (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0
             w[2] = (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0
             w[3] = t3 / 6.0
-        else:  # quintic: beta5(t + 2), beta5(t + 1), beta5(t), beta5(1 - t), beta5(2 - t), beta5(3 - t)
+        else:
+            # quintic: beta5(t + 2), beta5(t + 1), beta5(t),
+            #          beta5(1 - t), beta5(2 - t), beta5(3 - t)
             for j in range(6):
                 x = abs(t + 2.0 - j)
                 if x < 1.0:
@@ -91,7 +94,14 @@ if numba is not None:
                     w[j] = (66.0 - 60.0 * x2 + 30.0 * x2 * x2 - 10.0 * x2 * x2 * x) / 120.0
                 elif x < 2.0:
                     x2 = x * x
-                    w[j] = (51.0 + 75.0 * x - 210.0 * x2 + 150.0 * x2 * x - 45.0 * x2 * x2 + 5.0 * x2 * x2 * x) / 120.0
+                    w[j] = (
+                        51.0
+                        + 75.0 * x
+                        - 210.0 * x2
+                        + 150.0 * x2 * x
+                        - 45.0 * x2 * x2
+                        + 5.0 * x2 * x2 * x
+                    ) / 120.0
                 elif x < 3.0:
                     y = 3.0 - x
                     w[j] = y * y * y * y * y / 120.0
@@ -180,9 +190,23 @@ if numba is not None:
         inside = np.zeros(k, dtype=np.bool_)
         h = float(round(Xi[:, 1].max()))
         _step_nb(
-            spline.coeffs, spline.order, cx, cy, np.ascontiguousarray(gi, dtype=np.int64),
-            np.ascontiguousarray(A[:, :2, :]), np.ascontiguousarray(Xi[:, 1]), np.ascontiguousarray(Xi[:, 2]),
-            f0, fx, fy, df, h, b, rr, dg, inside,
+            spline.coeffs,
+            spline.order,
+            cx,
+            cy,
+            np.ascontiguousarray(gi, dtype=np.int64),
+            np.ascontiguousarray(A[:, :2, :]),
+            np.ascontiguousarray(Xi[:, 1]),
+            np.ascontiguousarray(Xi[:, 2]),
+            f0,
+            fx,
+            fy,
+            df,
+            h,
+            b,
+            rr,
+            dg,
+            inside,
         )
         return b, rr, dg, inside
 
@@ -225,9 +249,18 @@ def splat_numba(shape_super, Ux, Uy, C, R, centres, sig, amp, n, cutoff):
     if not deformed:
         Ux = Uy = np.zeros((1, 1), dtype=np.float32)
     _splat_nb(
-        G, Ux, Uy, deformed, np.ascontiguousarray(C, dtype=np.int64), np.ascontiguousarray(R, dtype=np.int64),
-        np.ascontiguousarray(centres[:, 0], dtype=float), np.ascontiguousarray(centres[:, 1], dtype=float),
-        np.ascontiguousarray(sig, dtype=float), np.ascontiguousarray(amp, dtype=float), int(n), float(cutoff),
+        G,
+        Ux,
+        Uy,
+        deformed,
+        np.ascontiguousarray(C, dtype=np.int64),
+        np.ascontiguousarray(R, dtype=np.int64),
+        np.ascontiguousarray(centres[:, 0], dtype=float),
+        np.ascontiguousarray(centres[:, 1], dtype=float),
+        np.ascontiguousarray(sig, dtype=float),
+        np.ascontiguousarray(amp, dtype=float),
+        int(n),
+        float(cutoff),
     )
     return G
 

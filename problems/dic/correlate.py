@@ -37,14 +37,15 @@ propagation: in rounds, every unsolved point next to solved ones starts from its
 reliable (highest-ZNCC) solved neighbour's warp, carried over the offset by the first-order
 shape; with a previous snapshot's solution, that is the start and propagation only fills in.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from problems.dic.interpolate import SUPPORTED_ORDERS, BSplineImage, noise_gain
 from problems.dic._kernels import get_step
+from problems.dic.interpolate import SUPPORTED_ORDERS, BSplineImage, noise_gain
 from problems.dic.seed import integer_guess, neighbour_graph, seed_candidates
 
 PARAM_NAMES = ("u", "u_x", "u_y", "v", "v_x", "v_y")
@@ -86,8 +87,12 @@ class DICConfig:
     backend: str | None = None
 
     def __post_init__(self):
-        if not (isinstance(self.subset, (int, np.integer)) and self.subset >= 5 and self.subset % 2 == 1):
-            raise ValueError(f"subset = {self.subset!r}: the subset side must be an odd integer >= 5")
+        if not (
+            isinstance(self.subset, (int, np.integer)) and self.subset >= 5 and self.subset % 2 == 1
+        ):
+            raise ValueError(
+                f"subset = {self.subset!r}: the subset side must be an odd integer >= 5"
+            )
         if not self.step >= 1:
             raise ValueError(f"step = {self.step!r}: the grid step must be >= 1 px")
         if self.order not in SUPPORTED_ORDERS:
@@ -254,7 +259,9 @@ def _matrices(p: np.ndarray) -> np.ndarray:
 
 
 def _params(M: np.ndarray) -> np.ndarray:
-    return np.column_stack([M[:, 0, 2], M[:, 0, 0] - 1, M[:, 0, 1], M[:, 1, 2], M[:, 1, 0], M[:, 1, 1] - 1])
+    return np.column_stack(
+        [M[:, 0, 2], M[:, 0, 0] - 1, M[:, 0, 1], M[:, 1, 2], M[:, 1, 0], M[:, 1, 1] - 1]
+    )
 
 
 def _inverse_warp(dp: np.ndarray) -> np.ndarray:
@@ -308,13 +315,20 @@ class Correlator:
         h = config.half
         rows, cols = ref.shape
         if config.subset > min(rows, cols):
-            raise ValueError(f"subset of {config.subset} px is larger than the image ({cols} x {rows} px)")
-        bad = (c[:, 0] - h < 0) | (c[:, 1] - h < 0) | (c[:, 0] + h > cols - 1) | (c[:, 1] + h > rows - 1)
+            raise ValueError(
+                f"subset of {config.subset} px is larger than the image ({cols} x {rows} px)"
+            )
+        bad = (
+            (c[:, 0] - h < 0)
+            | (c[:, 1] - h < 0)
+            | (c[:, 0] + h > cols - 1)
+            | (c[:, 1] + h > rows - 1)
+        )
         if np.any(bad):
             k = int(np.flatnonzero(bad)[0])
             raise ValueError(
-                f"{int(bad.sum())} subset(s) of {config.subset} px do not fit in the {cols} x {rows} px "
-                f"image, e.g. the one centred at ({c[k, 0]}, {c[k, 1]})"
+                f"{int(bad.sum())} subset(s) of {config.subset} px do not fit in the {cols} x "
+                f"{rows} px image, e.g. the one centred at ({c[k, 0]}, {c[k, 1]})"
             )
         self.cx, self.cy = c[:, 0], c[:, 1]
         self.points = c.astype(float)
@@ -398,14 +412,18 @@ class Correlator:
                 break
             gi = idx[act]
             A = M[act]
-            b, rr, dg, inside = self._step(spline, self.cx, self.cy, gi, A, self.Xi, self.f0, self.fx, self.fy, self.df)
+            b, rr, dg, inside = self._step(
+                spline, self.cx, self.cy, gi, A, self.Xi, self.f0, self.fx, self.fy, self.df
+            )
             good = inside & (dg > 0) & np.all(np.isfinite(b), axis=1)
             dp = -np.einsum("kij,kj->ki", self.Hinv[gi], b)
             M[act] = A @ _inverse_warp(dp)
             iters[act] = it
             zncc[act] = np.where(good, 1.0 - 0.5 * rr / self.df[gi] ** 2, np.nan)
             s2[act] = rr / max(self.P - 8, 1)
-            norm = np.sqrt(dp[:, 0] ** 2 + dp[:, 3] ** 2 + h * h * np.sum(dp[:, [1, 2, 4, 5]] ** 2, axis=1))
+            norm = np.sqrt(
+                dp[:, 0] ** 2 + dp[:, 3] ** 2 + h * h * np.sum(dp[:, [1, 2, 4, 5]] ** 2, axis=1)
+            )
             moved = np.hypot(M[act, 0, 2] - start[act, 0], M[act, 1, 2] - start[act, 1])
             diverged = ~good | ~np.isfinite(norm) | (moved > cfg.subset)
             done = ~diverged & (norm < cfg.tol)
@@ -428,8 +446,8 @@ class Correlator:
         g = as_grey(deformed, "deformed image")
         if g.shape != self.reference.shape:
             raise ValueError(
-                f"image sizes differ: reference is {self.reference.shape[1]} x {self.reference.shape[0]} px, "
-                f"deformed is {g.shape[1]} x {g.shape[0]} px"
+                f"image sizes differ: reference is {self.reference.shape[1]} x "
+                f"{self.reference.shape[0]} px, deformed is {g.shape[1]} x {g.shape[0]} px"
             )
         check_not_blank(g, "deformed image")
         spline = BSplineImage(g, cfg.order)
@@ -461,7 +479,9 @@ class Correlator:
             if not np.any(rest):
                 break
             # unreached points (e.g. a separate region): seed again among them
-            stats["seeds"] += self._seed(g, spline, p, zncc, iters, done, s2, tries, run, among=rest)
+            stats["seeds"] += self._seed(
+                g, spline, p, zncc, iters, done, s2, tries, run, among=rest
+            )
 
         cov = np.full((n, 6, 6), np.nan)
         if cfg.noise_sigma is None:
@@ -501,7 +521,9 @@ class Correlator:
                 continue
             p0 = np.zeros((len(batch), 6))
             for j, i in enumerate(batch):
-                du, dv, _ = integer_guess(self.reference, g, int(self.cx[i]), int(self.cy[i]), half, cfg.search_radius)
+                du, dv, _ = integer_guess(
+                    self.reference, g, int(self.cx[i]), int(self.cy[i]), half, cfg.search_radius
+                )
                 p0[j, 0], p0[j, 3] = du, dv
             sel = np.asarray(batch, dtype=np.int64)
             run(sel, p0)
@@ -523,7 +545,13 @@ class Correlator:
             best = np.argmax(nz, axis=1)
             bestz = nz[np.arange(self.n), best]
             src = nb[np.arange(self.n), best]
-            cand = self.valid & ~done & np.isfinite(bestz) & (tries < cfg.max_tries) & (src != last_src)
+            cand = (
+                self.valid
+                & ~done
+                & np.isfinite(bestz)
+                & (tries < cfg.max_tries)
+                & (src != last_src)
+            )
             if not np.any(cand):
                 return rounds
             sel = np.flatnonzero(cand)

@@ -5,6 +5,7 @@ PNG and BMP, 8- or 16-bit.
 Colour images are converted to grey (ITU-R 601 luma) with a rounded result in the same
 bit depth; alpha channels are dropped. ``write_image`` picks the format from the suffix.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,14 +25,18 @@ def _to_grey(a: np.ndarray, path: Path) -> np.ndarray:
     elif a.ndim == 3 and a.shape[-1] in (1, 2):  # grey (+ alpha)
         a = a[..., 0]
     if a.ndim != 2:
-        raise ValueError(f"{path}: expected a single grey-level image, got an array of shape {a.shape}")
+        raise ValueError(
+            f"{path}: expected a single grey-level image, got an array of shape {a.shape}"
+        )
     if a.dtype == np.uint8 or a.dtype == np.uint16:
         return a
     if a.dtype == np.bool_:
         return a.astype(np.uint8) * 255
     if np.issubdtype(a.dtype, np.integer):
         if a.min() < 0 or a.max() > 65535:
-            raise ValueError(f"{path}: integer grey levels outside 0..65535 ({a.dtype}) are not supported")
+            raise ValueError(
+                f"{path}: integer grey levels outside 0..65535 ({a.dtype}) are not supported"
+            )
         return a.astype(np.uint16)
     if np.issubdtype(a.dtype, np.floating):
         return a.astype(np.float64)
@@ -45,7 +50,9 @@ def read_image(path: str | Path) -> np.ndarray:
         raise FileNotFoundError(f"image file not found: {path}")
     suffix = path.suffix.lower()
     if suffix not in READ_SUFFIXES:
-        raise ValueError(f"{path}: unsupported image format {suffix or '(none)'}; use TIFF, PNG or BMP")
+        raise ValueError(
+            f"{path}: unsupported image format {suffix or '(none)'}; use TIFF, PNG or BMP"
+        )
     if suffix in (".tif", ".tiff"):
         import tifffile
 
@@ -54,7 +61,9 @@ def read_image(path: str | Path) -> np.ndarray:
         except Exception as exc:  # corrupt or unsupported TIFF
             raise ValueError(f"{path}: cannot read TIFF ({exc})") from exc
         if a.ndim == 3 and a.shape[0] > 4 and a.shape[-1] not in (1, 2, 3, 4):
-            raise ValueError(f"{path}: multi-page TIFF with {a.shape[0]} pages; give one image per file")
+            raise ValueError(
+                f"{path}: multi-page TIFF with {a.shape[0]} pages; give one image per file"
+            )
     else:
         from PIL import Image, UnidentifiedImageError
 
@@ -68,8 +77,11 @@ def read_image(path: str | Path) -> np.ndarray:
                 mode = im.mode
         except UnidentifiedImageError as exc:
             raise ValueError(f"{path}: not a readable {suffix[1:].upper()} image") from exc
-        except Exception as exc:  # truncated or corrupt data (Pillow raises OSError, SyntaxError, ...)
-            raise ValueError(f"{path}: cannot read {suffix[1:].upper()} image ({' '.join(str(exc).split())})") from exc
+        except Exception as exc:
+            # truncated or corrupt data (Pillow raises OSError, SyntaxError, ...)
+            raise ValueError(
+                f"{path}: cannot read {suffix[1:].upper()} image ({' '.join(str(exc).split())})"
+            ) from exc
         if mode == "I":  # 16-bit PNGs open as 32-bit integers
             a = a.astype(np.int64)
     return _to_grey(a, path)
@@ -88,7 +100,9 @@ def write_image(path: str | Path, image: np.ndarray, compression: str | None = N
         raise ValueError(f"{path}: write uint8 or uint16 grey levels, got {a.dtype}")
     suffix = path.suffix.lower()
     if suffix not in WRITE_SUFFIXES:
-        raise ValueError(f"{path}: unsupported image format {suffix or '(none)'}; use .tif, .png or .bmp")
+        raise ValueError(
+            f"{path}: unsupported image format {suffix or '(none)'}; use .tif, .png or .bmp"
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     if suffix in (".tif", ".tiff") and compression and compression.lower() == "packbits":
         from PIL import Image  # tifffile needs imagecodecs to encode PackBits; Pillow does not
@@ -102,6 +116,8 @@ def write_image(path: str | Path, image: np.ndarray, compression: str | None = N
         from PIL import Image
 
         if suffix == ".bmp" and a.dtype != np.uint8:
-            raise ValueError(f"{path}: BMP holds 8-bit grey levels only; use TIFF or PNG for 16 bits")
+            raise ValueError(
+                f"{path}: BMP holds 8-bit grey levels only; use TIFF or PNG for 16 bits"
+            )
         Image.fromarray(a).save(path)
     return path

@@ -12,6 +12,7 @@ the B-spline kernel, ``beta_n'(k) = beta_{n-1}(k + 1/2) - beta_{n-1}(k - 1/2)``.
 Coordinates follow the image convention: ``x`` is the column (to the right), ``y`` the row
 (down), pixel centres at integers.
 """
+
 from __future__ import annotations
 
 from math import comb, factorial
@@ -55,7 +56,9 @@ class BSplineImage:
 
     def __init__(self, image: np.ndarray, order: int = 3):
         if order not in SUPPORTED_ORDERS:
-            raise ValueError(f"interpolation order {order!r} is not supported: use 3 (bicubic) or 5 (biquintic)")
+            raise ValueError(
+                f"interpolation order {order!r} is not supported: use 3 (bicubic) or 5 (biquintic)"
+            )
         image = np.asarray(image, dtype=np.float64)
         if image.ndim != 2:
             raise ValueError(f"expected a 2-D grey-level image, got shape {image.shape}")
@@ -75,7 +78,9 @@ class BSplineImage:
         coords = np.empty((2, x.size))
         coords[0] = y.ravel()
         coords[1] = x.ravel()
-        out = ndimage.map_coordinates(self.coeffs, coords, order=self.order, prefilter=False, mode="mirror")
+        out = ndimage.map_coordinates(
+            self.coeffs, coords, order=self.order, prefilter=False, mode="mirror"
+        )
         return out.reshape(x.shape)
 
     def gradient_at_pixels(self) -> tuple[np.ndarray, np.ndarray]:
@@ -86,8 +91,12 @@ class BSplineImage:
             # s(x, y) = sum_ij c_ij beta(y - i) beta(x - j); at a pixel centre the derivative
             # along one axis pairs with the sampled kernel itself along the other axis.
             # convolve1d flips the kernel: (c * k)[i] = sum_m k[m] c[i - m].
-            gx = ndimage.convolve1d(ndimage.convolve1d(self.coeffs, d, axis=1, mode="mirror"), v, axis=0, mode="mirror")
-            gy = ndimage.convolve1d(ndimage.convolve1d(self.coeffs, d, axis=0, mode="mirror"), v, axis=1, mode="mirror")
+            gx = ndimage.convolve1d(
+                ndimage.convolve1d(self.coeffs, d, axis=1, mode="mirror"), v, axis=0, mode="mirror"
+            )
+            gy = ndimage.convolve1d(
+                ndimage.convolve1d(self.coeffs, d, axis=0, mode="mirror"), v, axis=1, mode="mirror"
+            )
             self._grad = (gx, gy)
         return self._grad
 
@@ -96,7 +105,8 @@ _GAIN_CACHE: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def noise_gain(t: np.ndarray, order: int) -> np.ndarray:
-    """Variance gain ``gamma(t) = sum_k eta(t - k)^2`` of white noise interpolated at fraction ``t``.
+    """Variance gain ``gamma(t) = sum_k eta(t - k)^2`` of white noise interpolated at fraction
+    ``t``.
 
     ``eta`` is the cardinal (interpolating) B-spline of the given order: ``gamma(0) = 1`` and
     ``gamma < 1`` in between pixels, where interpolation averages neighbouring noise. Tabulated
@@ -109,7 +119,9 @@ def noise_gain(t: np.ndarray, order: int) -> np.ndarray:
         c = ndimage.spline_filter1d(delta, order=order, mode="mirror")
         ts = np.linspace(0.0, 1.0, 101)
         pos = m + ts[:, None] - np.arange(-20, 21)[None, :]
-        eta = ndimage.map_coordinates(c, pos.ravel()[None, :], order=order, prefilter=False, mode="mirror")
+        eta = ndimage.map_coordinates(
+            c, pos.ravel()[None, :], order=order, prefilter=False, mode="mirror"
+        )
         _GAIN_CACHE[order] = (ts, np.sum(eta.reshape(pos.shape) ** 2, axis=1))
     ts, gam = _GAIN_CACHE[order]
     return np.interp(np.mod(t, 1.0), ts, gam)

@@ -16,6 +16,7 @@ stay in view. Subsets that would reach outside the image raise a ValueError.
 Points whose correlation fails are flagged (``converged = False``) and carry NaN values and
 NaN standard deviations.
 """
+
 from __future__ import annotations
 
 import json
@@ -120,7 +121,13 @@ def render_images(
     pattern = face_pattern(speckle, camera, seed)
     yield render_face(camera, speckle, pattern, None, np.random.default_rng([seed, 1, 0]))
     for k, f in enumerate(fields, start=1):
-        yield render_face(camera, speckle, pattern, pixel_displacement(f, camera), np.random.default_rng([seed, 1, k]))
+        yield render_face(
+            camera,
+            speckle,
+            pattern,
+            pixel_displacement(f, camera),
+            np.random.default_rng([seed, 1, k]),
+        )
 
 
 def _check_grid(points: np.ndarray, camera: CameraConfig) -> np.ndarray:
@@ -128,7 +135,13 @@ def _check_grid(points: np.ndarray, camera: CameraConfig) -> np.ndarray:
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
         raise ValueError(f"grid_points_mm must have shape (m, 2) [y, z], got {pts.shape}")
     w, h = camera.face_mm
-    bad = (pts[:, 0] < 0) | (pts[:, 0] > w / 2) | (pts[:, 1] < 0) | (pts[:, 1] > h) | ~np.all(np.isfinite(pts), 1)
+    bad = (
+        (pts[:, 0] < 0)
+        | (pts[:, 0] > w / 2)
+        | (pts[:, 1] < 0)
+        | (pts[:, 1] > h)
+        | ~np.all(np.isfinite(pts), 1)
+    )
     if np.any(bad):
         k = int(np.flatnonzero(bad)[0])
         raise ValueError(
@@ -221,9 +234,23 @@ def measure_front_face(
         bar.close()
 
     meas = DICMeasurement(
-        u_h=u_h, u_v=u_v, std_h=s_h, std_v=s_v, cov_hv=c_hv, converged=conv, zncc=zn, iterations=its,
-        noise_sigma=sig, points_mm=pts_mm, points_px=pts_px, centres_px=corr.points.copy(),
-        camera=camera, speckle=speckle, dic=dic, seed=int(seed), image_paths=tuple(paths),
+        u_h=u_h,
+        u_v=u_v,
+        std_h=s_h,
+        std_v=s_v,
+        cov_hv=c_hv,
+        converged=conv,
+        zncc=zn,
+        iterations=its,
+        noise_sigma=sig,
+        points_mm=pts_mm,
+        points_px=pts_px,
+        centres_px=corr.points.copy(),
+        camera=camera,
+        speckle=speckle,
+        dic=dic,
+        seed=int(seed),
+        image_paths=tuple(paths),
     )
     if outdir is not None:
         if figure and last is not None and np.any(last[1].converged):
@@ -231,8 +258,16 @@ def measure_front_face(
 
             idx = _figure_points(pts_mm, camera.face_mm)
             labels = [f"y = {pts_mm[i, 0]:g}, z = {pts_mm[i, 1]:g} mm" for i in idx]
-            panels = subset_figure_data(ref, last[0], last[1], idx, dic.subset, dic.order, labels=labels,
-                                        title=f"DIC subsets, snapshot {N}")
+            panels = subset_figure_data(
+                ref,
+                last[0],
+                last[1],
+                idx,
+                dic.subset,
+                dic.order,
+                labels=labels,
+                title=f"DIC subsets, snapshot {N}",
+            )
             meas.subsets_path = str(panels.save(outdir / "dic_subsets.npz"))
         (outdir / "dic_setup.json").write_text(json.dumps(meas.setup(), indent=2))
     return meas

@@ -11,6 +11,7 @@ deformed) are written to the ``image_dir`` the caller gives (``femubench data`` 
 cache use ``<data file stem>__dic_images/`` next to the data file); they are not part of the
 data file: camera, speckle and DIC settings and the seed regenerate them.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict
@@ -22,7 +23,7 @@ from scipy.interpolate import RegularGridInterpolator
 def front_face_fields(response) -> list:
     """One callable ``field(y_mm, z_mm) -> (u_y, u_z)`` per snapshot (quarter coordinates, mm)."""
     mesh = response.mesh
-    g = mesh.grid_index()[-1]                          # (ny+1, nz+1) front-face nodes
+    g = mesh.grid_index()[-1]  # (ny+1, nz+1) front-face nodes
     ys, zs = mesh.nodes[g[:, 0], 1], mesh.nodes[g[0, :], 2]
     fields = []
     for u in response.displacements:
@@ -39,7 +40,8 @@ def front_face_fields(response) -> list:
 
 
 def measure_by_dic(response, points, *, seed: int = 0, progress: bool = True, image_dir=None):
-    """Front-face displacements of ``response`` at ``points`` (m, 2) mm measured by DIC on rendered images.
+    """Front-face displacements of ``response`` at ``points`` (m, 2) mm measured by DIC on rendered
+    images.
 
     Returns ``(u_h (N, m), u_v (N, m), std (2, N, m), meta)`` in mm; points whose correlation failed
     get zero value and infinite standard deviation. ``image_dir``: where the images and the
@@ -47,13 +49,27 @@ def measure_by_dic(response, points, *, seed: int = 0, progress: bool = True, im
     """
     from problems.dic import measure_front_face
 
-    m = measure_front_face(front_face_fields(response), points, seed=seed, progress=progress,
-                           image_dir=image_dir, figure=True)
+    m = measure_front_face(
+        front_face_fields(response),
+        points,
+        seed=seed,
+        progress=progress,
+        image_dir=image_dir,
+        figure=True,
+    )
     ok = m.converged
     u_h = np.where(ok, m.u_h, 0.0)
     u_v = np.where(ok, m.u_v, 0.0)
     std = np.stack([np.where(ok, m.std_h, np.inf), np.where(ok, m.std_v, np.inf)])
-    meta = {"dic": {"camera": asdict(m.camera), "speckle": asdict(m.speckle), "dic": asdict(m.dic), "seed": m.seed,
-                    "converged_fraction": float(ok.mean()), "median_std_mm": float(np.nanmedian(m.std_h)),
-                    "max_abs_cov_hv_mm2": float(np.nanmax(np.abs(m.cov_hv))) if ok.any() else None}}
+    meta = {
+        "dic": {
+            "camera": asdict(m.camera),
+            "speckle": asdict(m.speckle),
+            "dic": asdict(m.dic),
+            "seed": m.seed,
+            "converged_fraction": float(ok.mean()),
+            "median_std_mm": float(np.nanmedian(m.std_h)),
+            "max_abs_cov_hv_mm2": float(np.nanmax(np.abs(m.cov_hv))) if ok.any() else None,
+        }
+    }
     return u_h, u_v, std, meta

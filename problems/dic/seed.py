@@ -10,6 +10,7 @@ at every integer shift.
 typical spacing: the 8-neighbourhood on a regular grid, and a sensible graph for any point set.
 Reliability-guided propagation (in :mod:`problems.dic.correlate`) walks this graph.
 """
+
 from __future__ import annotations
 
 import numpy as np

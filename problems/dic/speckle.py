@@ -33,6 +33,7 @@ The camera looks at the full front face (``y`` to the right, ``z`` up) with squa
 moving specimen edges stay in view. Grey-level noise is additive Gaussian (``noise_sigma``
 grey levels of the output bit depth) followed by rounding and clipping to 8 or 16 bits.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -110,11 +111,15 @@ class CameraConfig:
             raise ValueError(f"camera pixels = {self.pixels!r}: need at least 8 x 8")
         w, h = self.face_mm
         if not abs(w / cols - h / rows) <= 1e-9 * (w / cols):
-            raise ValueError(f"camera pixels {self.pixels} over a face of {self.face_mm} mm are not square")
+            raise ValueError(
+                f"camera pixels {self.pixels} over a face of {self.face_mm} mm are not square"
+            )
         if self.bit_depth not in (8, 16):
             raise ValueError(f"camera bit_depth = {self.bit_depth!r}: use 8 or 16")
         if self.noise_sigma < 0 or self.margin_px < 0 or self.supersample < 1 or self.map_step < 1:
-            raise ValueError("camera noise_sigma and margin_px must be >= 0, supersample and map_step >= 1")
+            raise ValueError(
+                "camera noise_sigma and margin_px must be >= 0, supersample and map_step >= 1"
+            )
 
     @property
     def pixel_mm(self) -> float:
@@ -200,17 +205,27 @@ class SpecklePattern:
                     if dx == 0.0 and dy == 0.0:
                         continue
                     cc = c + [dx, dy]
-                    near = (cc[:, 0] > x0 - reach) & (cc[:, 0] < x1 + reach) & (cc[:, 1] > y0 - reach) & (cc[:, 1] < y1 + reach)
+                    near = (
+                        (cc[:, 0] > x0 - reach)
+                        & (cc[:, 0] < x1 + reach)
+                        & (cc[:, 1] > y0 - reach)
+                        & (cc[:, 1] < y1 + reach)
+                    )
                     cs.append(cc[near]), ss.append(sig[near]), aa.append(amp[near])
             c, sig, amp = np.concatenate(cs), np.concatenate(ss), np.concatenate(aa)
         return cls(c, sig, amp)
 
-    def transformed(self, scale: tuple[float, float], offset: tuple[float, float]) -> "SpecklePattern":
-        """Pattern in new coordinates ``x' = offset + scale * x`` (per axis; |scale_x| = |scale_y|)."""
+    def transformed(
+        self, scale: tuple[float, float], offset: tuple[float, float]
+    ) -> "SpecklePattern":
+        """Pattern in new coordinates ``x' = offset + scale * x`` (per axis;
+        |scale_x| = |scale_y|)."""
         sx, sy = scale
         if not np.isclose(abs(sx), abs(sy)):
             raise ValueError("the pattern can only be mapped with a uniform scale")
-        c = np.column_stack([offset[0] + sx * self.centres[:, 0], offset[1] + sy * self.centres[:, 1]])
+        c = np.column_stack(
+            [offset[0] + sx * self.centres[:, 0], offset[1] + sy * self.centres[:, 1]]
+        )
         return SpecklePattern(c, self.sigma * abs(sx), self.amplitude)
 
     def blurred(self, blur: float) -> "SpecklePattern":
@@ -254,7 +269,18 @@ def blob_field(
     C = np.rint((approx_centres[:, 0] + 0.5) * n - 0.5).astype(np.int64)
     R = np.rint((approx_centres[:, 1] + 0.5) * n - 0.5).astype(np.int64)
     if backend == "numba" or (backend is None and _kernels.DEFAULT_BACKEND == "numba"):
-        return _kernels.splat_numba((Hs, Ws), Ux, Uy, C, R, pattern.centres, pattern.sigma, pattern.amplitude, n, CUTOFF_SIGMAS)
+        return _kernels.splat_numba(
+            (Hs, Ws),
+            Ux,
+            Uy,
+            C,
+            R,
+            pattern.centres,
+            pattern.sigma,
+            pattern.amplitude,
+            n,
+            CUTOFF_SIGMAS,
+        )
     rho_max = radius(pattern.sigma.max())
     pad = 2 * rho_max  # blob centres up to rho_max outside + their window
     Hp, Wp = Hs + 2 * pad, Ws + 2 * pad
@@ -358,7 +384,10 @@ def render(
 
 
 def acquire(
-    intensity: np.ndarray, bit_depth: int = 8, noise_sigma: float = 0.0, rng: np.random.Generator | int | None = None
+    intensity: np.ndarray,
+    bit_depth: int = 8,
+    noise_sigma: float = 0.0,
+    rng: np.random.Generator | int | None = None,
 ) -> np.ndarray:
     """Sensor: full-scale fractions -> noisy, rounded, clipped ``uint8``/``uint16`` grey levels."""
     if bit_depth not in (8, 16):
@@ -398,7 +427,8 @@ def render_face(
     displacement_px=None,
     noise_rng: np.random.Generator | int | None = None,
 ) -> np.ndarray:
-    """One camera image of the face (``uint8``/``uint16``), reference if ``displacement_px`` is None."""
+    """One camera image of the face (``uint8``/``uint16``), reference if ``displacement_px`` is
+    None."""
     dark = speckle.bright * (1.0 - speckle.contrast)
     img = render(
         pattern,

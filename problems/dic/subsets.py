@@ -4,6 +4,7 @@ and deformed-image subset for a few points, as arrays (:class:`SubsetPanels`, sa
 Drawing it is post-processing and lives with the other figures: :mod:`bench.dic_figures`.
 Grey levels as in the images; coordinates in pixels.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -44,20 +45,43 @@ class SubsetPanels:
         """Write the panels to ``path`` (.npz)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(path, reference=self.reference, warped=self.warped, deformed=self.deformed,
-                            outline=self.outline, labels=np.array(self.labels), zncc=self.zncc, u=self.u, v=self.v,
-                            title=np.array(self.title))
+        np.savez_compressed(
+            path,
+            reference=self.reference,
+            warped=self.warped,
+            deformed=self.deformed,
+            outline=self.outline,
+            labels=np.array(self.labels),
+            zncc=self.zncc,
+            u=self.u,
+            v=self.v,
+            title=np.array(self.title),
+        )
         return path
 
     @classmethod
     def load(cls, path) -> SubsetPanels:
         with np.load(Path(path), allow_pickle=False) as f:
-            return cls(f["reference"], f["warped"], f["deformed"], f["outline"], [str(t) for t in f["labels"]],
-                       f["zncc"], f["u"], f["v"], str(f["title"]))
+            return cls(
+                f["reference"],
+                f["warped"],
+                f["deformed"],
+                f["outline"],
+                [str(t) for t in f["labels"]],
+                f["zncc"],
+                f["u"],
+                f["v"],
+                str(f["title"]),
+            )
 
 
 def subset_panels(
-    reference: np.ndarray, deformed: np.ndarray, result: DICResult, index: int, subset: int, order: int = 3
+    reference: np.ndarray,
+    deformed: np.ndarray,
+    result: DICResult,
+    index: int,
+    subset: int,
+    order: int = 3,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(reference subset, warped subset g(W(xi; p)), deformed crop, warped corners in the crop).
 
@@ -79,7 +103,10 @@ def subset_panels(
     g = np.asarray(deformed, float)
     crop = np.full((subset, subset), np.nan)
     r0, c0 = oy - h, ox - h
-    rs, cs = slice(max(r0, 0), min(r0 + subset, g.shape[0])), slice(max(c0, 0), min(c0 + subset, g.shape[1]))
+    rs, cs = (
+        slice(max(r0, 0), min(r0 + subset, g.shape[0])),
+        slice(max(c0, 0), min(c0 + subset, g.shape[1])),
+    )
     crop[rs.start - r0 : rs.stop - r0, cs.start - c0 : cs.stop - c0] = g[rs, cs]
     cor = np.array([(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)], dtype=float)
     cxw = cx + p[0] + (1 + p[1]) * cor[:, 0] + p[2] * cor[:, 1] - c0
@@ -97,7 +124,8 @@ def subset_figure_data(
     labels: Sequence[str] | None = None,
     title: str | None = None,
 ) -> SubsetPanels:
-    """The panels of the converged points among ``indices`` (labels default to their pixel position).
+    """The panels of the converged points among ``indices`` (labels default to their pixel
+    position).
 
     Raises ValueError when none of them converged."""
     keep = [j for j, i in enumerate(indices) if bool(result.converged[int(i)])]
@@ -106,7 +134,16 @@ def subset_figure_data(
     if not indices:
         raise ValueError("none of the requested points converged: nothing to plot")
     panels = [subset_panels(reference, deformed, result, i, subset, order) for i in indices]
-    names = list(labels) if labels is not None else [f"({result.x[i]:.0f}, {result.y[i]:.0f}) px" for i in indices]
-    return SubsetPanels(*(np.array([p[k] for p in panels]) for k in range(4)), names,
-                        np.asarray(result.zncc)[indices], np.asarray(result.u)[indices],
-                        np.asarray(result.v)[indices], title or "")
+    names = (
+        list(labels)
+        if labels is not None
+        else [f"({result.x[i]:.0f}, {result.y[i]:.0f}) px" for i in indices]
+    )
+    return SubsetPanels(
+        *(np.array([p[k] for p in panels]) for k in range(4)),
+        names,
+        np.asarray(result.zncc)[indices],
+        np.asarray(result.u)[indices],
+        np.asarray(result.v)[indices],
+        title or "",
+    )

@@ -3,6 +3,7 @@
 ``speckle_image`` renders a *periodic* speckle pattern so that ``fourier_shift`` (a phase ramp
 in the Fourier domain: exact band-limited translation) produces no wrap-around artefacts.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,12 +25,17 @@ def speckle_image(
     supersample: int = 3,
 ) -> np.ndarray:
     """A periodic ``size x size`` speckle image, grey levels as fractions of full scale (float)."""
-    pat = SpecklePattern.random((-0.5, size - 0.5, -0.5, size - 0.5), speckle_px, density, 0.2, 2.0, rng=seed, periodic=True)
-    return render(pat.blurred(blur_px), (size, size), supersample=supersample, bright=bright, dark=dark)
+    pat = SpecklePattern.random(
+        (-0.5, size - 0.5, -0.5, size - 0.5), speckle_px, density, 0.2, 2.0, rng=seed, periodic=True
+    )
+    return render(
+        pat.blurred(blur_px), (size, size), supersample=supersample, bright=bright, dark=dark
+    )
 
 
 def fourier_shift(image: np.ndarray, dx: float, dy: float) -> np.ndarray:
-    """Translate a periodic image by ``(dx, dy)`` px (content moves right/down for positive values)."""
+    """Translate a periodic image by ``(dx, dy)`` px (content moves right/down for positive
+    values)."""
     ky = np.fft.fftfreq(image.shape[0])[:, None]
     kx = np.fft.fftfreq(image.shape[1])[None, :]
     F = np.fft.fft2(image)
@@ -72,13 +78,17 @@ def translation_study(
     noise_sigma : grey-level noise (of the bit depth's scale) added to every image
     bit_depth   : 8 or 16: images are quantised; None: float grey levels in 0..255, no rounding
     """
-    shifts = np.round(np.arange(0.0, 1.0001, 0.1), 10) if shifts is None else np.asarray(shifts, float)
+    shifts = (
+        np.round(np.arange(0.0, 1.0001, 0.1), 10) if shifts is None else np.asarray(shifts, float)
+    )
     base = speckle_image(size, speckle_px=speckle_px, seed=seed)
     rng = np.random.default_rng([seed, 99])
 
     def camera(img):
         if bit_depth is None:
-            return img * 255.0 + (noise_sigma * rng.standard_normal(img.shape) if noise_sigma > 0 else 0.0)
+            return img * 255.0 + (
+                noise_sigma * rng.standard_normal(img.shape) if noise_sigma > 0 else 0.0
+            )
         return acquire(img, bit_depth, noise_sigma, rng)
 
     ref = camera(base)
@@ -97,4 +107,6 @@ def translation_study(
         out["ev"].append(np.sqrt(np.mean(r.std_v[c] ** 2)))
         out["c"].append(np.mean(c))
     a = {k: np.array(v) for k, v in out.items()}
-    return TranslationStudy(shifts, a["bu"], a["bv"], a["su"], a["sv"], a["eu"], a["ev"], a["c"], len(pts))
+    return TranslationStudy(
+        shifts, a["bu"], a["bv"], a["su"], a["sv"], a["eu"], a["ev"], a["c"], len(pts)
+    )

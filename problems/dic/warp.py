@@ -14,6 +14,7 @@ of the pixel-centre map: the neglected term is ``u'' d^2 <= 0.25 px^2 |u''|``, f
 This module also turns the quarter-model field (y >= 0) into a full-face field by symmetry
 (u_y odd, u_z even about y = 0) and a field in mm into one in image pixels.
 """
+
 from __future__ import annotations
 
 from typing import Callable
@@ -65,7 +66,8 @@ def inverse_map(
     """
     rows, cols = shape
     step = max(1, int(map_step))
-    pad = 0 if step == 1 else 3 * step  # coarse grid overhangs the image: no spline edge effects inside
+    # coarse grid overhangs the image: no spline edge effects inside
+    pad = 0 if step == 1 else 3 * step
     ys = np.arange(-pad, rows - 1 + step + pad, step, dtype=float)
     xs = np.arange(-pad, cols - 1 + step + pad, step, dtype=float)
     x, y = np.meshgrid(xs, ys)
@@ -91,7 +93,9 @@ def inverse_map(
     return ux, uy
 
 
-def supersample_displacement(ux: np.ndarray, uy: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def supersample_displacement(
+    ux: np.ndarray, uy: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Displacements ``(Ux, Uy)`` at the ``n x n`` sub-samples of every pixel (float32).
 
     Sub-sample ``(a, b)`` of pixel ``(r, c)`` sits at ``x = c + d_b``, ``y = r + d_a`` with

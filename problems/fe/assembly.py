@@ -7,10 +7,11 @@ computed once per mesh. Two implementations use them:
   each element matrix in a 24 x 24 local buffer and add it straight into the CSR data array through
   the slot map; likewise the internal force and the strain increment. No per-element temporaries
   of shape (ne, 24, 24) or (ne, 8, 6, 24) are created.
-* :func:`element_matrices` / :func:`element_forces` + :meth:`Pattern.matrix` / :meth:`Pattern.vector`
-  (reference): batched numpy products and one ``np.bincount``. They are what the fused kernels are
-  tested against and the "numpy" assembly of :class:`~problems.fe.newton.NewtonSettings`, used by
-  ``bench/perf/forward.py`` to time the old code path.
+* :func:`element_matrices` / :func:`element_forces` + :meth:`Pattern.matrix` /
+  :meth:`Pattern.vector` (reference): batched numpy products and one ``np.bincount``. They are what
+  the fused kernels are tested against and the "numpy" assembly of
+  :class:`~problems.fe.newton.NewtonSettings`, used by ``bench/perf/forward.py`` to time the old
+  code path.
 
 How the fused tangent saves work: every strain operator of this code has the form
 ``B_g = P Bs_g + (1/3) m c_g^T`` with ``Bs_g`` the standard (sparse) small-strain operator of the
@@ -18,7 +19,8 @@ shape-function gradients at Gauss point g, ``m = [1, 1, 1, 0, 0, 0]``, ``P = I -
 deviatoric projector (P m = 0) and ``c_g`` the volumetric row (the element mean b-bar for the
 mean-dilatation element, the point's own divergence row for the standard element). Then
 
-    B_g^T D B_g = Bs^T (P D P) Bs + (1/3) Bs^T P D m c^T + (1/3) c m^T D P Bs + (1/9) (m^T D m) c c^T,
+    B_g^T D B_g = Bs^T (P D P) Bs + (1/3) Bs^T P D m c^T + (1/3) c m^T D P Bs
+                  + (1/9) (m^T D m) c c^T,
 
 and for B-bar (c the same at all Gauss points) the last three terms sum over g into two rank-one
 updates per element. The first term uses the sparsity of ``Bs`` (three non-zeros per column).
@@ -26,6 +28,7 @@ That is about half the arithmetic of the dense ``B^T D B`` and vectorises over r
 
 Units: B in 1/mm, D and stress in MPa, dV in mm^3; K in N/mm, forces in N, strain dimensionless.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -78,7 +81,8 @@ def build_pattern(elements: np.ndarray, n_nodes: int) -> Pattern:
 
 
 def element_matrices(B: np.ndarray, D: np.ndarray, dV: np.ndarray) -> np.ndarray:
-    """Ke = sum_g B_g^T D_g B_g dV_g for B (ne, g, 6, 24), D (ne, g, 6, 6), dV (ne, g) -> (ne, 24, 24).
+    """Ke = sum_g B_g^T D_g B_g dV_g for B (ne, g, 6, 24), D (ne, g, 6, 6), dV (ne, g)
+    -> (ne, 24, 24).
 
     Numpy reference of :meth:`FusedAssembler.tangent`.
     """
@@ -101,7 +105,8 @@ def split_operator(B: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     volumetric rows c (ne, g, 24) 1/mm, and whether c is the same at all Gauss points of each
     element (mean dilatation). Raises ValueError if B does not have that form.
     """
-    G = np.stack([B[:, :, 4, 2::3], B[:, :, 3, 2::3], B[:, :, 3, 1::3]], axis=-1)   # xz/uz, yz/uz, yz/uy
+    # xz/uz, yz/uz, yz/uy
+    G = np.stack([B[:, :, 4, 2::3], B[:, :, 3, 2::3], B[:, :, 3, 1::3]], axis=-1)
     c = B[:, :, 0] + B[:, :, 1] + B[:, :, 2]
     ne, ng = B.shape[:2]
     Bs = np.zeros((ne, ng, 6, 8, 3))
@@ -115,7 +120,9 @@ def split_operator(B: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     Bs[:, :, :3] += c[:, :, None] / 3.0
     scale = max(np.abs(B).max(), 1e-300)
     if np.abs(Bs - B).max() > 1e-12 * scale:
-        raise ValueError("strain operator is not of the form P Bs + m c^T / 3 (not a hexahedral B or B-bar)")
+        raise ValueError(
+            "strain operator is not of the form P Bs + m c^T / 3 (not a hexahedral B or B-bar)"
+        )
     const = bool(np.abs(c - c[:, :1]).max() <= 1e-14 * scale)
     return np.ascontiguousarray(G), np.ascontiguousarray(c), const
 
@@ -136,8 +143,11 @@ class FusedAssembler:
         self.edofs = np.ascontiguousarray(pattern.edofs, dtype=np.int64)
         self.slot = np.ascontiguousarray(pattern.slot, dtype=np.int64)
 
-    def tangent(self, D: np.ndarray, slot: np.ndarray | None = None, nnz: int | None = None) -> np.ndarray:
-        """Sparse-matrix data of K = sum_e sum_g B^T D B dV, N/mm, for D (n_points, 6, 6) or one (6, 6) MPa.
+    def tangent(
+        self, D: np.ndarray, slot: np.ndarray | None = None, nnz: int | None = None
+    ) -> np.ndarray:
+        """Sparse-matrix data of K = sum_e sum_g B^T D B dV, N/mm, for D (n_points, 6, 6) or one
+        (6, 6) MPa.
 
         By default the CSR data (nnz,) of the pattern. ``slot`` (ne * 576,) maps every element
         entry to a position in an array of ``nnz`` values instead, -1 dropping it: that assembles
@@ -150,9 +160,19 @@ class FusedAssembler:
         if slot is None:
             slot, nnz = self.slot, len(self.pattern.indices)
         elif nnz is None or len(slot) != len(self.slot):
-            raise ValueError("a custom slot map needs one entry per element-matrix entry and the output size nnz")
+            raise ValueError(
+                "a custom slot map needs one entry per element-matrix entry and the output size nnz"
+            )
         out = np.empty(nnz)
-        _tangent_kernel(self.G, self.c, self.c_const, D, self.dV, np.ascontiguousarray(slot, dtype=np.int64), out)
+        _tangent_kernel(
+            self.G,
+            self.c,
+            self.c_const,
+            D,
+            self.dV,
+            np.ascontiguousarray(slot, dtype=np.int64),
+            out,
+        )
         return out
 
     def matrix(self, D: np.ndarray) -> sp.csr_matrix:
@@ -162,11 +182,18 @@ class FusedAssembler:
     def internal_force(self, stress: np.ndarray) -> np.ndarray:
         """f = sum_e sum_g B^T sigma dV (n_dofs,), N, for stress (n_points, 6) MPa."""
         out = np.empty(self.pattern.n_dofs)
-        _force_kernel(self.B, np.ascontiguousarray(stress, dtype=float).reshape(-1, 6), self.dV, self.edofs, out)
+        _force_kernel(
+            self.B,
+            np.ascontiguousarray(stress, dtype=float).reshape(-1, 6),
+            self.dV,
+            self.edofs,
+            out,
+        )
         return out
 
     def strain(self, u: np.ndarray) -> np.ndarray:
-        """Strain (n_points, 6) (engineering shear) of the nodal displacement vector u (n_dofs,) mm."""
+        """Strain (n_points, 6) (engineering shear) of the nodal displacement vector u (n_dofs,)
+        mm."""
         out = np.empty((self.dV.size, 6))
         _strain_kernel(self.B, np.ascontiguousarray(u, dtype=float), self.edofs, out)
         return out
@@ -198,10 +225,10 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
             q = e * ng + g if per_point else 0
             w = dV[e, g]
             for i in range(6):
-                Dm[i] = D[q, i, 0] + D[q, i, 1] + D[q, i, 2]     # D m
-                mD[i] = D[q, 0, i] + D[q, 1, i] + D[q, 2, i]     # m^T D
+                Dm[i] = D[q, i, 0] + D[q, i, 1] + D[q, i, 2]  # D m
+                mD[i] = D[q, 0, i] + D[q, 1, i] + D[q, 2, i]  # m^T D
             mDm = Dm[0] + Dm[1] + Dm[2]
-            for i in range(6):                                    # Dt = w P D P
+            for i in range(6):  # Dt = w P D P
                 for j in range(6):
                     v = D[q, i, j]
                     if j < 3:
@@ -211,11 +238,11 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
                         if j < 3:
                             v += third * third * mDm
                     Dt[i, j] = w * v
-            for i in range(6):                                    # w/3 P D m, w/3 P D^T m
+            for i in range(6):  # w/3 P D m, w/3 P D^T m
                 corr = third * mDm if i < 3 else 0.0
                 pdm[i] = w * third * (Dm[i] - corr)
                 pmd[i] = w * third * (mD[i] - corr)
-            for b in range(8):                                    # X = Dt Bs
+            for b in range(8):  # X = Dt Bs
                 gx = G[e, g, b, 0]
                 gy = G[e, g, b, 1]
                 gz = G[e, g, b, 2]
@@ -223,7 +250,7 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
                     X[r, 3 * b] = gx * Dt[r, 0] + gz * Dt[r, 4] + gy * Dt[r, 5]
                     X[r, 3 * b + 1] = gy * Dt[r, 1] + gz * Dt[r, 3] + gx * Dt[r, 5]
                     X[r, 3 * b + 2] = gz * Dt[r, 2] + gy * Dt[r, 3] + gx * Dt[r, 4]
-            for a in range(8):                                    # Ke += Bs^T X
+            for a in range(8):  # Ke += Bs^T X
                 gx = G[e, g, a, 0]
                 gy = G[e, g, a, 1]
                 gz = G[e, g, a, 2]
@@ -240,7 +267,7 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
             sg = w * mDm * third * third
             if c_const:
                 s += sg
-            else:                                                 # rank-one terms of this point
+            else:  # rank-one terms of this point
                 for a in range(24):
                     ua = U[a] + sg * c[e, g, a]
                     ca = c[e, g, a]

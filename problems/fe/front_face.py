@@ -1,4 +1,5 @@
 """What a camera and a load cell see of a forward run: front-face displacements and plate force."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -7,14 +8,21 @@ import scipy.sparse as sp
 from problems.fe.mesh import Mesh
 
 
-def measurement_grid(spacing_mm: float = 5.0, margin_mm: float = 5.0, width_mm: float = 75.0,
-                     height_mm: float = 150.0) -> np.ndarray:
-    """Points (m, 2) = (y, z) mm on the front face, every ``spacing_mm`` with a ``margin_mm`` margin.
+def measurement_grid(
+    spacing_mm: float = 5.0,
+    margin_mm: float = 5.0,
+    width_mm: float = 75.0,
+    height_mm: float = 150.0,
+) -> np.ndarray:
+    """Points (m, 2) = (y, z) mm on the front face, every ``spacing_mm`` with a ``margin_mm``
+    margin.
 
     The default gives y = 5...70, z = 5...145: 14 x 29 = 406 points (z fastest).
     """
     if spacing_mm <= 0 or margin_mm < 0:
-        raise ValueError(f"grid spacing_mm = {spacing_mm} must be > 0 and margin_mm = {margin_mm} >= 0")
+        raise ValueError(
+            f"grid spacing_mm = {spacing_mm} must be > 0 and margin_mm = {margin_mm} >= 0"
+        )
     y = np.arange(margin_mm, width_mm - margin_mm + 1e-9, spacing_mm)
     z = np.arange(margin_mm, height_mm - margin_mm + 1e-9, spacing_mm)
     Y, Z = np.meshgrid(y, z, indexing="ij")
@@ -27,11 +35,14 @@ def front_face_operator(mesh: Mesh, points_mm) -> sp.csr_matrix:
     Uses the structured grid of the front face x = max x (node coordinates of the undeformed mesh).
     """
     pts = np.atleast_2d(np.asarray(points_mm, float))
-    g = mesh.grid_index()[-1]                          # (ny+1, nz+1) node indices on x = 75 mm
+    g = mesh.grid_index()[-1]  # (ny+1, nz+1) node indices on x = 75 mm
     ys, zs = mesh.nodes[g[:, 0], 1], mesh.nodes[g[0, :], 2]
     y, z = pts[:, 0], pts[:, 1]
     if np.any((y < ys[0] - 1e-9) | (y > ys[-1] + 1e-9) | (z < zs[0] - 1e-9) | (z > zs[-1] + 1e-9)):
-        raise ValueError(f"front-face points must lie in y in [{ys[0]}, {ys[-1]}] mm, z in [{zs[0]}, {zs[-1]}] mm")
+        raise ValueError(
+            f"front-face points must lie in y in [{ys[0]}, {ys[-1]}] mm, z in [{zs[0]}, {zs[-1]}] "
+            "mm"
+        )
     j = np.clip(np.searchsorted(ys, y, side="right") - 1, 0, len(ys) - 2)
     k = np.clip(np.searchsorted(zs, z, side="right") - 1, 0, len(zs) - 2)
     s = (y - ys[j]) / (ys[j + 1] - ys[j])

@@ -28,6 +28,7 @@ cut increment, never an exception of the run.
 Units: whatever the matrix carries (N/mm for the stiffness, N for the right-hand sides, mm for
 the solutions).
 """
+
 from __future__ import annotations
 
 import math
@@ -57,7 +58,8 @@ class Factor(Protocol):
     krylov_iterations: int
 
     def solve(self, rhs: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
-        """Solution of ``A x = rhs`` for rhs (n,) or (n, k); relative residual <= rtol per column."""
+        """Solution of ``A x = rhs`` for rhs (n,) or (n, k); relative residual <= rtol per
+        column."""
         ...
 
     def for_matrix(self, A: sp.spmatrix) -> "Factor | None":
@@ -79,13 +81,17 @@ class LinearSolver(Protocol):
 def make_linear_solver(name: str = "auto") -> LinearSolver:
     """The solver called ``name`` (one of :data:`LINEAR_SOLVERS`)."""
     if name not in LINEAR_SOLVERS:
-        raise ValueError(f"linear_solver = {name!r} is unknown; allowed: {', '.join(LINEAR_SOLVERS)}")
+        raise ValueError(
+            f"linear_solver = {name!r} is unknown; allowed: {', '.join(LINEAR_SOLVERS)}"
+        )
     if name == "auto":
         name = "cholmod-gmres" if cholmod_available() else "superlu"
     if name == "cholmod-gmres":
         if not cholmod_available():
-            raise ValueError("linear_solver = 'cholmod-gmres' needs the kvxopt package (pip install kvxopt); "
-                             "use 'superlu' or 'auto' without it")
+            raise ValueError(
+                "linear_solver = 'cholmod-gmres' needs the kvxopt package (pip install kvxopt); "
+                "use 'superlu' or 'auto' without it"
+            )
         return CholmodGmresSolver()
     return SuperLUSolver()
 
@@ -118,11 +124,16 @@ class SuperLUFactor:
 
 
 def superlu_factor(A: sp.spmatrix) -> SuperLUFactor:
-    """SuperLU of A in its given (fill-reducing) order, diagonal pivoting; SingularMatrixError if singular."""
+    """SuperLU of A in its given (fill-reducing) order, diagonal pivoting; SingularMatrixError if
+    singular."""
     try:
         # The ordering is already fill-reducing: keep it (NATURAL) and pivot on the diagonal.
-        lu = spla.splu(sp.csc_matrix(A), permc_spec="NATURAL", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
+        lu = spla.splu(
+            sp.csc_matrix(A),
+            permc_spec="NATURAL",
+            diag_pivot_thresh=0.0,
+            options={"SymmetricMode": True},
+        )
     except RuntimeError as exc:  # "Factor is exactly singular"
         raise SingularMatrixError(str(exc)) from exc
     return SuperLUFactor(lu)
@@ -139,7 +150,8 @@ class SuperLUSolver:
 
 # --------------------------------------------------------------------------------- CHOLMOD+GMRES
 class _SymmetricPartPattern:
-    """Lower triangle of (A + A^T)/2 for a structurally symmetric CSC pattern, and its CHOLMOD analysis."""
+    """Lower triangle of (A + A^T)/2 for a structurally symmetric CSC pattern, and its CHOLMOD
+    analysis."""
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, n: int):
         import kvxopt
@@ -147,18 +159,25 @@ class _SymmetricPartPattern:
 
         self.indptr, self.indices, self.n = indptr, indices, n
         cols = np.repeat(np.arange(n), np.diff(indptr))
-        lower = np.nonzero(indices >= cols)[0]            # CSC order: by column, then row
+        lower = np.nonzero(indices >= cols)[0]  # CSC order: by column, then row
         rows_l, cols_l = indices[lower], cols[lower]
-        keys = cols.astype(np.int64) * n + indices          # sorted (CSC with sorted indices)
+        keys = cols.astype(np.int64) * n + indices  # sorted (CSC with sorted indices)
         if np.any(np.diff(keys) <= 0):
             raise ValueError("matrix indices must be sorted and unique")
         transposed = np.searchsorted(keys, rows_l.astype(np.int64) * n + cols_l)
-        if np.any(transposed >= len(keys)) or np.any(keys[np.minimum(transposed, len(keys) - 1)] != rows_l.astype(np.int64) * n + cols_l):
+        if np.any(transposed >= len(keys)) or np.any(
+            keys[np.minimum(transposed, len(keys) - 1)] != rows_l.astype(np.int64) * n + cols_l
+        ):
             raise ValueError("matrix pattern is not structurally symmetric")
         self.lower, self.transposed = lower, transposed
-        self.matrix = kvxopt.spmatrix(np.zeros(len(lower)), rows_l.astype(int), cols_l.astype(int), (n, n))
+        self.matrix = kvxopt.spmatrix(
+            np.zeros(len(lower)), rows_l.astype(int), cols_l.astype(int), (n, n)
+        )
         cp, ri, _ = self.matrix.CCS
-        if not (np.array_equal(np.asarray(ri).ravel(), rows_l) and np.array_equal(np.asarray(cp).ravel(), indptr_of(cols_l, n))):
+        if not (
+            np.array_equal(np.asarray(ri).ravel(), rows_l)
+            and np.array_equal(np.asarray(cp).ravel(), indptr_of(cols_l, n))
+        ):
             raise RuntimeError("unexpected kvxopt storage order")
         cholmod.options["supernodal"] = 2
         # The rows are already in nested-dissection order: CHOLMOD keeps it.
@@ -166,9 +185,14 @@ class _SymmetricPartPattern:
         self.generation = 0
 
     def matches(self, A: sp.csc_matrix) -> bool:
-        return (A.shape[0] == self.n and (A.indices is self.indices or (
-            len(A.indices) == len(self.indices) and np.array_equal(A.indptr, self.indptr)
-            and np.array_equal(A.indices, self.indices))))
+        return A.shape[0] == self.n and (
+            A.indices is self.indices
+            or (
+                len(A.indices) == len(self.indices)
+                and np.array_equal(A.indptr, self.indptr)
+                and np.array_equal(A.indices, self.indices)
+            )
+        )
 
 
 def indptr_of(cols: np.ndarray, n: int) -> np.ndarray:
@@ -177,11 +201,14 @@ def indptr_of(cols: np.ndarray, n: int) -> np.ndarray:
 
 
 class CholmodGmresFactor:
-    """CHOLMOD factor of the symmetric part of one matrix, preconditioning GMRES on a matrix ``A``."""
+    """CHOLMOD factor of the symmetric part of one matrix, preconditioning GMRES on a matrix
+    ``A``."""
 
     exact = False
 
-    def __init__(self, solver: "CholmodGmresSolver", pattern: _SymmetricPartPattern, generation: int, A):
+    def __init__(
+        self, solver: "CholmodGmresSolver", pattern: _SymmetricPartPattern, generation: int, A
+    ):
         self._solver, self._pattern, self._generation = solver, pattern, generation
         self.A = A
         self.n = A.shape[0]
@@ -193,8 +220,10 @@ class CholmodGmresFactor:
         import kvxopt.cholmod as cholmod
 
         if self._pattern.generation != self._generation:
-            raise RuntimeError("this factorisation was overwritten by a later one of the same solver; "
-                               "use a factor only until the solver factorises again")
+            raise RuntimeError(
+                "this factorisation was overwritten by a later one of the same solver; "
+                "use a factor only until the solver factorises again"
+            )
         y = kvxopt.matrix(np.asfortranarray(v, dtype=float))
         cholmod.solve(self._pattern.symbolic, y)
         return np.asarray(y).reshape(v.shape)
@@ -240,12 +269,14 @@ class CholmodGmresSolver:
             self._pattern = _SymmetricPartPattern(A.indptr, A.indices, A.shape[0])
         p = self._pattern
         values = 0.5 * (A.data[p.lower] + A.data[p.transposed])
-        p.matrix.V = kvxopt.matrix(values)           # same pattern: the symbolic analysis stays valid
+        # same pattern: the symbolic analysis stays valid
+        p.matrix.V = kvxopt.matrix(values)
         p.generation += 1
         cholmod.options["supernodal"] = 2
         try:
             cholmod.numeric(p.matrix, p.symbolic)
-            cholmod.diag(p.symbolic)   # raises unless the factorisation completed (positive definite)
+            # raises unless the factorisation completed (positive definite)
+            cholmod.diag(p.symbolic)
             ok = True
         except (ArithmeticError, ValueError):
             ok = False
@@ -314,7 +345,7 @@ def gmres(matvec, psolve, b: np.ndarray, rtol: float, restart: int = 40, maxiter
             V[j + 1] = w / hn
         y = np.zeros(k)
         for i in range(k - 1, -1, -1):  # back substitution with the triangular H
-            y[i] = (g[i] - H[i, i + 1:k] @ y[i + 1:k]) / H[i, i]
+            y[i] = (g[i] - H[i, i + 1 : k] @ y[i + 1 : k]) / H[i, i]
         x += y @ Z[:k]
         r = b - matvec(x)
         beta = float(np.linalg.norm(r))

@@ -1,4 +1,5 @@
 """Export of a forward run to VTU files (one per snapshot) and a ParaView ``.pvd`` collection."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,7 +23,7 @@ def write_vtu(response: Response, directory: str | Path, stem: str = "cube") -> 
     out.mkdir(parents=True, exist_ok=True)
     mesh = response.mesh
     paths = []
-    for k, top in enumerate(response.snapshots_mm):
+    for k, _top in enumerate(response.snapshots_mm):
         s = response.stress[k]
         dev = s[:, :3] - s[:, :3].mean(axis=1, keepdims=True)
         vm = np.sqrt(1.5 * (dev**2).sum(axis=1) + 3.0 * (s[:, 3:] ** 2).sum(axis=1))
@@ -30,12 +31,23 @@ def write_vtu(response: Response, directory: str | Path, stem: str = "cube") -> 
         for j, name in enumerate(response.state_names):
             cell_data[name] = [response.state[k, :, j]]
         path = out / f"{stem}_{k:04d}.vtu"
-        meshio.write(path, meshio.Mesh(mesh.nodes, [("hexahedron", mesh.elements)],
-                                       point_data={"displacement": response.displacements[k]},
-                                       cell_data=cell_data))
+        meshio.write(
+            path,
+            meshio.Mesh(
+                mesh.nodes,
+                [("hexahedron", mesh.elements)],
+                point_data={"displacement": response.displacements[k]},
+                cell_data=cell_data,
+            ),
+        )
         paths.append(path)
-    entries = "\n".join(f'    <DataSet timestep="{t:.6g}" file="{p.name}"/>' for t, p in zip(response.snapshots_mm, paths))
+    entries = "\n".join(
+        f'    <DataSet timestep="{t:.6g}" file="{p.name}"/>'
+        for t, p in zip(response.snapshots_mm, paths)
+    )
     (out / f"{stem}.pvd").write_text(
-        f'<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n{entries}\n'
-        "  </Collection>\n</VTKFile>\n")
+        '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
+        f"  <Collection>\n{entries}\n"
+        "  </Collection>\n</VTKFile>\n"
+    )
     return paths

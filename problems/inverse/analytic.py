@@ -1,14 +1,15 @@
-"""Cheap analytic forward models that go through the very same :class:`~problems.inverse.evaluator.Evaluator`.
+"""Cheap analytic forward models that go through the very same
+:class:`~problems.inverse.evaluator.Evaluator`.
 
 They let every solver be tested in seconds, with known answers:
 
 ``analytic-smooth``
     A smooth elasto-plastic uniaxial compression curve with dilatancy, Drucker-Prager-like,
     parameters ``E, sigma0, H, psi``. Strains ``eps_k`` (40 points up to 4e-3) are split into an
-    elastic part ``ee = eps / (1 + (E eps / sigma0)^2)^(1/2)`` (it saturates at ``sigma0 / E``) and a
-    plastic part ``ep = eps - ee``; measured are the axial stress ``E ee + H ep`` (MPa, sigma 0.05)
-    and the lateral expansion ``nu ee + (1 + tan psi) ep / 2`` (sigma 2e-6). Well conditioned,
-    cost 0 at the reference (inside the bounds).
+    elastic part ``ee = eps / (1 + (E eps / sigma0)^2)^(1/2)`` (it saturates at ``sigma0 / E``) and
+    a plastic part ``ep = eps - ee``; measured are the axial stress ``E ee + H ep``
+    (MPa, sigma 0.05) and the lateral expansion ``nu ee + (1 + tan psi) ep / 2`` (sigma 2e-6). Well
+    conditioned, cost 0 at the reference (inside the bounds).
 ``analytic-multimodal``
     A sinusoid frequency fit ``y(t) = a sin(omega t) + c`` on ``t in [0, 15] s`` (80 points, sigma
     0.05), parameters ``a, omega, c``: seven local minima in ``omega`` over ``[1, 4]`` rad/s, each
@@ -16,10 +17,11 @@ They let every solver be tested in seconds, with known answers:
     ``omega in [1.7, 2.3]`` (a fifth of the range). The default start (``omega = 1.5``) lies in the
     basin of the local minimum at 1.5, so a local method started there fails.
 ``analytic-rastrigin``
-    Rastrigin in residual form: ``u_i = (x_i / ref_i - 1) / 0.1``, residuals ``[u_i, sqrt(20) sin(pi u_i)]``
-    so that ``cost = sum u_i^2 + 20 sin^2(pi u_i)`` (the Rastrigin function with A = 10), 3
-    parameters, asymmetric bounds, about 700 local minima near integer ``u``; the global basin is
-    ``|u_i| < 1/2`` (``|x_i / ref_i - 1| < 5 %``), global minimum 0 at the reference.
+    Rastrigin in residual form: ``u_i = (x_i / ref_i - 1) / 0.1``, residuals
+    ``[u_i, sqrt(20) sin(pi u_i)]`` so that ``cost = sum u_i^2 + 20 sin^2(pi u_i)`` (the Rastrigin
+    function with A = 10), 3 parameters, asymmetric bounds, about 700 local minima near integer
+    ``u``; the global basin is ``|u_i| < 1/2`` (``|x_i / ref_i - 1| < 5 %``), global minimum 0 at
+    the reference.
 ``analytic-linear``
     ``y = A x`` (20 x 3), sigma 0.05: with the uniform prior on the (wide) box the posterior is
     Gaussian to within 20 standard deviations; :meth:`LinearModel.posterior` gives its mean and
@@ -33,6 +35,7 @@ They let every solver be tested in seconds, with known answers:
 ``noise`` times the nominal measurement standard deviation of Gaussian noise (seeded).
 All models are module-level classes, hence picklable.
 """
+
 from __future__ import annotations
 
 import math
@@ -103,7 +106,9 @@ class InfeasibleStressStrainModel(StressStrainModel):
 
     def check(self, x) -> str | None:
         if x[3] > self.psi_max:
-            return f"dilatancy angle psi = {x[3]:.4g} deg above {self.psi_max:g} deg is not admissible"
+            return (
+                f"dilatancy angle psi = {x[3]:.4g} deg above {self.psi_max:g} deg is not admissible"
+            )
         return None
 
 
@@ -114,7 +119,9 @@ class FailingStressStrainModel(StressStrainModel):
 
     def __call__(self, x) -> ForwardResult:
         if x[1] > self.sigma0_max:
-            return ForwardResult(False, None, f"return mapping did not converge (sigma0 = {x[1]:.4g} MPa)")
+            return ForwardResult(
+                False, None, f"return mapping did not converge (sigma0 = {x[1]:.4g} MPa)"
+            )
         return super().__call__(x)
 
 
@@ -133,7 +140,9 @@ class SinusoidModel:
 
     def jacobian(self, x) -> np.ndarray:
         a, w, c = x
-        return np.column_stack([np.sin(w * self.t), a * self.t * np.cos(w * self.t), np.ones_like(self.t)])
+        return np.column_stack(
+            [np.sin(w * self.t), a * self.t * np.cos(w * self.t), np.ones_like(self.t)]
+        )
 
     def check(self, x) -> str | None:
         return None
@@ -162,7 +171,9 @@ class RastriginModel:
     def jacobian(self, x) -> np.ndarray:
         u = self.u(x)
         du = 1.0 / (self.reference * self.scale)
-        return np.vstack([np.diag(du), np.diag(math.sqrt(2 * self.A) * math.pi * np.cos(math.pi * u) * du)])
+        return np.vstack(
+            [np.diag(du), np.diag(math.sqrt(2 * self.A) * math.pi * np.cos(math.pi * u) * du)]
+        )
 
     def check(self, x) -> str | None:
         return None
@@ -205,29 +216,40 @@ class LinearModel:
 
 # --- cases --------------------------------------------------------------------------------
 
+
 def _smooth_parameters() -> tuple[Parameter, ...]:
-    return (Parameter("E", "MPa", 30_000.0, 15_000.0, 45_000.0),
-            Parameter("sigma0", "MPa", 20.0, 14.0, 26.0),
-            Parameter("H", "MPa", 1_500.0, 750.0, 2_250.0),
-            Parameter("psi", "deg", 15.0, 5.0, 30.0))
+    return (
+        Parameter("E", "MPa", 30_000.0, 15_000.0, 45_000.0),
+        Parameter("sigma0", "MPa", 20.0, 14.0, 26.0),
+        Parameter("H", "MPa", 1_500.0, 750.0, 2_250.0),
+        Parameter("psi", "deg", 15.0, 5.0, 30.0),
+    )
 
 
 def _sinusoid_parameters() -> tuple[Parameter, ...]:
-    return (Parameter("a", "-", 1.0, 0.5, 2.0), Parameter("omega", "rad/s", 2.0, 1.0, 4.0),
-            Parameter("c", "-", 1.0, 0.5, 1.5))
+    return (
+        Parameter("a", "-", 1.0, 0.5, 2.0),
+        Parameter("omega", "rad/s", 2.0, 1.0, 4.0),
+        Parameter("c", "-", 1.0, 0.5, 1.5),
+    )
 
 
 def _rastrigin_parameters() -> tuple[Parameter, ...]:
     m = RastriginModel
     lo = m.reference * (1 + m.scale * m.u_lower)
     hi = m.reference * (1 + m.scale * m.u_upper)
-    return tuple(Parameter(n, "-", float(r), float(a), float(b))
-                 for n, r, a, b in zip(m.names, m.reference, lo, hi))
+    return tuple(
+        Parameter(n, "-", float(r), float(a), float(b))
+        for n, r, a, b in zip(m.names, m.reference, lo, hi)
+    )
 
 
 def _linear_parameters() -> tuple[Parameter, ...]:
     m = LinearModel
-    return tuple(Parameter(n, "-", float(r), 0.5 * float(r), 1.5 * float(r)) for n, r in zip(m.names, m.reference))
+    return tuple(
+        Parameter(n, "-", float(r), 0.5 * float(r), 1.5 * float(r))
+        for n, r in zip(m.names, m.reference)
+    )
 
 
 _MODELS = {
@@ -240,7 +262,8 @@ _MODELS = {
 }
 
 ANALYTIC_CASES: dict[str, Case] = {
-    name: Case(name, "analytic", "none", params(), {}, kind="analytic") for name, (_, params) in _MODELS.items()
+    name: Case(name, "analytic", "none", params(), {}, kind="analytic")
+    for name, (_, params) in _MODELS.items()
 }
 
 
@@ -270,7 +293,17 @@ def analytic_objective(name: str, *, noise: float = 0.0, seed: int = 0, mapper=N
     if isinstance(model, RastriginModel):
         data[:] = 0.0  # exact zeros rather than rounding noise
     if noise:
-        data = data + noise * np.broadcast_to(sigma, data.shape) * np.random.default_rng(seed).standard_normal(data.size)
-    problem = LeastSquaresProblem(model, data, case.lower, case.upper, case.reference, sigma=sigma, blocks=blocks,
-                                  provenance={"case": name, "data_tier": "synthetic", "noise": noise, "seed": seed})
+        data = data + noise * np.broadcast_to(sigma, data.shape) * np.random.default_rng(
+            seed
+        ).standard_normal(data.size)
+    problem = LeastSquaresProblem(
+        model,
+        data,
+        case.lower,
+        case.upper,
+        case.reference,
+        sigma=sigma,
+        blocks=blocks,
+        provenance={"case": name, "data_tier": "synthetic", "noise": noise, "seed": seed},
+    )
     return Evaluator(problem, mapper=mapper)

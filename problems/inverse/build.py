@@ -6,6 +6,7 @@ region, the FE forward model on the inverse mesh and a model-error correction in
 ``provenance``. The honesty rule is enforced here: a model-error data set's discretisation is
 never used by a model of the loop (:func:`problems.inverse.model_error.check_honest`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -36,8 +37,10 @@ class Region:
 
     def __post_init__(self):
         if not (np.isfinite(self.plate_margin_mm) and 0.0 <= self.plate_margin_mm < SIZE_MM[2] / 2):
-            raise ValueError(f"plate_margin_mm = {self.plate_margin_mm!r} is out of range: "
-                             f"0 <= margin < {SIZE_MM[2] / 2:g} mm")
+            raise ValueError(
+                f"plate_margin_mm = {self.plate_margin_mm!r} is out of range: "
+                f"0 <= margin < {SIZE_MM[2] / 2:g} mm"
+            )
 
     def mask(self, points) -> np.ndarray:
         """Boolean mask over front-face points (m, 2) = (y, z) mm."""
@@ -49,13 +52,16 @@ def hifi_mesh_for(mesh: str) -> str:
     """The default high-fidelity mesh of a correction for inverse mesh ``mesh``."""
     base = str(mesh).partition(":")[0]
     if base not in DEFAULT_HIFI:
-        raise ValueError(f"no default high-fidelity mesh for inverse mesh {mesh!r}; allowed inverse meshes: "
-                         f"{', '.join(DEFAULT_HIFI)} (or name the high-fidelity mesh explicitly)")
+        raise ValueError(
+            f"no default high-fidelity mesh for inverse mesh {mesh!r}; allowed inverse meshes: "
+            f"{', '.join(DEFAULT_HIFI)} (or name the high-fidelity mesh explicitly)"
+        )
     return DEFAULT_HIFI[base]
 
 
 def resolve_data(case: Case, mesh: str, tier: str, data: Dataset | str | Path | None) -> Dataset:
-    """The data set: explicit (a Dataset or a file) or the tier's default for the inverse ``mesh``."""
+    """The data set: explicit (a Dataset or a file) or the tier's default for the inverse
+    ``mesh``."""
     if data is None:
         return get_data(case.name, tier_settings(tier, inverse_mesh=mesh))
     return data if isinstance(data, Dataset) else load(data)
@@ -65,26 +71,42 @@ def subset(data: Dataset, region: Region) -> tuple[np.ndarray, np.ndarray, np.nd
     """``(points, values, sigma_displacement)`` of the data restricted to ``region``."""
     keep = region.mask(data.points)
     if not keep.any():
-        raise ValueError(f"the measurement region (plate margin {region.plate_margin_mm:g} mm) leaves no point")
+        raise ValueError(
+            f"the measurement region (plate margin {region.plate_margin_mm:g} mm) leaves no point"
+        )
     std = data.std_u_mm[:, :, keep]
     values = layout.stack(data.u_h[:, keep], data.u_v[:, keep], data.reaction_kN)
     return data.points[keep], values, std
 
 
-def model_pair(case: Case | str, mesh: str, hifi_mesh: str, data: Dataset, region: Region = Region()):
-    """``(hifi, inverse)`` FE forward models of a correction on the objective's points and loading."""
+def model_pair(
+    case: Case | str, mesh: str, hifi_mesh: str, data: Dataset, region: Region = Region()
+):
+    """``(hifi, inverse)`` FE forward models of a correction on the objective's points and
+    loading."""
     from problems.inverse.forward import FEForwardModel
 
     case = get_case(case) if isinstance(case, str) else case
     points = data.points[region.mask(data.points)]
-    return (FEForwardModel(case, hifi_mesh, data.settings.loading, points),
-            FEForwardModel(case, mesh, data.settings.loading, points))
+    return (
+        FEForwardModel(case, hifi_mesh, data.settings.loading, points),
+        FEForwardModel(case, mesh, data.settings.loading, points),
+    )
 
 
-def build_objective(case: Case | str, *, mesh: str = "coarse", tier: str = "model-error",
-                    data: Dataset | str | Path | None = None, region: Region = Region(),
-                    correction: Correction | None = None, hifi_mesh: str | None = None, mapper=None,
-                    sigma_force_kN: float = 1.0, cache: bool = True) -> Evaluator:
+def build_objective(
+    case: Case | str,
+    *,
+    mesh: str = "coarse",
+    tier: str = "model-error",
+    data: Dataset | str | Path | None = None,
+    region: Region = Region(),
+    correction: Correction | None = None,
+    hifi_mesh: str | None = None,
+    mapper=None,
+    sigma_force_kN: float = 1.0,
+    cache: bool = True,
+) -> Evaluator:
     """The evaluator (a solver's objective) of ``case`` with the FE model on ``mesh``.
 
     tier       : ``model-error`` or ``consistent`` data (ignored when ``data`` is given: its own
@@ -108,8 +130,10 @@ def build_objective(case: Case | str, *, mesh: str = "coarse", tier: str = "mode
     tier = ds.settings.tier
     data_key, inverse_key = discretisation_key(ds.settings.mesh), discretisation_key(mesh)
     if tier == "consistent" and data_key != inverse_key:
-        raise ValueError(f"consistent-tier data were made on mesh {ds.settings.mesh} ({data_key}); the inverse "
-                         f"model uses {mesh} ({inverse_key}): use data made on the inverse mesh")
+        raise ValueError(
+            f"consistent-tier data were made on mesh {ds.settings.mesh} ({data_key}); the inverse "
+            f"model uses {mesh} ({inverse_key}): use data made on the inverse mesh"
+        )
     hifi_key = discretisation_key(hifi_mesh) if (correction is not None and hifi_mesh) else None
     check_honest(data_key, tier, forward=inverse_key, hifi=hifi_key)
     points, values, std = subset(ds, region)
@@ -119,15 +143,27 @@ def build_objective(case: Case | str, *, mesh: str = "coarse", tier: str = "mode
     model = FEForwardModel(case, mesh, ds.settings.loading, points)
     shift = 0.0 if correction is None or correction.shift is None else correction.shift
     problem = LeastSquaresProblem(
-        model, values - shift, case.lower, case.upper, case.reference, sigma=sigma,
+        model,
+        values - shift,
+        case.lower,
+        case.upper,
+        case.reference,
+        sigma=sigma,
         covariance_factor=None if correction is None else correction.factor,
         blocks=layout.blocks(len(ds.snapshots_mm), len(points)),
-        provenance={"case": case.name, "data_tier": tier, "data_hash": ds.hash, "data_mesh": ds.settings.mesh,
-                    "data_route": ds.settings.route, "inverse_mesh": mesh,
-                    "region_plate_margin_mm": region.plate_margin_mm,
-                    "treatment": "none" if correction is None else correction.treatment,
-                    "hifi_mesh": hifi_mesh if correction is not None else None,
-                    "correction_hash": None if correction is None else correction.hash})
+        provenance={
+            "case": case.name,
+            "data_tier": tier,
+            "data_hash": ds.hash,
+            "data_mesh": ds.settings.mesh,
+            "data_route": ds.settings.route,
+            "inverse_mesh": mesh,
+            "region_plate_margin_mm": region.plate_margin_mm,
+            "treatment": "none" if correction is None else correction.treatment,
+            "hifi_mesh": hifi_mesh if correction is not None else None,
+            "correction_hash": None if correction is None else correction.hash,
+        },
+    )
     evaluator = Evaluator(problem, mapper=mapper, cache=cache)
     if correction is not None:
         evaluator.charge("hifi", correction.n_hifi, correction.hifi_wall_s)

@@ -6,6 +6,7 @@ Drucker-Prager variant; ``"analytic"``: a cheap test problem of :mod:`problems.i
 
 Units: MPa for E, sigma0, H, pt0; degrees for beta and psi; ``a`` in MPa^(1-b); K, b, nu -.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -29,7 +30,9 @@ class Parameter:
 
     def __post_init__(self):
         if not (self.lower <= self.reference <= self.upper):
-            raise ValueError(f"{self.name}: reference {self.reference} outside [{self.lower}, {self.upper}]")
+            raise ValueError(
+                f"{self.name}: reference {self.reference} outside [{self.lower}, {self.upper}]"
+            )
 
 
 @dataclass(frozen=True)
@@ -81,15 +84,19 @@ class Case:
 
     def random_starts(self, n: int, seed: int) -> np.ndarray:
         """``n`` seeded Latin-hypercube points in the bounds, shape (n, n_params)."""
-        unit = qmc.LatinHypercube(d=len(self.parameters), seed=np.random.default_rng(seed)).random(n)
+        unit = qmc.LatinHypercube(d=len(self.parameters), seed=np.random.default_rng(seed)).random(
+            n
+        )
         return qmc.scale(unit, self.lower, self.upper)
 
     def identified(self, x) -> dict[str, float]:
         """``{name: value}`` of the identified parameters at ``x``."""
         x = np.asarray(x, float)
         if x.shape != (len(self.parameters),):
-            raise ValueError(f"{self.name}: expected {len(self.parameters)} parameters {self.names}, "
-                             f"got shape {x.shape}")
+            raise ValueError(
+                f"{self.name}: expected {len(self.parameters)} parameters {self.names}, "
+                f"got shape {x.shape}"
+            )
         return dict(zip(self.names, map(float, x)))
 
     def material_parameters(self, x) -> dict[str, float]:
@@ -113,10 +120,18 @@ class Case:
     def to_dict(self) -> dict:
         """The JSON form listed by ``femubench cases --json``."""
         return {
-            "name": self.name, "form": self.form, "hardening": self.hardening,
+            "name": self.name,
+            "form": self.form,
+            "hardening": self.hardening,
             "parameters": [
-                {"name": p.name, "unit": p.unit, "reference": p.reference, "lower": p.lower,
-                 "upper": p.upper, "start": float(s)}
+                {
+                    "name": p.name,
+                    "unit": p.unit,
+                    "reference": p.reference,
+                    "lower": p.lower,
+                    "upper": p.upper,
+                    "start": float(s),
+                }
                 for p, s in zip(self.parameters, self.start)
             ],
             "fixed": dict(self.fixed),

@@ -8,6 +8,7 @@ yield surface in pure shear or uniaxial tension, and ``H = 75 sigma0`` keeps H/s
 
 Units: MPa for E, sigma0, H, pt0; degrees for beta and psi; ``a`` in MPa^(1-b); K, b, nu -.
 """
+
 from __future__ import annotations
 
 import math
@@ -18,7 +19,11 @@ from scipy.optimize import brentq
 from problems.inverse.analytic import ANALYTIC_CASES
 from problems.inverse.case import Case, Parameter
 from problems.materials.drucker_prager import (
-    FORM_PARAMETERS, FORMS, OPTIONAL_PARAMETERS, PARAMETER_RANGES, hyperbolic_l0,
+    FORM_PARAMETERS,
+    FORMS,
+    OPTIONAL_PARAMETERS,
+    PARAMETER_RANGES,
+    hyperbolic_l0,
 )
 from problems.materials.hardening import HARDENINGS, reference_test
 
@@ -28,8 +33,18 @@ from problems.materials.hardening import HARDENINGS, reference_test
 ACTIVE = {**FORM_PARAMETERS, "exponent": ("E", "psi", "sigma0", "H", "pt0", "b")}
 UNITS = {name: PARAMETER_RANGES[name][4] for name in PARAMETER_RANGES}
 #: TeX symbol of each parameter (figure and table labels)
-LABELS = {"E": r"$E$", "nu": r"$\nu$", "beta": r"$\beta$", "K": r"$K$", "psi": r"$\psi$",
-          "sigma0": r"$\sigma_0$", "H": r"$H$", "pt0": r"$p_{t0}$", "a": r"$a$", "b": r"$b$"}
+LABELS = {
+    "E": r"$E$",
+    "nu": r"$\nu$",
+    "beta": r"$\beta$",
+    "K": r"$K$",
+    "psi": r"$\psi$",
+    "sigma0": r"$\sigma_0$",
+    "H": r"$H$",
+    "pt0": r"$p_{t0}$",
+    "a": r"$a$",
+    "b": r"$b$",
+}
 FIXED = dict(OPTIONAL_PARAMETERS)
 
 # Reference concrete (compression variants).
@@ -40,11 +55,15 @@ A_REF = (PT0_REF + SIGMA_C0 / 3.0) / SIGMA_C0**B_REF  # exponent surface through
 
 # --- the same concrete seen through each hardening test ------------------------------------
 
+
 def _sigma0_linear(hardening: str) -> float:
     tb, K = math.tan(math.radians(BETA_REF)), K_REF
     d = (1.0 - tb / 3.0) * SIGMA_C0
-    return {"compression": SIGMA_C0, "tension": d / (1.0 / K + tb / 3.0),
-            "shear": d / (math.sqrt(3.0) / 2.0 * (1.0 + 1.0 / K))}[hardening]
+    return {
+        "compression": SIGMA_C0,
+        "tension": d / (1.0 / K + tb / 3.0),
+        "shear": d / (math.sqrt(3.0) / 2.0 * (1.0 + 1.0 / K)),
+    }[hardening]
 
 
 def _sigma0_hyperbolic(hardening: str) -> float:
@@ -88,8 +107,14 @@ class ExponentStrength:
 
 
 #: relative half-width of the box of each parameter (angles and K have absolute boxes)
-BOX = {"E": (0.5, 0.5), "H": (0.5, 0.5), "sigma0": (0.3, 0.3), "pt0": (0.3, 0.3), "a": (0.3, 0.3),
-       "b": (0.3, 0.3)}
+BOX = {
+    "E": (0.5, 0.5),
+    "H": (0.5, 0.5),
+    "sigma0": (0.3, 0.3),
+    "pt0": (0.3, 0.3),
+    "a": (0.3, 0.3),
+    "b": (0.3, 0.3),
+}
 ABSOLUTE_BOX = {"beta": (20.0, 50.0), "psi": (5.0, 30.0), "K": (0.778, 1.0)}
 #: hyperbolic surfaces hardened in tension need pt0 > sigma0/3: a box reaching 20 % (not 30 %)
 #: below the reference pt0 keeps >= 95 % of the box well-posed
@@ -112,8 +137,17 @@ def make_case(form: str, hardening: str) -> Case:
     if hardening not in HARDENINGS:
         raise ValueError(f"hardening {hardening!r} is unknown; allowed: {', '.join(HARDENINGS)}")
     sigma0 = _SIGMA0[form](hardening)
-    refs = {"E": E_REF, "beta": BETA_REF, "K": K_REF, "psi": PSI_REF, "sigma0": sigma0,
-            "H": H_OVER_SIGMA0 * sigma0, "pt0": PT0_REF, "a": A_REF, "b": B_REF}
+    refs = {
+        "E": E_REF,
+        "beta": BETA_REF,
+        "K": K_REF,
+        "psi": PSI_REF,
+        "sigma0": sigma0,
+        "H": H_OVER_SIGMA0 * sigma0,
+        "pt0": PT0_REF,
+        "a": A_REF,
+        "b": B_REF,
+    }
     params = tuple(_parameter(n, refs[n], form, hardening) for n in ACTIVE[form])
     name = f"{form}-{hardening}"
     derive = ExponentStrength(hardening) if form == "exponent" else None

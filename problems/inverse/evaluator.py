@@ -42,6 +42,7 @@ Batches and parallelism
 one batch through a single ``mapper(fn, items)`` call (``fn`` is a picklable callable wrapping
 the model, ``items`` the physical points); ``mapper=None`` is :func:`sequential_map`.
 """
+
 from __future__ import annotations
 
 import math
@@ -55,7 +56,9 @@ import numpy as np
 from problems.inverse.problem import FAILURE_COST, LeastSquaresProblem
 from problems.inverse.protocol import ForwardResult, RunModel, provides_jacobian
 
-Mapper = Callable[[Callable[[np.ndarray], ForwardResult], Sequence[np.ndarray]], Iterable[ForwardResult]]
+Mapper = Callable[
+    [Callable[[np.ndarray], ForwardResult], Sequence[np.ndarray]], Iterable[ForwardResult]
+]
 
 
 def sequential_map(fn, items) -> list:
@@ -67,7 +70,9 @@ class BudgetExhausted(Exception):
     """Raised by the evaluator when an evaluation would exceed the budget."""
 
     def __init__(self, budget: int, n_evals: int):
-        super().__init__(f"evaluation budget of {budget} forward evaluations exhausted ({n_evals} used)")
+        super().__init__(
+            f"evaluation budget of {budget} forward evaluations exhausted ({n_evals} used)"
+        )
         self.budget = budget
         self.n_evals = n_evals
 
@@ -107,8 +112,14 @@ class Evaluator:
     recorded evaluation (progress bars, live logs); they must not raise.
     """
 
-    def __init__(self, problem: LeastSquaresProblem, *, mapper: Mapper | None = None,
-                 cache: bool | int = True, exact_jacobian: bool = True):
+    def __init__(
+        self,
+        problem: LeastSquaresProblem,
+        *,
+        mapper: Mapper | None = None,
+        cache: bool | int = True,
+        exact_jacobian: bool = True,
+    ):
         self.problem = problem
         self.mapper = mapper
         self.cache = cache
@@ -167,19 +178,29 @@ class Evaluator:
         return math.inf if self.budget is None else max(0, self.budget - self.n_evals)
 
     def counters(self) -> dict[str, float]:
-        return {"n_evals": self.n_evals, "n_failed": self.n_failed, "n_infeasible": self.n_infeasible,
-                "n_cache_hits": self.n_cache_hits, "forward_equivalents": self.forward_equivalents()}
+        return {
+            "n_evals": self.n_evals,
+            "n_failed": self.n_failed,
+            "n_infeasible": self.n_infeasible,
+            "n_cache_hits": self.n_cache_hits,
+            "forward_equivalents": self.forward_equivalents(),
+        }
 
     def charge(self, kind: str, n: int, wall_s: float) -> None:
-        """Record ``n`` runs of ``kind`` (e.g. ``"hifi"``, ``"training"``) taking ``wall_s`` s in all."""
+        """Record ``n`` runs of ``kind`` (e.g. ``"hifi"``, ``"training"``) taking ``wall_s`` s in
+        all."""
         c = self.charges.setdefault(kind, {"n": 0, "wall_s": 0.0})
         c["n"] += int(n)
         c["wall_s"] += float(wall_s)
 
     def _unit_s(self) -> float | None:
-        """Median wall time of this evaluator's successful plain runs, s (the forward-equivalent)."""
-        plain = [e["wall_s"] for e in self.log
-                 if not e["cached"] and e["kind"] == "plain" and e["ok"] and e["feasible"]]
+        """Median wall time of this evaluator's successful plain runs, s
+        (the forward-equivalent)."""
+        plain = [
+            e["wall_s"]
+            for e in self.log
+            if not e["cached"] and e["kind"] == "plain" and e["ok"] and e["feasible"]
+        ]
         return float(np.median(plain)) if plain else None
 
     def charged_equivalents(self) -> dict[str, float]:
@@ -188,7 +209,8 @@ class Evaluator:
         return {k: (c["wall_s"] / unit if unit else float(c["n"])) for k, c in self.charges.items()}
 
     def forward_equivalents(self) -> float:
-        """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall time)."""
+        """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall
+        time)."""
         new = [e for e in self.log if not e["cached"]]
         unit = self._unit_s()
         total = 0.0
@@ -216,10 +238,21 @@ class Evaluator:
     def _failure(self, x, message, wall_s=0.0, feasible=True) -> Evaluation:
         if message.startswith("model raised") and not self._warned:
             self._warned = True
-            warnings.warn(f"forward model raised an exception, treated as a failed point: {message}",
-                          RuntimeWarning, stacklevel=3)
-        return Evaluation(x, FAILURE_COST, self.problem.failure_residual.copy(), False, feasible, message,
-                          False, wall_s)
+            warnings.warn(
+                f"forward model raised an exception, treated as a failed point: {message}",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+        return Evaluation(
+            x,
+            FAILURE_COST,
+            self.problem.failure_residual.copy(),
+            False,
+            feasible,
+            message,
+            False,
+            wall_s,
+        )
 
     def _record(self, ev: Evaluation, key: bytes | None, kind: str) -> None:
         if ev.cached:
@@ -236,8 +269,18 @@ class Evaluator:
                     self._cache.popitem(last=False)
             if ev.ok and ev.feasible and (self.best is None or ev.cost < self.best.cost):
                 self.best = ev
-        self.log.append({"x": ev.x, "cost": ev.cost, "ok": ev.ok, "feasible": ev.feasible,
-                         "wall_s": ev.wall_s, "cached": ev.cached, "n_evals": self.n_evals, "kind": kind})
+        self.log.append(
+            {
+                "x": ev.x,
+                "cost": ev.cost,
+                "ok": ev.ok,
+                "feasible": ev.feasible,
+                "wall_s": ev.wall_s,
+                "cached": ev.cached,
+                "n_evals": self.n_evals,
+                "kind": kind,
+            }
+        )
         for observe in self.observers:
             observe(self, ev)
 
@@ -252,12 +295,15 @@ class Evaluator:
         prepared = self.problem.classify(Z)
         keys = [x.tobytes() for x, _ in prepared]
         kind = "jacobian" if with_jacobian else "plain"
-        hits: dict[int, Evaluation | int] = {}  # index -> cached Evaluation, or index of its first copy
+        # index -> cached Evaluation, or index of its first copy
+        hits: dict[int, Evaluation | int] = {}
         new: list[int] = []
         first: dict[bytes, int] = {}
         for i, key in enumerate(keys):
             cached = self._cache.get(key) if self.cache else None
-            if cached is not None and (not with_jacobian or cached.jacobian is not None or not cached.usable):
+            if cached is not None and (
+                not with_jacobian or cached.jacobian is not None or not cached.usable
+            ):
                 hits[i] = cached
                 self._cache.move_to_end(key)
             elif self.cache and key in first:
@@ -271,9 +317,13 @@ class Evaluator:
         done: dict[int, Evaluation] = {}
         if run_idx:
             mapper = self.mapper or sequential_map
-            results = list(mapper(RunModel(self.model, with_jacobian), [prepared[i][0] for i in run_idx]))
+            results = list(
+                mapper(RunModel(self.model, with_jacobian), [prepared[i][0] for i in run_idx])
+            )
             if len(results) != len(run_idx):
-                raise RuntimeError(f"mapper returned {len(results)} results for {len(run_idx)} points")
+                raise RuntimeError(
+                    f"mapper returned {len(results)} results for {len(run_idx)} points"
+                )
             for i, res in zip(run_idx, results):
                 done[i] = self._finish(prepared[i][0], res)
         for i in todo:
@@ -301,7 +351,9 @@ class Evaluator:
 
     def evaluate(self, z, *, with_jacobian: bool = False) -> Evaluation:
         """Evaluate one scaled point (cache first; counts and budget as documented)."""
-        return self.evaluate_many(np.asarray(z, dtype=float).reshape(1, -1), with_jacobian=with_jacobian)[0]
+        return self.evaluate_many(
+            np.asarray(z, dtype=float).reshape(1, -1), with_jacobian=with_jacobian
+        )[0]
 
     def cost(self, z) -> float:
         return self.evaluate(z).cost
@@ -314,14 +366,17 @@ class Evaluator:
         return np.array([ev.cost for ev in self.evaluate_many(Z)])
 
     def cost_split(self, z) -> dict[str, float]:
-        """Cost per named block plus ``"total"``; blocks are ``nan`` for a failed/infeasible point."""
+        """Cost per named block plus ``"total"``; blocks are ``nan`` for a failed/infeasible
+        point."""
         ev = self.evaluate(z)
         if not ev.usable:
             return {**{name: math.nan for name in self.blocks}, "total": ev.cost}
         return {**self.problem.split(ev.residual), "total": ev.cost}
 
     # --- derivatives -----------------------------------------------------------------------------
-    def jacobian(self, z, *, scheme: str = "forward", rel_step: float = 1e-6, r0=None) -> np.ndarray:
+    def jacobian(
+        self, z, *, scheme: str = "forward", rel_step: float = 1e-6, r0=None
+    ) -> np.ndarray:
         """Jacobian ``dR/dz`` (m, n) of the whitened residual: exact when the model provides it
         (one run with sensitivities, ``scheme`` ignored), else by finite differences.
 
@@ -352,7 +407,9 @@ class Evaluator:
         r0 = np.asarray(r0, dtype=float)
         h = rel_step * np.maximum(np.abs(z), 1.0)
         up_room, down_room = self.upper_z - z, z - self.lower_z
-        plus = np.where(h <= up_room, h, np.where(down_room >= up_room, -np.minimum(h, down_room), up_room))
+        plus = np.where(
+            h <= up_room, h, np.where(down_room >= up_room, -np.minimum(h, down_room), up_room)
+        )
         central = scheme == "central"
         pts, cols = [], []
         for i in range(n):
@@ -370,7 +427,9 @@ class Evaluator:
                 ea, eb = evs[k], evs[k + 1]
                 k += 2
                 if ea.usable and eb.usable:
-                    J[:, i] = (ea.residual - eb.residual) / (self.to_scaled(ea.x)[i] - self.to_scaled(eb.x)[i])
+                    J[:, i] = (ea.residual - eb.residual) / (
+                        self.to_scaled(ea.x)[i] - self.to_scaled(eb.x)[i]
+                    )
                     continue
                 good = ea if ea.usable else (eb if eb.usable else None)
                 if good is not None:

@@ -5,6 +5,7 @@ points for each of the N snapshots (snapshot-major: all points of snapshot 1, th
 ...), ``force`` the plate force (kN) at each snapshot. Data files, forward models, objectives,
 sensitivities and Jacobians (rows) all use this order.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,8 +21,12 @@ def size(n_snapshots: int, n_points: int) -> int:
 def blocks(n_snapshots: int, n_points: int) -> dict[str, slice]:
     """Named slices: ``u_h``, ``u_v``, ``displacement`` (both) and ``force``."""
     nm = n_snapshots * n_points
-    return {"u_h": slice(0, nm), "u_v": slice(nm, 2 * nm), "displacement": slice(0, 2 * nm),
-            "force": slice(2 * nm, 2 * nm + n_snapshots)}
+    return {
+        "u_h": slice(0, nm),
+        "u_v": slice(nm, 2 * nm),
+        "displacement": slice(0, 2 * nm),
+        "force": slice(2 * nm, 2 * nm + n_snapshots),
+    }
 
 
 def stack(u_h, u_v, force_kN) -> np.ndarray:
@@ -35,8 +40,13 @@ def unstack(values, n_snapshots: int, n_points: int) -> tuple[np.ndarray, np.nda
     v = np.asarray(values, dtype=float)
     expected = size(n_snapshots, n_points)
     if v.shape[0] != expected:
-        raise ValueError(f"measurement vector has {v.shape[0]} values; N = {n_snapshots} snapshots and "
-                         f"m = {n_points} points need 2 N m + N = {expected}")
+        raise ValueError(
+            f"measurement vector has {v.shape[0]} values; N = {n_snapshots} snapshots and "
+            f"m = {n_points} points need 2 N m + N = {expected}"
+        )
     b, tail = blocks(n_snapshots, n_points), v.shape[1:]
-    return (v[b["u_h"]].reshape((n_snapshots, n_points) + tail),
-            v[b["u_v"]].reshape((n_snapshots, n_points) + tail), v[b["force"]].reshape((n_snapshots,) + tail))
+    return (
+        v[b["u_h"]].reshape((n_snapshots, n_points) + tail),
+        v[b["u_v"]].reshape((n_snapshots, n_points) + tail),
+        v[b["force"]].reshape((n_snapshots,) + tail),
+    )

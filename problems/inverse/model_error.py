@@ -20,6 +20,7 @@ inverse loop (forward model, high-fidelity model of a correction, BAE statistics
 training); :func:`check_honest` enforces it. Every high-fidelity run is counted apart
 (:class:`Correction` ``n_hifi``, ``hifi_wall_s``) so that it can be charged.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -53,8 +54,9 @@ def check_honest(data_discretisation: str | None, tier: str, **models_in_loop: s
         if key is not None and key == data_discretisation:
             raise HonestyError(
                 f"the {role} model uses discretisation {key}, which made the model-error data: the "
-                "discretisation that makes pseudo-experimental data is never used inside the inverse loop "
-                "(use the consistent tier, or data made on another discretisation)")
+                "discretisation that makes pseudo-experimental data is never used inside the "
+                "inverse loop (use the consistent tier, or data made on another discretisation)"
+            )
 
 
 @dataclass
@@ -95,11 +97,18 @@ class Correction:
         """Write the statistics to ``path`` (npz, with the hash and provenance)."""
         import json
 
-        np.savez_compressed(path, treatment=self.treatment, shift=_or_empty(self.shift),
-                            factor=_or_empty(self.factor), points=_or_empty(self.points),
-                            counts=np.array([self.n_hifi, self.hifi_wall_s, self.n_inverse, self.inverse_wall_s,
-                                             self.n_failed]),
-                            provenance=json.dumps(self.provenance, sort_keys=True), hash=self.hash)
+        np.savez_compressed(
+            path,
+            treatment=self.treatment,
+            shift=_or_empty(self.shift),
+            factor=_or_empty(self.factor),
+            points=_or_empty(self.points),
+            counts=np.array(
+                [self.n_hifi, self.hifi_wall_s, self.n_inverse, self.inverse_wall_s, self.n_failed]
+            ),
+            provenance=json.dumps(self.provenance, sort_keys=True),
+            hash=self.hash,
+        )
 
     @classmethod
     def load(cls, path) -> "Correction":
@@ -108,9 +117,18 @@ class Correction:
 
         with np.load(path, allow_pickle=False) as f:
             counts = f["counts"]
-            c = cls(str(f["treatment"]), _or_none(f["shift"]), _or_none(f["factor"]), int(counts[0]),
-                    float(counts[1]), int(counts[2]), float(counts[3]), int(counts[4]), _or_none(f["points"]),
-                    json.loads(str(f["provenance"])))
+            c = cls(
+                str(f["treatment"]),
+                _or_none(f["shift"]),
+                _or_none(f["factor"]),
+                int(counts[0]),
+                float(counts[1]),
+                int(counts[2]),
+                float(counts[3]),
+                int(counts[4]),
+                _or_none(f["points"]),
+                json.loads(str(f["provenance"])),
+            )
             if str(f["hash"]) != c.hash:
                 raise ValueError(f"{path}: content hash mismatch (file modified or torn)")
         return c
@@ -125,7 +143,8 @@ def _or_none(a):
 
 
 def _run_pair(hifi, inverse, X, mapper):
-    """Values of both models at the points X; per point (u_hifi, u_inverse) or None if either failed."""
+    """Values of both models at the points X; per point (u_hifi, u_inverse) or None if either
+    failed."""
     mapper = mapper or sequential_map
     t0 = time.perf_counter()
     hi = list(mapper(RunModel(hifi), list(X)))
@@ -140,18 +159,37 @@ def _run_pair(hifi, inverse, X, mapper):
 
 
 def one_point(hifi, inverse, x0, *, mapper=None, provenance: dict | None = None) -> Correction:
-    """The one-point additive correction ``eps(x0) = U_hifi(x0) - U_inverse(x0)`` (physical ``x0``)."""
+    """The one-point additive correction ``eps(x0) = U_hifi(x0) - U_inverse(x0)``
+    (physical ``x0``)."""
     x0 = np.asarray(x0, float)
     pairs, hifi_s, inv_s = _run_pair(hifi, inverse, [x0], mapper)
     if pairs[0] is None:
         raise RuntimeError(f"model-error correction: a model failed at x0 = {x0.tolist()}")
     hi, lo = pairs[0]
-    return Correction("one-point", shift=np.asarray(hi) - np.asarray(lo), n_hifi=1, hifi_wall_s=hifi_s,
-                      n_inverse=1, inverse_wall_s=inv_s, points=x0[None, :], provenance=dict(provenance or {}))
+    return Correction(
+        "one-point",
+        shift=np.asarray(hi) - np.asarray(lo),
+        n_hifi=1,
+        hifi_wall_s=hifi_s,
+        n_inverse=1,
+        inverse_wall_s=inv_s,
+        points=x0[None, :],
+        provenance=dict(provenance or {}),
+    )
 
 
-def bae_statistics(hifi, inverse, lower, upper, *, samples: int = 32, seed: int = 0, mapper=None,
-                   rank: int | None = None, provenance: dict | None = None) -> Correction:
+def bae_statistics(
+    hifi,
+    inverse,
+    lower,
+    upper,
+    *,
+    samples: int = 32,
+    seed: int = 0,
+    mapper=None,
+    rank: int | None = None,
+    provenance: dict | None = None,
+) -> Correction:
     """Bayesian approximation error: mean and low-rank covariance of ``eps`` over a seeded Latin
     hypercube of ``samples`` points in the box [lower, upper] (physical units).
 
@@ -161,17 +199,32 @@ def bae_statistics(hifi, inverse, lower, upper, *, samples: int = 32, seed: int 
     from scipy.stats import qmc
 
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
-    X = qmc.scale(qmc.LatinHypercube(d=lower.size, seed=np.random.default_rng(seed)).random(samples), lower, upper)
+    X = qmc.scale(
+        qmc.LatinHypercube(d=lower.size, seed=np.random.default_rng(seed)).random(samples),
+        lower,
+        upper,
+    )
     X = np.array([x for x in X if hifi.check(x) is None and inverse.check(x) is None])
     pairs, hifi_s, inv_s = _run_pair(hifi, inverse, X, mapper)
     good = [i for i, p in enumerate(pairs) if p is not None]
     if len(good) < 2:
-        raise RuntimeError(f"BAE statistics: only {len(good)} of {len(X)} sample points ran on both models")
-    E = np.array([np.asarray(pairs[i][0]) - np.asarray(pairs[i][1]) for i in good])   # (K, m)
+        raise RuntimeError(
+            f"BAE statistics: only {len(good)} of {len(X)} sample points ran on both models"
+        )
+    E = np.array([np.asarray(pairs[i][0]) - np.asarray(pairs[i][1]) for i in good])  # (K, m)
     mean = E.mean(axis=0)
-    U, S, _ = np.linalg.svd((E - mean).T, full_matrices=False)                       # (m, K)
+    U, S, _ = np.linalg.svd((E - mean).T, full_matrices=False)  # (m, K)
     k = len(S) if rank is None else min(rank, len(S))
     factor = U[:, :k] * (S[:k] / np.sqrt(len(good) - 1))
-    return Correction("bae", shift=mean, factor=factor, n_hifi=len(X), hifi_wall_s=hifi_s, n_inverse=len(X),
-                      inverse_wall_s=inv_s, n_failed=len(X) - len(good), points=X[good],
-                      provenance={**(provenance or {}), "samples": samples, "seed": seed, "rank": k})
+    return Correction(
+        "bae",
+        shift=mean,
+        factor=factor,
+        n_hifi=len(X),
+        hifi_wall_s=hifi_s,
+        n_inverse=len(X),
+        inverse_wall_s=inv_s,
+        n_failed=len(X) - len(good),
+        points=X[good],
+        provenance={**(provenance or {}), "samples": samples, "seed": seed, "rank": k},
+    )

@@ -8,10 +8,12 @@ with ``C`` diagonal (``sigma``: scalar or vector of standard deviations), diagon
 (``sigma`` and ``covariance_factor`` V: ``C = diag(sigma^2) + V V^T``, e.g. a model-error
 covariance; whitened with the symmetric square root of the Woodbury form, O(m k)) or full
 (``covariance``; its lower Cholesky factor ``L`` is used, ``R = L^-1 (U_E - U_N)``). In every
-case ``R^T R = d^T C^-1 d``. ``blocks`` names slices of the measurement vector so that the cost can be
-split; with a full covariance the split is that of the Cholesky-whitened residual (it still sums
-to the total). Solvers work in the *scaled* space ``z = x / reference`` (the reference is z = 1).
+case ``R^T R = d^T C^-1 d``. ``blocks`` names slices of the measurement vector so that the cost can
+be split; with a full covariance the split is that of the Cholesky-whitened residual
+(it still sums to the total). Solvers work in the *scaled* space ``z = x / reference``
+(the reference is z = 1).
 """
+
 from __future__ import annotations
 
 import math
@@ -65,8 +67,10 @@ class LeastSquaresProblem:
         n = self.reference.size
         self.names = tuple(getattr(self.model, "names", ())) or tuple(f"x{i}" for i in range(n))
         if not (len(self.names) == self.lower.size == self.upper.size == n):
-            raise ValueError(f"names {self.names}, lower, upper and reference must have the same length "
-                             f"(got {len(self.names)}, {self.lower.size}, {self.upper.size}, {n})")
+            raise ValueError(
+                f"names {self.names}, lower, upper and reference must have the same length "
+                f"(got {len(self.names)}, {self.lower.size}, {self.upper.size}, {n})"
+            )
         if np.any(self.reference == 0) or not np.all(np.isfinite(self.reference)):
             raise ValueError("reference values must be finite and non-zero (z = x / reference)")
         if np.any(self.lower > self.upper):
@@ -85,7 +89,11 @@ class LeastSquaresProblem:
             except np.linalg.LinAlgError as exc:
                 raise ValueError(f"covariance is not positive definite ({exc})") from None
         else:
-            s = np.ones(m) if self.sigma is None else np.broadcast_to(np.asarray(self.sigma, float), (m,)).copy()
+            s = (
+                np.ones(m)
+                if self.sigma is None
+                else np.broadcast_to(np.asarray(self.sigma, float), (m,)).copy()
+            )
             if np.any(s <= 0) or not np.all(np.isfinite(s)):
                 raise ValueError("sigma must be positive and finite")
             self._sigma = s
@@ -95,11 +103,14 @@ class LeastSquaresProblem:
                 raise ValueError("covariance_factor goes with sigma, not with a full covariance")
             V = np.asarray(self.covariance_factor, dtype=float).reshape(m, -1)
             Q, S, _ = np.linalg.svd(V / self._sigma[:, None], full_matrices=False)
-            self._lowrank = (Q, 1.0 - 1.0 / np.sqrt(1.0 + S * S))   # (I + U U^T)^(-1/2) = I - Q c Q^T
+            # (I + U U^T)^(-1/2) = I - Q c Q^T
+            self._lowrank = (Q, 1.0 - 1.0 / np.sqrt(1.0 + S * S))
         self.blocks = dict(self.blocks) if self.blocks else {"all": slice(0, m)}
         for name, sl in self.blocks.items():
             if not isinstance(sl, slice) or len(range(m)[sl]) == 0:
-                raise ValueError(f"block {name!r} must be a non-empty slice of the {m} measurements")
+                raise ValueError(
+                    f"block {name!r} must be a non-empty slice of the {m} measurements"
+                )
         self.failure_residual = np.full(m, math.sqrt(FAILURE_COST / m))
 
     # --- shape and scaling ---------------------------------------------------------------------
@@ -134,7 +145,9 @@ class LeastSquaresProblem:
         infeasible (non-finite, outside the box, or the model's ``check``), or None if feasible."""
         Z = np.atleast_2d(np.asarray(Z, dtype=float))
         if Z.ndim != 2 or Z.shape[1] != self.n_params:
-            raise ValueError(f"expected {self.n_params} parameters {self.names}, got shape {Z.shape[1:]}")
+            raise ValueError(
+                f"expected {self.n_params} parameters {self.names}, got shape {Z.shape[1:]}"
+            )
         X = Z * self.reference
         tol = BOX_TOL * np.maximum(self.upper - self.lower, np.abs(self.reference) * 1e-12)
         finite = np.all(np.isfinite(X), axis=1)
@@ -145,8 +158,11 @@ class LeastSquaresProblem:
             if not finite[k]:
                 prepared.append((X[k].copy(), "non-finite parameters"))
             elif out[k].any():
-                bad = ", ".join(f"{self.names[i]} = {X[k, i]:.6g} is outside [{self.lower[i]:.6g}, "
-                                f"{self.upper[i]:.6g}]" for i in np.flatnonzero(out[k]))
+                bad = ", ".join(
+                    f"{self.names[i]} = {X[k, i]:.6g} is outside [{self.lower[i]:.6g}, "
+                    f"{self.upper[i]:.6g}]"
+                    for i in np.flatnonzero(out[k])
+                )
                 prepared.append((X[k].copy(), f"outside the bounds: {bad}"))
             else:
                 x = Xc[k].copy()
@@ -172,7 +188,8 @@ class LeastSquaresProblem:
         return r, ""
 
     def residual_jacobian(self, jacobian_x) -> np.ndarray:
-        """dR/dz (m, n) of the whitened residual from the model's dU_N/dx (m, n) in physical units."""
+        """dR/dz (m, n) of the whitened residual from the model's dU_N/dx (m, n) in physical
+        units."""
         return -self.whiten(np.asarray(jacobian_x, float)) * self.reference[None, :]
 
     def split(self, r) -> dict[str, float]:

@@ -5,6 +5,7 @@ A forward model maps physical parameters ``x`` to a predicted measurement vector
 never raises for non-convergence (it returns ``ok=False`` with a message instead), and ``check``
 tells cheaply, without running anything heavy, whether ``x`` is a valid point at all.
 """
+
 from __future__ import annotations
 
 import time
@@ -63,16 +64,22 @@ class RunModel:
             x = np.array(x, dtype=float)
             res = self.model(x, jacobian=True) if self.with_jacobian else self.model(x)
         except Exception as exc:  # a crash inside the model must not kill the solver loop
-            return ForwardResult(False, None, f"model raised {type(exc).__name__}: {exc}",
-                                 time.perf_counter() - t0)
+            return ForwardResult(
+                False, None, f"model raised {type(exc).__name__}: {exc}", time.perf_counter() - t0
+            )
         if not isinstance(res, ForwardResult):
-            return ForwardResult(False, None, f"model returned {type(res).__name__}, not ForwardResult",
-                                 time.perf_counter() - t0)
+            return ForwardResult(
+                False,
+                None,
+                f"model returned {type(res).__name__}, not ForwardResult",
+                time.perf_counter() - t0,
+            )
         if not res.wall_s:
             res = replace(res, wall_s=time.perf_counter() - t0)
         return res
 
 
 def provides_jacobian(model) -> bool:
-    """True when ``model`` declares that it computes exact Jacobians (``model(x, jacobian=True)``)."""
+    """True when ``model`` declares that it computes exact Jacobians
+    (``model(x, jacobian=True)``)."""
     return bool(getattr(model, "provides_jacobian", False))

@@ -1,4 +1,5 @@
 """Start points of an identification: the case's default start or seeded Latin-hypercube starts."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +9,8 @@ from problems.inverse.cases import get_case
 
 
 def feasible_toward_reference(case: Case, x, check) -> np.ndarray:
-    """``x`` if ``check(x)`` is None, else the first feasible point on the way back to the reference.
+    """``x`` if ``check(x)`` is None, else the first feasible point on the way back to the
+    reference.
 
     A start can be an ill-posed material (exponent-compression: a sigma0^b < sigma0/3), so it is
     pulled toward the reference by factors 0.9^k until the material is well-posed.
@@ -22,8 +24,11 @@ def feasible_toward_reference(case: Case, x, check) -> np.ndarray:
     return ref.copy()
 
 
-def start_point(case: Case | str, kind: str = "default", seed: int = 0, index: int = 0) -> np.ndarray:
-    """Physical start point: the case's default start, or the ``index``-th seeded Latin-hypercube start."""
+def start_point(
+    case: Case | str, kind: str = "default", seed: int = 0, index: int = 0
+) -> np.ndarray:
+    """Physical start point: the case's default start, or the ``index``-th seeded Latin-hypercube
+    start."""
     case = get_case(case) if isinstance(case, str) else case
     if kind == "default":
         x = case.start

@@ -2,6 +2,7 @@
 floats become the strings ``"inf"``, ``"-inf"`` and ``"nan"`` (strict JSON has no NaN), which
 :func:`decode` turns back into floats.
 """
+
 from __future__ import annotations
 
 import json

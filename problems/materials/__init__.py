@@ -1,4 +1,5 @@
 """Constitutive models behind the :class:`problems.materials.base.Material` protocol."""
+
 from problems.materials.base import DifferentiableMaterial, Material, MaterialUpdate
 from problems.materials.elastic import LinearElastic
 

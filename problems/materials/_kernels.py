@@ -29,6 +29,7 @@ Parameter vectors (built by the dataclasses, see ``kernel_params``):
 * sensitivities: the chain-rule matrix ``dtheta`` (TH_SIZE, P) from the physical parameters to
   the kernel parameters theta, rows indexed by ``TH_*`` (built by :mod:`ddm`).
 """
+
 from __future__ import annotations
 
 import math
@@ -36,7 +37,8 @@ import math
 import numpy as np
 from numba import njit
 
-_JIT = dict(cache=True, nogil=True, error_model="numpy")  # numpy semantics: x/0 gives inf/nan, no raise
+# numpy semantics: x/0 gives inf/nan, no raise
+_JIT = dict(cache=True, nogil=True, error_model="numpy")
 
 #: yield-surface codes (``yp[0]``)
 LINEAR, HYPERBOLIC, EXPONENT = 0, 1, 2
@@ -79,11 +81,18 @@ def _inv(q):
 
 # Hot-path data are tuples (registers), not array views: a view costs reference counting.
 
+
 @njit(**_JIT)
 def _comb(a, x, b, y):
     """a x + b y for 6-tuples."""
-    return (a * x[0] + b * y[0], a * x[1] + b * y[1], a * x[2] + b * y[2],
-            a * x[3] + b * y[3], a * x[4] + b * y[4], a * x[5] + b * y[5])
+    return (
+        a * x[0] + b * y[0],
+        a * x[1] + b * y[1],
+        a * x[2] + b * y[2],
+        a * x[3] + b * y[3],
+        a * x[4] + b * y[4],
+        a * x[5] + b * y[5],
+    )
 
 
 @njit(**_JIT)
@@ -95,6 +104,7 @@ def _plus_normal(c, x):
 # --------------------------------------------------------------------------------------------
 # Invariants (p = -tr/3 compression positive, s deviator, J2 = s:s/2, J3 = det s)
 # --------------------------------------------------------------------------------------------
+
 
 @njit(**_JIT)
 def _deviator(v):
@@ -125,8 +135,14 @@ def _grad_j3(s, J2):
     """d J3 / d sigma = dev(s.s) with doubled shear entries."""
     xx, yy, zz, yz, xz, xy = s
     c = (2.0 / 3.0) * J2
-    return (xx * xx + xy * xy + xz * xz - c, xy * xy + yy * yy + yz * yz - c, xz * xz + yz * yz + zz * zz - c,
-            2.0 * (xy * xz + yy * yz + yz * zz), 2.0 * (xx * xz + xy * yz + xz * zz), 2.0 * (xx * xy + xy * yy + xz * yz))
+    return (
+        xx * xx + xy * xy + xz * xz - c,
+        xy * xy + yy * yy + yz * yz - c,
+        xz * xz + yz * yz + zz * zz - c,
+        2.0 * (xy * xz + yy * yz + yz * zz),
+        2.0 * (xx * xz + xy * yz + xz * zz),
+        2.0 * (xx * xy + xy * yy + xz * yz),
+    )
 
 
 @njit(**_JIT)
@@ -172,7 +188,8 @@ def _add_hess_j3(s, f, H):
 
 @njit(**_JIT)
 def _add_hess_j2(a, H):
-    """H[:6, :6] += a d2J2/dsigma^2 (deviatoric projector on the normal block, 2 on the shear diagonal)."""
+    """H[:6, :6] += a d2J2/dsigma^2 (deviatoric projector on the normal block, 2 on the shear
+    diagonal)."""
     for i in range(3):
         for j in range(3):
             H[i, j] += a * ((1.0 if i == j else 0.0) - 1.0 / 3.0)
@@ -192,6 +209,7 @@ def _lode_xi(s, J2):
 # Lode-dependent deviatoric measure of the linear form: t = A q + B J3 / q^2
 # --------------------------------------------------------------------------------------------
 
+
 @njit(**_JIT)
 def _lode_t(A, B, s, J2):
     q = math.sqrt(3.0 * J2)
@@ -210,7 +228,14 @@ def _lode(A, B, s, J2, hess, w, H):
     """
     q = math.sqrt(3.0 * J2)
     qi = _inv(q)
-    gq = (1.5 * qi * s[0], 1.5 * qi * s[1], 1.5 * qi * s[2], 3.0 * qi * s[3], 3.0 * qi * s[4], 3.0 * qi * s[5])
+    gq = (
+        1.5 * qi * s[0],
+        1.5 * qi * s[1],
+        1.5 * qi * s[2],
+        3.0 * qi * s[3],
+        3.0 * qi * s[4],
+        3.0 * qi * s[5],
+    )
     if B == 0.0:  # K = 1: t = q, no third-invariant terms
         if hess:
             c = w * qi
@@ -226,7 +251,7 @@ def _lode(A, B, s, J2, hess, w, H):
     t_J = B * qi2
     if hess:
         c1 = w * (6.0 * B * J3 * qi2 * qi2 - t_q * qi)  # w (t_qq - t_q/q)
-        c2 = w * (-2.0 * B * qi2 * qi)                   # w t_qJ
+        c2 = w * (-2.0 * B * qi2 * qi)  # w t_qJ
         for i in range(6):
             for j in range(6):
                 H[i, j] = gq[i] * (c1 * gq[j] + c2 * gJ[j]) + c2 * gJ[i] * gq[j]
@@ -238,6 +263,7 @@ def _lode(A, B, s, J2, hess, w, H):
 # --------------------------------------------------------------------------------------------
 # Yield functions F = phi(p, q, J3) - k(sigma_bar)
 # --------------------------------------------------------------------------------------------
+
 
 @njit(**_JIT)
 def _strength(yp, sbar):
@@ -295,9 +321,11 @@ def _yield_gradient(yp, s, p, J2, sbar, H):
 # Flow potentials G = t - p tan(psi) (cone) and sqrt(e^2 + q^2) - p tan(psi) (hyperbola)
 # --------------------------------------------------------------------------------------------
 
+
 @njit(**_JIT)
 def _potential(gp, s, J2, hess, w, H):
-    """dG/dsigma (6-tuple); if hess, also sets H[:6, :6] = w d2G/dsigma^2 (singular at the cone's apex)."""
+    """dG/dsigma (6-tuple); if hess, also sets H[:6, :6] = w d2G/dsigma^2
+    (singular at the cone's apex)."""
     if int(gp[0]) == CONE:
         g = _lode(gp[2], gp[3], s, J2, hess, w, H)[1]
     else:
@@ -320,16 +348,26 @@ def _plastic_work_rate(gp, sig, s, p, J2, g):
     g = dG/dsigma. Cone: w = G (degree-one homogeneous), dw = g. Hyperbola:
     w = q^2/R - p tan(psi), dw = g + (3/(2R)) (e^2/R^2) dJ2 (R = sqrt(e^2 + q^2))."""
     if int(gp[0]) == CONE:
-        w = sig[0] * g[0] + sig[1] * g[1] + sig[2] * g[2] + sig[3] * g[3] + sig[4] * g[4] + sig[5] * g[5]
+        w = (
+            sig[0] * g[0]
+            + sig[1] * g[1]
+            + sig[2] * g[2]
+            + sig[3] * g[3]
+            + sig[4] * g[4]
+            + sig[5] * g[5]
+        )
         return w, g
     e = gp[2]
     root = max(math.sqrt(e * e + 3.0 * J2), _Q_TINY)
-    return 3.0 * J2 / root - p * gp[1], _comb(1.0, g, 1.5 * e * e / (root * root * root), _grad_j2(s))
+    return 3.0 * J2 / root - p * gp[1], _comb(
+        1.0, g, 1.5 * e * e / (root * root * root), _grad_j2(s)
+    )
 
 
 # --------------------------------------------------------------------------------------------
 # Dense LU with partial pivoting of the 8 x 8 local systems
 # --------------------------------------------------------------------------------------------
+
 
 @njit(**_JIT)
 def _lu8(A, piv):
@@ -383,6 +421,7 @@ def _lu8_solve(A, piv, b):
 # --------------------------------------------------------------------------------------------
 # Return mapping
 # --------------------------------------------------------------------------------------------
+
 
 @njit(**_JIT)
 def _residual(mp, yp, gp, x, st, eqps_n, R, J):
@@ -530,7 +569,8 @@ def _radial_q(q_trial, c, e):
 
 @njit(**_JIT)
 def _meridional_state(mp, gp, p_tr, q_tr, sbar_n, eqps_n, dl):
-    """p, q, eqps after the multiplier dl on the meridional plane (see :func:`_meridional_return`)."""
+    """p, q, eqps after the multiplier dl on the meridional plane (see
+    :func:`_meridional_return`)."""
     E, nu, H, q_hat = mp[M_E], mp[M_NU], mp[M_H], mp[M_RULE_C]
     tp, e = gp[1], gp[2]
     q = _radial_q(q_tr, 3.0 * E / (2.0 * (1.0 + nu)) * dl, e)
@@ -564,20 +604,20 @@ def _meridional_return(mp, yp, gp, p_tr, q_tr, eqps_n, f_tol):
     q, dl = q_tr, 0.0
     for _ in range(12):
         R = math.sqrt(e * e + q * q)
-        r1 = q * (1.0 + 3.0 * G * dl / R) - q_tr       # radial (deviatoric) flow
-        p = p_tr + Kb * tp * dl                         # volumetric flow
-        w = q * q / R - p * tp                          # plastic work per unit multiplier
+        r1 = q * (1.0 + 3.0 * G * dl / R) - q_tr  # radial (deviatoric) flow
+        p = p_tr + Kb * tp * dl  # volumetric flow
+        w = q * q / R - p * tp  # plastic work per unit multiplier
         rhs = dl * w / q_hat
         disc = sbar_n * sbar_n + 4.0 * H * rhs
         if not disc >= 0.0:
             break
         sq = math.sqrt(disc)
-        u = 2.0 * rhs / (sbar_n + sq)                   # q_hat (sbar_n + H u) u = dl w
+        u = 2.0 * rhs / (sbar_n + sq)  # q_hat (sbar_n + H u) u = dl w
         F, Fq_q, Fp, Fs = _yield_pq(yp, p, q * q, sbar_n + H * u)
         if abs(F) <= f_tol and abs(r1) <= f_tol and dl > 0.0:
             return p, q, eqps_n + u, dl, True
         r1_q, r1_dl = 1.0 + 3.0 * G * dl * e * e / (R * R * R), 3.0 * G * q / R
-        D = q_hat * sq                                  # d(q_hat (sbar_n + H u) u)/du
+        D = q_hat * sq  # d(q_hat (sbar_n + H u) u)/du
         u_q = dl * q * (q * q + 2.0 * e * e) / (R * R * R) / D
         u_dl = (w - dl * Kb * tp * tp) / D
         F_q, F_dl = Fq_q * q + Fs * H * u_q, Fp * Kb * tp + Fs * H * u_dl
@@ -713,7 +753,9 @@ def _coaxial_return(mp, yp, gp, p_tr, s_tr, J2_tr, eqps_n, a, mu, x):
         a, b, mu = a + da, b + db, mu + dmu
         # quadratic convergence: once the step is at 1e-9 the next one reaches round-off
         done = max(abs(da), abs(db), abs(dmu)) <= 1e-9
-    if not (done and max(abs(r1), abs(r2), abs(r3)) <= 1e-13 and mu >= 0.0 and a * g11 + b * g12 > 0.0):
+    if not (
+        done and max(abs(r1), abs(r2), abs(r3)) <= 1e-13 and mu >= 0.0 and a * g11 + b * g12 > 0.0
+    ):
         return False
     dl = mu * q_tr / (2.0 * G)
     p = p_tr + Kb * tp * dl
@@ -750,13 +792,16 @@ def _start(mp, yp, gp, st, p_tr, s_tr, J2_tr, eqps_n, scale, x):
         dl = max(f_tr, 0.0) / (3.0 * G * h * h + Kb * tp * tb + dh * c * mp[M_H])
         # stay off the apex, where the cone's flow direction is undefined
         q = max(q_tr - 3.0 * G * h * dl, 0.05 * q_tr)
-        if q_tr > 0.0 and _coaxial_return(mp, yp, gp, p_tr, s_tr, J2_tr, eqps_n, q * inv_q_tr,
-                                          2.0 * G * dl * inv_q_tr, x):
+        if q_tr > 0.0 and _coaxial_return(
+            mp, yp, gp, p_tr, s_tr, J2_tr, eqps_n, q * inv_q_tr, 2.0 * G * dl * inv_q_tr, x
+        ):
             return
         p = p_tr + Kb * tp * dl
         eqps = eqps_n + c * dl
     else:
-        p, q, eqps, dl, ok = _meridional_return(mp, yp, gp, p_tr, q_tr, eqps_n, 1e-3 * mp[M_TOL] * scale)
+        p, q, eqps, dl, ok = _meridional_return(
+            mp, yp, gp, p_tr, q_tr, eqps_n, 1e-3 * mp[M_TOL] * scale
+        )
         if not ok:
             return
     f = q * inv_q_tr
@@ -909,6 +954,7 @@ def plastic_return(mp, yp, gp, sig_tr, eqps_n, scale):
 # Parameter sensitivities of the update (direct differentiation)
 # --------------------------------------------------------------------------------------------
 
+
 @njit(**_JIT)
 def _potential_partials(gp, s, J2, lam, Rth):
     """Rth[:6, TH_G:] = (E dlambda) d(dG/dsigma)/d gp[1:]: cone dG/dsigma = t_q dq + t_J dJ3 +
@@ -919,7 +965,14 @@ def _potential_partials(gp, s, J2, lam, Rth):
     if int(gp[0]) == CONE:
         q = math.sqrt(3.0 * J2)
         qi = _inv(q)
-        gq = (1.5 * qi * s[0], 1.5 * qi * s[1], 1.5 * qi * s[2], 3.0 * qi * s[3], 3.0 * qi * s[4], 3.0 * qi * s[5])
+        gq = (
+            1.5 * qi * s[0],
+            1.5 * qi * s[1],
+            1.5 * qi * s[2],
+            3.0 * qi * s[3],
+            3.0 * qi * s[4],
+            3.0 * qi * s[5],
+        )
         gJ = _grad_j3(s, J2)
         fq = -2.0 * _j3(s) * qi * qi * qi
         for i in range(6):
@@ -946,16 +999,21 @@ def _yield_partials(yp, s, p, J2, sbar, Rth):
         Rth[6, TH_Y + 1] = q
         Rth[6, TH_Y + 2] = _j3(s) * qi * qi
         Rth[6, TH_Y + 3] = -sbar
-    elif code == HYPERBOLIC:  # F = sqrt(l0^2 + q^2) - p tan(beta) - sqrt(l0^2 + (qh sbar)^2) + ph sbar tan(beta)
+    elif code == HYPERBOLIC:
+        # F = sqrt(l0^2 + q^2) - p tan(beta) - sqrt(l0^2 + (qh sbar)^2) + ph sbar tan(beta)
         l0, qh, ph = yp[2], yp[3], yp[4]
         Rth[6, TH_Y] = -p + ph * sbar
-        Rth[6, TH_Y + 1] = l0 / math.sqrt(l0 * l0 + 3.0 * J2) - l0 / math.sqrt(l0 * l0 + qh * sbar * qh * sbar)
+        Rth[6, TH_Y + 1] = l0 / math.sqrt(l0 * l0 + 3.0 * J2) - l0 / math.sqrt(
+            l0 * l0 + qh * sbar * qh * sbar
+        )
     else:  # F = a q^b - p - a (qh sbar)^b + ph sbar
         a, b, qh = yp[1], yp[2], yp[3]
         q2, ref = 3.0 * J2, qh * sbar
-        qb, rb = q2 ** (0.5 * b), ref ** b
+        qb, rb = q2 ** (0.5 * b), ref**b
         Rth[6, TH_Y] = qb - rb
-        Rth[6, TH_Y + 1] = a * (0.5 * qb * math.log(q2) if q2 > 0.0 else 0.0) - a * rb * math.log(ref)
+        Rth[6, TH_Y + 1] = a * (0.5 * qb * math.log(q2) if q2 > 0.0 else 0.0) - a * rb * math.log(
+            ref
+        )
 
 
 @njit(**_JIT)
@@ -1007,7 +1065,9 @@ def _residual_partials(mp, yp, gp, x, st, eqps_n, Rth):
 
 
 @njit(**_JIT)
-def _smooth_sensitivity(mp, yp, gp, dth, st, eqps_n, sig, eqps, dst_n, i, dstress, dstate, x, R, J, piv, Rth, rhs):
+def _smooth_sensitivity(
+    mp, yp, gp, dth, st, eqps_n, sig, eqps, dst_n, i, dstress, dstate, x, R, J, piv, Rth, rhs
+):
     """Derivatives of point i's converged closest-point return by the implicit function theorem,
     ``J dx = -(dR/dtheta dtheta + dR/dsigma_trial dsigma_trial + dR/deqps_n deqps_n)`` with J
     the local Jacobian at the converged x = [sigma, E dlambda, E eqps]; eqps = x[7]/E.
@@ -1055,7 +1115,8 @@ def _smooth_sensitivity(mp, yp, gp, dth, st, eqps_n, sig, eqps, dst_n, i, dstres
 def _apex_sensitivity(mp, yp, gp, dth, p_tr, eqps_n, dl, dst_n, i, dstress, dstate):
     """Derivatives of point i's closed-form apex return (:func:`_apex_return`)::
 
-        dlambda = (-p_trial tan(beta) - d_hat sigma_bar(eqps_n)) / (K_b tan(psi) tan(beta) + d_hat c H)
+        dlambda = (-p_trial tan(beta) - d_hat sigma_bar(eqps_n)) / (K_b tan(psi) tan(beta) + d_hat c
+        H)
         p = p_trial + K_b tan(psi) dlambda,   eqps = eqps_n + c dlambda,   sigma = -p m
 
     dstress[i] holds the trial stress derivative on entry (only its trace, -3 dp_trial, is used)
@@ -1066,11 +1127,18 @@ def _apex_sensitivity(mp, yp, gp, dth, p_tr, eqps_n, dl, dst_n, i, dstress, dsta
     den = Kb * tp * tb + dh * c * H
     sbar_n = s0 + H * eqps_n
     for k in range(dth.shape[1]):
-        dKb = dth[TH_E, k] / (3.0 * (1.0 - 2.0 * nu)) + dth[TH_NU, k] * 2.0 * E / (3.0 * (1.0 - 2.0 * nu) ** 2)
+        dKb = dth[TH_E, k] / (3.0 * (1.0 - 2.0 * nu)) + dth[TH_NU, k] * 2.0 * E / (
+            3.0 * (1.0 - 2.0 * nu) ** 2
+        )
         dtb, ddh, dtp = dth[TH_Y, k], dth[TH_Y + 3, k], dth[TH_G, k]
         dc, dH, deqps_n = dth[TH_C, k], dth[TH_H, k], dst_n[i, k, 0]
         dp_tr = -(dstress[i, k, 0] + dstress[i, k, 1] + dstress[i, k, 2]) / 3.0
-        dnum = -dp_tr * tb - p_tr * dtb - ddh * sbar_n - dh * (dth[TH_S0, k] + dH * eqps_n + H * deqps_n)
+        dnum = (
+            -dp_tr * tb
+            - p_tr * dtb
+            - ddh * sbar_n
+            - dh * (dth[TH_S0, k] + dH * eqps_n + H * deqps_n)
+        )
         dden = (dKb * tp + Kb * dtp) * tb + Kb * tp * dtb + (ddh * c + dh * dc) * H + dh * c * dH
         ddl = (dnum - dl * dden) / den
         dp = dp_tr + (dKb * tp + Kb * dtp) * dl + Kb * tp * ddl
@@ -1092,10 +1160,22 @@ def _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress):
     mu_nu = -E / (2.0 * (1.0 + nu) ** 2)
     d = (de[i, 0], de[i, 1], de[i, 2], de[i, 3], de[i, 4], de[i, 5])
     tr = d[0] + d[1] + d[2]
-    vE = ((2.0 * mu * d[0] + lam * tr) / E, (2.0 * mu * d[1] + lam * tr) / E, (2.0 * mu * d[2] + lam * tr) / E,
-          mu * d[3] / E, mu * d[4] / E, mu * d[5] / E)
-    vN = (2.0 * mu_nu * d[0] + lam_nu * tr, 2.0 * mu_nu * d[1] + lam_nu * tr, 2.0 * mu_nu * d[2] + lam_nu * tr,
-          mu_nu * d[3], mu_nu * d[4], mu_nu * d[5])
+    vE = (
+        (2.0 * mu * d[0] + lam * tr) / E,
+        (2.0 * mu * d[1] + lam * tr) / E,
+        (2.0 * mu * d[2] + lam * tr) / E,
+        mu * d[3] / E,
+        mu * d[4] / E,
+        mu * d[5] / E,
+    )
+    vN = (
+        2.0 * mu_nu * d[0] + lam_nu * tr,
+        2.0 * mu_nu * d[1] + lam_nu * tr,
+        2.0 * mu_nu * d[2] + lam_nu * tr,
+        mu_nu * d[3],
+        mu_nu * d[4],
+        mu_nu * d[5],
+    )
     for k in range(dth.shape[1]):
         dE, dnu = dth[TH_E, k], dth[TH_NU, k]
         t = lam * (dde[i, k, 0] + dde[i, k, 1] + dde[i, k, 2])
@@ -1106,28 +1186,50 @@ def _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress):
 
 @njit(**_JIT)
 def _plastic_strain_sensitivity(mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate):
-    """dstate[i, :, 1:] = derivative of point i's plastic strain eps_pl_n + deps - C (sigma - sigma_n)
-    as :func:`merge_update` forms it; with C = S/E, S = [[1, -nu, -nu], ...; 2 (1 + nu)]:
-    ``deps_pl_n + ddeps - (S (dsigma - dsigma_n) + dnu dS/dnu (sigma - sigma_n) - dE C (sigma - sigma_n)) / E``."""
+    """dstate[i, :, 1:] = derivative of point i's plastic strain
+    eps_pl_n + deps - C (sigma - sigma_n) as :func:`merge_update` forms it; with C = S/E,
+    S = [[1, -nu, -nu], ...; 2 (1 + nu)]:
+    ``deps_pl_n + ddeps
+    - (S (dsigma - dsigma_n) + dnu dS/dnu (sigma - sigma_n) - dE C (sigma - sigma_n)) / E``."""
     E, nu = mp[M_E], mp[M_NU]
-    d = (stress[i, 0] - sig_n[i, 0], stress[i, 1] - sig_n[i, 1], stress[i, 2] - sig_n[i, 2],
-         stress[i, 3] - sig_n[i, 3], stress[i, 4] - sig_n[i, 4], stress[i, 5] - sig_n[i, 5])
+    d = (
+        stress[i, 0] - sig_n[i, 0],
+        stress[i, 1] - sig_n[i, 1],
+        stress[i, 2] - sig_n[i, 2],
+        stress[i, 3] - sig_n[i, 3],
+        stress[i, 4] - sig_n[i, 4],
+        stress[i, 5] - sig_n[i, 5],
+    )
     td = d[0] + d[1] + d[2]
-    Sd = ((1.0 + nu) * d[0] - nu * td, (1.0 + nu) * d[1] - nu * td, (1.0 + nu) * d[2] - nu * td,
-          2.0 * (1.0 + nu) * d[3], 2.0 * (1.0 + nu) * d[4], 2.0 * (1.0 + nu) * d[5])
-    dSd = (d[0] - td, d[1] - td, d[2] - td, 2.0 * d[3], 2.0 * d[4], 2.0 * d[5])  # dS/dnu (sigma - sigma_n)
+    Sd = (
+        (1.0 + nu) * d[0] - nu * td,
+        (1.0 + nu) * d[1] - nu * td,
+        (1.0 + nu) * d[2] - nu * td,
+        2.0 * (1.0 + nu) * d[3],
+        2.0 * (1.0 + nu) * d[4],
+        2.0 * (1.0 + nu) * d[5],
+    )
+    # dS/dnu (sigma - sigma_n)
+    dSd = (d[0] - td, d[1] - td, d[2] - td, 2.0 * d[3], 2.0 * d[4], 2.0 * d[5])
     for k in range(dth.shape[1]):
         dE, dnu = dth[TH_E, k], dth[TH_NU, k]
-        t = (dstress[i, k, 0] - dsig_n[i, k, 0]) + (dstress[i, k, 1] - dsig_n[i, k, 1]) + (dstress[i, k, 2] - dsig_n[i, k, 2])
+        t = (
+            (dstress[i, k, 0] - dsig_n[i, k, 0])
+            + (dstress[i, k, 1] - dsig_n[i, k, 1])
+            + (dstress[i, k, 2] - dsig_n[i, k, 2])
+        )
         for a in range(6):
             dd = dstress[i, k, a] - dsig_n[i, k, a]
             Sdd = (1.0 + nu) * dd - nu * t if a < 3 else 2.0 * (1.0 + nu) * dd
-            dstate[i, k, a + 1] = dst_n[i, k, a + 1] + dde[i, k, a] - (Sdd + dnu * dSd[a] - dE * Sd[a] / E) / E
+            dstate[i, k, a + 1] = (
+                dst_n[i, k, a + 1] + dde[i, k, a] - (Sdd + dnu * dSd[a] - dE * Sd[a] / E) / E
+            )
 
 
 # --------------------------------------------------------------------------------------------
 # Vectorised entry points (arguments: C-contiguous float64 arrays)
 # --------------------------------------------------------------------------------------------
+
 
 @njit(**_JIT)
 def elastic_trial(lam, mu, sigma0, H, yield_tol, yp, de, sig_n, eqps_n):
@@ -1146,14 +1248,32 @@ def elastic_trial(lam, mu, sigma0, H, yield_tol, yp, de, sig_n, eqps_n):
             sig_tr[i, k] = v
             big = max(big, abs(v))
         scale[i] = big
-        p, s = _deviator((sig_tr[i, 0], sig_tr[i, 1], sig_tr[i, 2], sig_tr[i, 3], sig_tr[i, 4], sig_tr[i, 5]))
+        p, s = _deviator(
+            (sig_tr[i, 0], sig_tr[i, 1], sig_tr[i, 2], sig_tr[i, 3], sig_tr[i, 4], sig_tr[i, 5])
+        )
         plastic[i] = _yield_value(yp, s, p, _j2(s), sigma0 + H * eqps_n[i]) > yield_tol * big
     return sig_tr, scale, plastic
 
 
 @njit(**_JIT)
-def merge_update(D, E, nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps, r_tangent, r_ok,
-                 stress, tangent, state, ok):
+def merge_update(
+    D,
+    E,
+    nu,
+    de,
+    sig_n,
+    st_n,
+    sig_tr,
+    idx,
+    r_stress,
+    r_eqps,
+    r_tangent,
+    r_ok,
+    stress,
+    tangent,
+    state,
+    ok,
+):
     """Assemble an update from the elastic trial and the plastic returns of the points idx:
     returned points take the return's stress, tangent and eqps, and the plastic strain
     eps_pl_n + de - C (sigma - sigma_n); the others (elastic, or ok False) keep the trial stress,
@@ -1184,7 +1304,11 @@ def merge_update(D, E, nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps, r_tan
             for b in range(6):
                 tangent[i, a, b] = r_tangent[j, a, b]
         state[i, 0] = r_eqps[j]
-        d0, d1, d2 = stress[i, 0] - sig_n[i, 0], stress[i, 1] - sig_n[i, 1], stress[i, 2] - sig_n[i, 2]
+        d0, d1, d2 = (
+            stress[i, 0] - sig_n[i, 0],
+            stress[i, 1] - sig_n[i, 1],
+            stress[i, 2] - sig_n[i, 2],
+        )
         state[i, 1] += de[i, 0] - (d0 - nu * (d1 + d2)) / E
         state[i, 2] += de[i, 1] - (d1 - nu * (d0 + d2)) / E
         state[i, 3] += de[i, 2] - (d2 - nu * (d0 + d1)) / E
@@ -1193,7 +1317,9 @@ def merge_update(D, E, nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps, r_tan
 
 
 @njit(**_JIT)
-def update_sensitivities(mp, yp, gp, dth, de, sig_n, st_n, sig_tr, plastic, stress, state, ok, dsig_n, dst_n, dde):
+def update_sensitivities(
+    mp, yp, gp, dth, de, sig_n, st_n, sig_tr, plastic, stress, state, ok, dsig_n, dst_n, dde
+):
     """Parameter derivatives of one update of n points (direct differentiation).
 
     Inputs: the kernel vectors; dtheta (TH_SIZE, P) = d theta / d parameters; the update's
@@ -1220,7 +1346,14 @@ def update_sensitivities(mp, yp, gp, dth, de, sig_n, st_n, sig_tr, plastic, stre
         _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress)
         good = not plastic[i] or ok[i]
         if plastic[i] and good:
-            st = (sig_tr[i, 0], sig_tr[i, 1], sig_tr[i, 2], sig_tr[i, 3], sig_tr[i, 4], sig_tr[i, 5])
+            st = (
+                sig_tr[i, 0],
+                sig_tr[i, 1],
+                sig_tr[i, 2],
+                sig_tr[i, 3],
+                sig_tr[i, 4],
+                sig_tr[i, 5],
+            )
             en = st_n[i, 0]
             is_apex = False
             if cone:
@@ -1229,11 +1362,38 @@ def update_sensitivities(mp, yp, gp, dth, de, sig_n, st_n, sig_tr, plastic, stre
                 if is_apex:
                     _apex_sensitivity(mp, yp, gp, dth, p_tr, en, dl, dst_n, i, dstress, dstate)
             if not is_apex:
-                sig = (stress[i, 0], stress[i, 1], stress[i, 2], stress[i, 3], stress[i, 4], stress[i, 5])
-                good = _smooth_sensitivity(mp, yp, gp, dth, st, en, sig, state[i, 0], dst_n, i, dstress, dstate,
-                                           x, R, J, piv, Rth, rhs)
+                sig = (
+                    stress[i, 0],
+                    stress[i, 1],
+                    stress[i, 2],
+                    stress[i, 3],
+                    stress[i, 4],
+                    stress[i, 5],
+                )
+                good = _smooth_sensitivity(
+                    mp,
+                    yp,
+                    gp,
+                    dth,
+                    st,
+                    en,
+                    sig,
+                    state[i, 0],
+                    dst_n,
+                    i,
+                    dstress,
+                    dstate,
+                    x,
+                    R,
+                    J,
+                    piv,
+                    Rth,
+                    rhs,
+                )
             if good:
-                _plastic_strain_sensitivity(mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate)
+                _plastic_strain_sensitivity(
+                    mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate
+                )
         elif good:  # elastic: the old state
             for k in range(n_p):
                 for b in range(n_st):
@@ -1252,7 +1412,9 @@ def yield_values(yp, stress, sbar):
     """F (n,) at stresses (n, 6) and yield stresses sigma_bar (n,)."""
     out = np.empty(stress.shape[0])
     for i in range(stress.shape[0]):
-        p, s = _deviator((stress[i, 0], stress[i, 1], stress[i, 2], stress[i, 3], stress[i, 4], stress[i, 5]))
+        p, s = _deviator(
+            (stress[i, 0], stress[i, 1], stress[i, 2], stress[i, 3], stress[i, 4], stress[i, 5])
+        )
         out[i] = _yield_value(yp, s, p, _j2(s), sbar[i])
     return out
 

@@ -9,6 +9,7 @@ Conventions (shared by every material and the FE code)
   it may be non-symmetric (non-associated flow).
 * Everything is vectorised over ``n`` material points: no Python loop over points.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -47,7 +48,9 @@ class Material(Protocol):
         """History variables of ``n`` virgin points, shape (n, n_state)."""
         ...
 
-    def update(self, strain_increment: np.ndarray, stress_old: np.ndarray, state_old: np.ndarray) -> MaterialUpdate:
+    def update(
+        self, strain_increment: np.ndarray, stress_old: np.ndarray, state_old: np.ndarray
+    ) -> MaterialUpdate:
         """Integrate one strain increment (n, 6) from the converged (stress_old, state_old)."""
         ...
 
@@ -67,15 +70,23 @@ class DifferentiableMaterial(Material, Protocol):
 
     parameter_names: tuple[str, ...]
 
-    def sensitivity(self, strain_increment: np.ndarray, stress_old: np.ndarray, state_old: np.ndarray,
-                    update: MaterialUpdate, dstress_old: np.ndarray, dstate_old: np.ndarray,
-                    dstrain_increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def sensitivity(
+        self,
+        strain_increment: np.ndarray,
+        stress_old: np.ndarray,
+        state_old: np.ndarray,
+        update: MaterialUpdate,
+        dstress_old: np.ndarray,
+        dstate_old: np.ndarray,
+        dstrain_increment: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Derivatives of one converged update with respect to the parameters."""
         ...
 
 
 def isotropic_stiffness(E: float, nu: float) -> np.ndarray:
-    """Isotropic elastic stiffness (6, 6) in MPa for Young's modulus E (MPa) and Poisson's ratio nu."""
+    """Isotropic elastic stiffness (6, 6) in MPa for Young's modulus E (MPa) and Poisson's ratio
+    nu."""
     lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
     mu = E / (2.0 * (1.0 + nu))
     D = np.zeros((6, 6))
@@ -96,8 +107,9 @@ def isotropic_stiffness_derivatives(E: float, nu: float) -> tuple[np.ndarray, np
     return isotropic_stiffness(E, nu) / E, dD_dnu
 
 
-def trial_stress_sensitivity(E: float, nu: float, i_E: int, i_nu: int, strain_increment, dstress_old,
-                             dstrain_increment) -> np.ndarray:
+def trial_stress_sensitivity(
+    E: float, nu: float, i_E: int, i_nu: int, strain_increment, dstress_old, dstrain_increment
+) -> np.ndarray:
     """Parameter derivatives (n, P, 6) in MPa per parameter unit of the elastic trial stress
     ``sigma_old + D(E, nu) deps``: ``dsigma_old + D ddeps + dD/dp deps``, where only the
     parameters in columns i_E (E) and i_nu (nu) enter D."""

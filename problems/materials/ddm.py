@@ -13,6 +13,7 @@ Two pieces sit here beside the materials' ``sensitivity`` methods:
 
 The equations are in ``docs/drucker_prager.md`` (section "Parameter sensitivities").
 """
+
 from __future__ import annotations
 
 import math
@@ -58,7 +59,9 @@ def kernel_parameter_jacobian(material) -> np.ndarray:
     else:
         _eccentricity_rows(out, col, v["eccentricity"], v["sigma0"], tp)
         if material.form == "hyperbolic":
-            _hyperbolic_rows(out, col, v["sigma0"], v["pt0"], material.yield_function.tan_beta, test)
+            _hyperbolic_rows(
+                out, col, v["sigma0"], v["pt0"], material.yield_function.tan_beta, test
+            )
         else:
             out[_K.TH_Y, col["a"]] = 1.0
             out[_K.TH_Y + 1, col["b"]] = 1.0
@@ -68,7 +71,7 @@ def kernel_parameter_jacobian(material) -> np.ndarray:
 def _linear_rows(out, col, K, tb, tp, test) -> None:
     """Rows of A, B (in yp and gp), d_hat, K and c: functions of K, beta and psi."""
     dA, dB = -0.5 / K**2, -6.75 / K**2
-    dh_K = -0.5 * (1.0 + test.xi) / K**2     # d (t_hat / q_hat) / dK
+    dh_K = -0.5 * (1.0 + test.xi) / K**2  # d (t_hat / q_hat) / dK
     jK, jb, jp = col["K"], col["beta"], col["psi"]
     dtb, dtp = _dtan_deg(tb), _dtan_deg(tp)
     out[_K.TH_Y, jb] = dtb
@@ -104,6 +107,7 @@ def _eccentricity_rows(out, col, ecc, s0, tp) -> None:
 # --------------------------------------------------------------------------------------------
 # Material-point DDM driver
 # --------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class PathSensitivity:
@@ -144,4 +148,6 @@ def run_path_sensitivity(material, increments, stress0=None, state0=None) -> Pat
         stress, state = up.stress, up.state
         for key, value in zip(hist, (stress, state, up.ok, dstress, dstate)):
             hist[key].append(value)
-    return PathSensitivity(*(np.stack(hist[key]) for key in hist), parameter_names=tuple(material.parameter_names))
+    return PathSensitivity(
+        *(np.stack(hist[key]) for key in hist), parameter_names=tuple(material.parameter_names)
+    )

@@ -24,6 +24,7 @@ trial deviator lies inside the apex's cone of admissible flow directions.
 The elastic trial, the elastic/plastic split and the bookkeeping are vectorised numpy here; the
 plastic points go to the compiled per-point kernel :func:`_kernels.plastic_return` (numba).
 """
+
 from __future__ import annotations
 
 import math
@@ -36,10 +37,20 @@ from problems.materials import _kernels as _K
 from problems.materials.base import MaterialUpdate, isotropic_stiffness
 from problems.materials.ddm import kernel_parameter_jacobian
 from problems.materials.hardening import (
-    HARDENINGS, LinearHardening, ProportionalEqps, WorkEqps, linear_eqps_constant, reference_test,
+    HARDENINGS,
+    LinearHardening,
+    ProportionalEqps,
+    WorkEqps,
+    linear_eqps_constant,
+    reference_test,
 )
 from problems.materials.yield_surfaces import (
-    ExponentYield, HyperbolicPotential, HyperbolicYield, LinearPotential, LinearYield, LodeMeasure,
+    ExponentYield,
+    HyperbolicPotential,
+    HyperbolicYield,
+    LinearPotential,
+    LinearYield,
+    LodeMeasure,
     tan_deg,
 )
 
@@ -94,20 +105,28 @@ def _complete(form: str, hardening: str, params: Mapping[str, float]) -> dict[st
     allowed = set(required) | set(OPTIONAL_PARAMETERS)
     unknown = sorted(set(params) - allowed)
     if unknown:
-        raise ValueError(f"unknown parameter(s) {', '.join(map(repr, unknown))} for the {form} form; "
-                         f"expected {', '.join(required)} and optionally {', '.join(OPTIONAL_PARAMETERS)}")
+        raise ValueError(
+            f"unknown parameter(s) {', '.join(map(repr, unknown))} for the {form} form; "
+            f"expected {', '.join(required)} and optionally {', '.join(OPTIONAL_PARAMETERS)}"
+        )
     missing = [n for n in required if n not in params]
     if missing:
-        raise ValueError(f"missing parameter(s) {', '.join(map(repr, missing))} for the {form} form "
-                         f"(required: {', '.join(required)})")
+        raise ValueError(
+            f"missing parameter(s) {', '.join(map(repr, missing))} for the {form} form "
+            f"(required: {', '.join(required)})"
+        )
     values = {**OPTIONAL_PARAMETERS}
     for name, raw in params.items():
         try:
             v = float(raw)
         except (TypeError, ValueError):
-            raise ValueError(f"{name} = {raw!r} is not a number; allowed range {_range_text(name)}") from None
+            raise ValueError(
+                f"{name} = {raw!r} is not a number; allowed range {_range_text(name)}"
+            ) from None
         lo, hi, lo_in, hi_in, _ = PARAMETER_RANGES[name]
-        inside = np.isfinite(v) and (v >= lo if lo_in else v > lo) and (v <= hi if hi_in else v < hi)
+        inside = (
+            np.isfinite(v) and (v >= lo if lo_in else v > lo) and (v <= hi if hi_in else v < hi)
+        )
         if not inside:
             raise ValueError(f"{name} = {raw!r} is out of range: allowed {_range_text(name)}")
         values[name] = v
@@ -124,9 +143,10 @@ def _check_well_posed(form: str, hardening: str, v: dict[str, float]) -> None:
         for name in ("beta", "psi"):
             if v[name] >= _ATAN3_DEG:
                 raise ValueError(
-                    f"{name} = {v[name]:g} deg is out of range for the linear form with compression "
-                    f"hardening: allowed {'0 <' if name == 'beta' else '0 <='} {name} < atan(3) = "
-                    f"{_ATAN3_DEG:.4f} deg (tan({name})/3 must stay below 1)")
+                    f"{name} = {v[name]:g} deg is out of range for the linear form with "
+                    f"compression hardening: allowed {'0 <' if name == 'beta' else '0 <='} {name} "
+                    f"< atan(3) = {_ATAN3_DEG:.4f} deg (tan({name})/3 must stay below 1)"
+                )
     elif form == "hyperbolic":
         # The hyperbola through p = -pt0, q = 0 and the reference state has
         # l0 = (S^2 - A^2)/(2A), S = q_hat sigma0, A = tan(beta)(pt0 + p_hat sigma0): l0 > 0
@@ -137,16 +157,18 @@ def _check_well_posed(form: str, hardening: str, v: dict[str, float]) -> None:
         if not (l0 > 0.0 and np.isfinite(l0)):
             raise ValueError(
                 f"pt0 = {v['pt0']:g} MPa is out of range for the hyperbolic form with {hardening} "
-                f"hardening (sigma0 = {s0:g} MPa, beta = {v['beta']:g} deg): allowed {lo:g} < pt0 < "
-                f"{hi:g} MPa, so that l0 > 0 (a non-degenerate hyperbola)")
+                f"hardening (sigma0 = {s0:g} MPa, beta = {v['beta']:g} deg): allowed {lo:g} < pt0 "
+                f"< {hi:g} MPa, so that l0 > 0 (a non-degenerate hyperbola)"
+            )
     elif form == "exponent":
         pt0 = v["a"] * (test.q_hat * s0) ** v["b"] - test.p_hat * s0
         if not pt0 > 0.0:
             a_min = test.p_hat * s0 / (test.q_hat * s0) ** v["b"]
             raise ValueError(
                 f"a = {v['a']:g} MPa^(1-b) is out of range for the exponent form with {hardening} "
-                f"hardening (sigma0 = {s0:g} MPa, b = {v['b']:g}): allowed a > {a_min:.6g} so that the "
-                f"hydrostatic tension strength pt0 = a sigma0^b - sigma0/3 is positive")
+                f"hardening (sigma0 = {s0:g} MPa, b = {v['b']:g}): allowed a > {a_min:.6g} so that "
+                "the hydrostatic tension strength pt0 = a sigma0^b - sigma0/3 is positive"
+            )
 
 
 def hyperbolic_l0(hardening: str, sigma0: float, pt0: float, beta_deg: float) -> float:
@@ -192,27 +214,31 @@ def make_material(form: str, hardening: str, params: Mapping[str, float]) -> "Dr
         potential = HyperbolicPotential(tan_psi, e)
         rule = WorkEqps(test.q_hat)
         if form == "hyperbolic":
-            yf = HyperbolicYield(tan_deg(v["beta"]), hyperbolic_l0(hardening, v["sigma0"], v["pt0"], v["beta"]), test)
+            yf = HyperbolicYield(
+                tan_deg(v["beta"]), hyperbolic_l0(hardening, v["sigma0"], v["pt0"], v["beta"]), test
+            )
         else:
             yf = ExponentYield(v["a"], v["b"], test)
     used = FORM_PARAMETERS[form] + (("nu",) if form == "linear" else ("nu", "eccentricity"))
-    return DruckerPrager(form, hardening, v["E"], v["nu"], yf, potential, law, rule,
-                         tuple((n, v[n]) for n in used))
+    return DruckerPrager(
+        form, hardening, v["E"], v["nu"], yf, potential, law, rule, tuple((n, v[n]) for n in used)
+    )
 
 
 # --------------------------------------------------------------------------------------------
 # The material
 # --------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class _Return:
     """Result of the plastic correction at m points."""
 
-    stress: np.ndarray    # (m, 6)
-    eqps: np.ndarray      # (m,)
-    tangent: np.ndarray   # (m, 6, 6)
-    ok: np.ndarray        # (m,)
-    apex: np.ndarray      # (m,) bool, returned to the cone apex (linear form)
+    stress: np.ndarray  # (m, 6)
+    eqps: np.ndarray  # (m,)
+    tangent: np.ndarray  # (m, 6, 6)
+    ok: np.ndarray  # (m,)
+    apex: np.ndarray  # (m,) bool, returned to the cone apex (linear form)
 
 
 @dataclass(frozen=True)
@@ -232,8 +258,9 @@ class DruckerPrager:
     law: LinearHardening
     eqps_rule: ProportionalEqps | WorkEqps
     parameters: tuple[tuple[str, float], ...]
-    tol: float = 1e-10          # local Newton: max |residual| / max(sigma0, |sigma_trial|), then one more step
-    yield_tol: float = 1e-10    # trial F above this (relative) is plastic
+    # local Newton: max |residual| / max(sigma0, |sigma_trial|), then one more step
+    tol: float = 1e-10
+    yield_tol: float = 1e-10  # trial F above this (relative) is plastic
     max_iter: int = 50
     state_names: tuple[str, ...] = field(default=STATE_NAMES, init=False)
 
@@ -264,7 +291,9 @@ class DruckerPrager:
     def yield_value(self, stress, eqps) -> np.ndarray:
         """F(sigma, sigma_bar(eqps)) in MPa; <= 0 is admissible."""
         stress = np.atleast_2d(np.asarray(stress, float))
-        return self.yield_function.value(stress, self.yield_stress(np.broadcast_to(eqps, stress.shape[:1])))
+        return self.yield_function.value(
+            stress, self.yield_stress(np.broadcast_to(eqps, stress.shape[:1]))
+        )
 
     def flow_direction(self, stress) -> np.ndarray:
         """dG/dsigma (n, 6), engineering components (undefined at the linear cone's apex)."""
@@ -291,12 +320,36 @@ class DruckerPrager:
             res = self._plastic_return(sig_tr[idx], eqps_n[idx], scale[idx])
             r_stress, r_eqps, r_tangent, r_ok = res.stress, res.eqps, res.tangent, res.ok
         else:
-            r_stress, r_eqps, r_tangent, r_ok = np.zeros((0, 6)), np.zeros(0), np.zeros((0, 6, 6)), np.zeros(0, bool)
+            r_stress, r_eqps, r_tangent, r_ok = (
+                np.zeros((0, 6)),
+                np.zeros(0),
+                np.zeros((0, 6, 6)),
+                np.zeros(0, bool),
+            )
         n = de.shape[0]
-        out = MaterialUpdate(np.empty((n, 6)), np.empty((n, 6, 6)), np.empty_like(st_n), np.empty(n, bool))
-        # returned points: plastic strain = total increment minus its elastic part C (sigma - sigma_n)
-        _K.merge_update(self.stiffness, self.E, self.nu, de, sig_n, st_n, sig_tr, idx, r_stress, r_eqps,
-                        r_tangent, r_ok, out.stress, out.tangent, out.state, out.ok)
+        out = MaterialUpdate(
+            np.empty((n, 6)), np.empty((n, 6, 6)), np.empty_like(st_n), np.empty(n, bool)
+        )
+        # returned points: plastic strain = total increment minus its elastic part
+        # C (sigma - sigma_n)
+        _K.merge_update(
+            self.stiffness,
+            self.E,
+            self.nu,
+            de,
+            sig_n,
+            st_n,
+            sig_tr,
+            idx,
+            r_stress,
+            r_eqps,
+            r_tangent,
+            r_ok,
+            out.stress,
+            out.tangent,
+            out.state,
+            out.ok,
+        )
         return out
 
     # ---- parameter sensitivities (direct differentiation) -------------------------------------
@@ -306,8 +359,16 @@ class DruckerPrager:
         ``FORM_PARAMETERS[form] + ("nu",)`` (the eccentricity is a fixed constant)."""
         return FORM_PARAMETERS[self.form] + ("nu",)
 
-    def sensitivity(self, strain_increment, stress_old, state_old, update: MaterialUpdate, dstress_old,
-                    dstate_old, dstrain_increment) -> tuple[np.ndarray, np.ndarray]:
+    def sensitivity(
+        self,
+        strain_increment,
+        stress_old,
+        state_old,
+        update: MaterialUpdate,
+        dstress_old,
+        dstate_old,
+        dstrain_increment,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Exact derivatives of one converged update with respect to the parameters.
 
         ``update`` is what :meth:`update` returned for this (strain_increment (n, 6),
@@ -326,28 +387,61 @@ class DruckerPrager:
           solution; the FE solver cuts such increments).
 
         In terms of the consistent tangent T of the update this is
-        ``dstress = T ddeps + dsigma/dsigma_n dstress_old + dsigma/dstate_n dstate_old + dsigma/dp``.
+        ``dstress = T ddeps + dsigma/dsigma_n dstress_old + dsigma/dstate_n dstate_old
+        + dsigma/dp``.
         """
-        de, sig_n, st_n, dsig_n, dst_n, dde = (np.ascontiguousarray(a, dtype=float) for a in (
-            strain_increment, stress_old, state_old, dstress_old, dstate_old, dstrain_increment))
+        de, sig_n, st_n, dsig_n, dst_n, dde = (
+            np.ascontiguousarray(a, dtype=float)
+            for a in (
+                strain_increment,
+                stress_old,
+                state_old,
+                dstress_old,
+                dstate_old,
+                dstrain_increment,
+            )
+        )
         sig_tr, _, plastic = self._elastic_trial(de, sig_n, np.ascontiguousarray(st_n[:, 0]))
         return _K.update_sensitivities(
-            self._kernel_params, self.yield_function.kernel_params, self.potential.kernel_params,
-            kernel_parameter_jacobian(self), de, sig_n, st_n, sig_tr, plastic, np.ascontiguousarray(update.stress),
-            np.ascontiguousarray(update.state), np.ascontiguousarray(update.ok), dsig_n, dst_n, dde)
+            self._kernel_params,
+            self.yield_function.kernel_params,
+            self.potential.kernel_params,
+            kernel_parameter_jacobian(self),
+            de,
+            sig_n,
+            st_n,
+            sig_tr,
+            plastic,
+            np.ascontiguousarray(update.stress),
+            np.ascontiguousarray(update.state),
+            np.ascontiguousarray(update.ok),
+            dsig_n,
+            dst_n,
+            dde,
+        )
 
     def _elastic_trial(self, de, sig_n, eqps_n):
         """Elastic predictor (:func:`_kernels.elastic_trial`) of C-contiguous float arrays de,
         sig_n (n, 6) and eqps_n (n,): trial stress (n, 6) MPa, residual scale (n,) MPa and the
         plastic flags (n,)."""
         lam = self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
-        return _K.elastic_trial(lam, self.shear_modulus, self.law.sigma0, self.law.H, self.yield_tol,
-                                self.yield_function.kernel_params, de, sig_n, eqps_n)
+        return _K.elastic_trial(
+            lam,
+            self.shear_modulus,
+            self.law.sigma0,
+            self.law.H,
+            self.yield_tol,
+            self.yield_function.kernel_params,
+            de,
+            sig_n,
+            eqps_n,
+        )
 
     # ---- plastic correction -------------------------------------------------------------------
     @property
     def _kernel_params(self) -> np.ndarray:
-        """The material vector of :mod:`_kernels` (elasticity, hardening, eqps rule, Newton controls)."""
+        """The material vector of :mod:`_kernels` (elasticity, hardening, eqps rule, Newton
+        controls)."""
         mp = np.empty(_K.M_SIZE)
         mp[_K.M_E], mp[_K.M_NU] = self.E, self.nu
         mp[_K.M_S0], mp[_K.M_H] = self.law.sigma0, self.law.H
@@ -361,13 +455,18 @@ class DruckerPrager:
     def _plastic_return(self, sig_tr, eqps_n, scale) -> _Return:
         """Return of m plastic trial states (see :func:`_kernels.plastic_return`)."""
         stress, eqps, _, tangent, ok, apex, _ = _K.plastic_return(
-            self._kernel_params, self.yield_function.kernel_params, self.potential.kernel_params,
-            np.ascontiguousarray(sig_tr, dtype=float), np.ascontiguousarray(eqps_n, dtype=float),
-            np.ascontiguousarray(scale, dtype=float))
+            self._kernel_params,
+            self.yield_function.kernel_params,
+            self.potential.kernel_params,
+            np.ascontiguousarray(sig_tr, dtype=float),
+            np.ascontiguousarray(eqps_n, dtype=float),
+            np.ascontiguousarray(scale, dtype=float),
+        )
         return _Return(stress, eqps, tangent, ok, apex)
 
 
 def _polar_factor(xi: np.ndarray, K: float) -> np.ndarray:
     """m(xi) = max over Lode angles phi of cos(phi - phi_y) / h(phi), with cos 3 phi_y = xi and
-    h(phi) = t/q at Lode angle phi: the apex test's gauge factor (see :func:`_kernels._polar_factor`)."""
+    h(phi) = t/q at Lode angle phi: the apex test's gauge factor (see
+    :func:`_kernels._polar_factor`)."""
     return _K.polar_factors(np.ascontiguousarray(xi, dtype=float), float(K))

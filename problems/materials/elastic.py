@@ -1,4 +1,5 @@
 """Isotropic linear elasticity."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -45,10 +46,20 @@ class LinearElastic:
         n = strain_increment.shape[0]
         return MaterialUpdate(stress, np.broadcast_to(D, (n, 6, 6)), state_old, np.ones(n, bool))
 
-    def sensitivity(self, strain_increment, stress_old, state_old, update, dstress_old, dstate_old,
-                    dstrain_increment) -> tuple[np.ndarray, np.ndarray]:
+    def sensitivity(
+        self,
+        strain_increment,
+        stress_old,
+        state_old,
+        update,
+        dstress_old,
+        dstate_old,
+        dstrain_increment,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Derivatives with respect to (E, nu) of one update (see ``DruckerPrager.sensitivity``):
         ``dstress = dstress_old + D ddeps + dD/dp deps`` (n, 2, 6) in MPa per MPa and per unit
         of nu, and the (empty) state's (n, 2, 0)."""
-        dstress = trial_stress_sensitivity(self.E, self.nu, 0, 1, strain_increment, dstress_old, dstrain_increment)
+        dstress = trial_stress_sensitivity(
+            self.E, self.nu, 0, 1, strain_increment, dstress_old, dstrain_increment
+        )
         return dstress, np.array(dstate_old, dtype=float)

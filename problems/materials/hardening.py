@@ -14,6 +14,7 @@ per unit of the measure are constants (compression-positive p)::
 Every yield surface of the family derives its size (cohesion d, d' or pt) from the condition that
 the reference state with ``sigma_bar`` lies on the surface; see :mod:`yield_surfaces`.
 """
+
 from __future__ import annotations
 
 import math

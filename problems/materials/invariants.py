@@ -17,6 +17,7 @@ All functions are vectorised over the leading axis (``n`` points). The third inv
 derivatives are those of the compiled per-point code of :mod:`_kernels` (the return mapping's),
 looped over the points.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -47,7 +48,9 @@ def deviator(stress: np.ndarray) -> np.ndarray:
 
 def j2(s: np.ndarray) -> np.ndarray:
     """Second deviatoric invariant ``J2 = s:s/2`` of a Voigt deviator, (n,)."""
-    return 0.5 * np.einsum("ni,ni->n", s[:, :3], s[:, :3]) + np.einsum("ni,ni->n", s[:, 3:], s[:, 3:])
+    return 0.5 * np.einsum("ni,ni->n", s[:, :3], s[:, :3]) + np.einsum(
+        "ni,ni->n", s[:, 3:], s[:, 3:]
+    )
 
 
 def j3(s: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ controlled strain and its stress (xx for the uniaxial and hydrostatic paths, gam
 tau_xy for shear), p = -tr(sigma)/3 and q the von Mises stress (MPa), eqps the equivalent plastic
 strain (0 for materials without one).
 """
+
 from __future__ import annotations
 
 import csv
@@ -77,9 +78,18 @@ class MaterialPointResult:
                 w.writerow([int(r[0]), *(repr(float(v)) for v in r[1:])])
 
 
-def run_material_point(material: Material, path: str, strain: float, steps: int, *,
-                       tol: float = 1e-10, max_iter: int = 30, max_cuts: int = 12) -> MaterialPointResult:
-    """Drive ``material`` along ``path`` to the strain magnitude ``strain`` in ``steps`` equal steps.
+def run_material_point(
+    material: Material,
+    path: str,
+    strain: float,
+    steps: int,
+    *,
+    tol: float = 1e-10,
+    max_iter: int = 30,
+    max_cuts: int = 12,
+) -> MaterialPointResult:
+    """Drive ``material`` along ``path`` to the strain magnitude ``strain`` in ``steps`` equal
+    steps.
 
     tol: stress-free components are converged to ``tol * max(1 MPa, max |sigma|)``.
     Raises ValueError for bad input and RuntimeError if a step cannot be completed even after
@@ -89,7 +99,9 @@ def run_material_point(material: Material, path: str, strain: float, steps: int,
         raise ValueError(f"path {path!r} is unknown; allowed: {', '.join(PATHS)}")
     strain = float(strain)
     if not (np.isfinite(strain) and strain > 0.0):
-        raise ValueError(f"strain = {strain!r} must be a positive magnitude (the path sets the sign)")
+        raise ValueError(
+            f"strain = {strain!r} must be a positive magnitude (the path sets the sign)"
+        )
     if int(steps) != steps or steps < 1:
         raise ValueError(f"steps = {steps!r} must be a positive integer")
     steps = int(steps)
@@ -103,16 +115,24 @@ def run_material_point(material: Material, path: str, strain: float, steps: int,
     rows, eps_hist, sig_hist, state_hist = [], [], [], []
     d_eps = direction * strain / steps
     for k in range(1, steps + 1):
-        eps, sig, state, tangent = _advance(material, eps, sig, state, tangent, d_eps, free,
-                                            tol, max_iter, max_cuts)
+        eps, sig, state, tangent = _advance(
+            material, eps, sig, state, tangent, d_eps, free, tol, max_iter, max_cuts
+        )
         eqps = state[material.state_names.index("eqps")] if "eqps" in material.state_names else 0.0
         # + 0.0 turns the -0.0 of a vanishing pressure into 0.0 for the printed table
-        rows.append((k, eps[ctrl], sig[ctrl], pressure(sig[None])[0] + 0.0, mises(sig[None])[0], eqps))
+        rows.append(
+            (k, eps[ctrl], sig[ctrl], pressure(sig[None])[0] + 0.0, mises(sig[None])[0], eqps)
+        )
         eps_hist.append(eps.copy())
         sig_hist.append(sig.copy())
         state_hist.append(state.copy())
-    return MaterialPointResult(path, np.array(rows, float), np.array(eps_hist), np.array(sig_hist),
-                               np.array(state_hist).reshape(steps, -1))
+    return MaterialPointResult(
+        path,
+        np.array(rows, float),
+        np.array(eps_hist),
+        np.array(sig_hist),
+        np.array(state_hist).reshape(steps, -1),
+    )
 
 
 def _advance(material, eps, sig, state, tangent, d_eps, free, tol, max_iter, cuts_left):
@@ -122,10 +142,14 @@ def _advance(material, eps, sig, state, tangent, d_eps, free, tol, max_iter, cut
         de, sig_new, state_new, tan_new = result
         return eps + de, sig_new, state_new, tan_new
     if cuts_left == 0:
-        raise RuntimeError("material point: a step did not converge even after bisection; "
-                           "reduce the strain or increase the number of steps")
+        raise RuntimeError(
+            "material point: a step did not converge even after bisection; "
+            "reduce the strain or increase the number of steps"
+        )
     half = 0.5 * d_eps
-    eps, sig, state, tangent = _advance(material, eps, sig, state, tangent, half, free, tol, max_iter, cuts_left - 1)
+    eps, sig, state, tangent = _advance(
+        material, eps, sig, state, tangent, half, free, tol, max_iter, cuts_left - 1
+    )
     return _advance(material, eps, sig, state, tangent, half, free, tol, max_iter, cuts_left - 1)
 
 
@@ -133,7 +157,11 @@ def _try_step(material, sig, state, tangent, d_eps, free, tol, max_iter):
     """Newton on the free strain components so that their stresses vanish; None on failure."""
     de = d_eps.copy()
     if free.size:
-        T = tangent if tangent is not None else material.update(np.zeros((1, 6)), sig[None], state[None]).tangent[0]
+        T = (
+            tangent
+            if tangent is not None
+            else material.update(np.zeros((1, 6)), sig[None], state[None]).tangent[0]
+        )
         fixed = np.setdiff1d(np.arange(6), free)
         # predictor: the free strains that keep the current tangent's free stresses unchanged
         de[free] = -np.linalg.solve(T[np.ix_(free, free)], T[np.ix_(free, fixed)] @ d_eps[fixed])

@@ -1,6 +1,7 @@
 """Tools to verify a material: finite-difference tangents, Voigt rotations and typical
 Drucker-Prager parameter sets. Used by the tests, the perf script and the material-point CLI.
 """
+
 from __future__ import annotations
 
 import math
@@ -13,8 +14,15 @@ from problems.materials.invariants import M_VEC
 
 # Typical concrete, compression variants (MPa, degrees); a such that the exponent surface
 # passes through p = -pt0, q = 0: a = (pt0 + sigma_c/3) / sigma_c^b.
-_TYPICAL = {"E": 30_000.0, "beta": 35.0, "K": 0.85, "psi": 15.0, "pt0": 2.5, "b": 1.5,
-            "a": (2.5 + 20.0 / 3.0) / 20.0**1.5}
+_TYPICAL = {
+    "E": 30_000.0,
+    "beta": 35.0,
+    "K": 0.85,
+    "psi": 15.0,
+    "pt0": 2.5,
+    "b": 1.5,
+    "a": (2.5 + 20.0 / 3.0) / 20.0**1.5,
+}
 _TYPICAL_SIGMA0 = {"compression": 20.0, "shear": 10.0, "tension": 2.5}
 
 
@@ -26,13 +34,17 @@ def typical_parameters(form: str, hardening: str) -> dict[str, float]:
     if form not in FORM_PARAMETERS:
         raise ValueError(f"form {form!r} is unknown; allowed: {', '.join(FORM_PARAMETERS)}")
     if hardening not in _TYPICAL_SIGMA0:
-        raise ValueError(f"hardening {hardening!r} is unknown; allowed: {', '.join(_TYPICAL_SIGMA0)}")
+        raise ValueError(
+            f"hardening {hardening!r} is unknown; allowed: {', '.join(_TYPICAL_SIGMA0)}"
+        )
     s0 = _TYPICAL_SIGMA0[hardening]
     values = {**_TYPICAL, "sigma0": s0, "H": 75.0 * s0}
     return {name: values[name] for name in FORM_PARAMETERS[form]}
 
 
-def fd_tangent(material: Material, strain_increment, stress_old, state_old, rel_step: float = 1e-7) -> np.ndarray:
+def fd_tangent(
+    material: Material, strain_increment, stress_old, state_old, rel_step: float = 1e-7
+) -> np.ndarray:
     """Central-difference tangent d stress / d strain_increment (n, 6, 6) of ``material.update``.
 
     The step of each point is ``rel_step * max|strain_increment|`` (absolute 1e-12 if zero);
@@ -71,15 +83,15 @@ def voigt_rotations(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     shear components) and for strain (engineering shear components)."""
     T_s = np.zeros((6, 6))
     T_e = np.zeros((6, 6))
-    for b, (k, l) in enumerate(_PAIRS):
+    for b, (k, m) in enumerate(_PAIRS):
         # unit tensor of Voigt component b (symmetric pair for shear), rotated
         E = np.zeros((3, 3))
-        E[k, l] = E[l, k] = 1.0
+        E[k, m] = E[m, k] = 1.0
         Er = R @ E @ R.T
         for a, (i, j) in enumerate(_PAIRS):
             T_s[a, b] = Er[i, j]
             # engineering strain: component b carries gamma = 2 eps for shear
-            T_e[a, b] = Er[i, j] * (2.0 if i != j else 1.0) * (0.5 if k != l else 1.0)
+            T_e[a, b] = Er[i, j] * (2.0 if i != j else 1.0) * (0.5 if k != m else 1.0)
     return T_s, T_e
 
 

@@ -17,6 +17,7 @@ The classes here hold the parameters and the derived constants; the arithmetic (
 gradients, Hessians, the plastic work rate) is the compiled per-point code of :mod:`_kernels`,
 which the vectorised methods below call with ``kernel_params``.
 """
+
 from __future__ import annotations
 
 import math
@@ -38,7 +39,8 @@ def _per_point(values, n: int) -> np.ndarray:
 
 
 def _scalar_map(fn, yp, sbar):
-    """Apply a kernel taking (yp, sbar (n,)) -> (k, dk) to a scalar or array sbar, keeping its shape."""
+    """Apply a kernel taking (yp, sbar (n,)) -> (k, dk) to a scalar or array sbar, keeping its
+    shape."""
     arr = np.asarray(sbar, float)
     k, dk = fn(yp, np.ascontiguousarray(arr.ravel()))
     if arr.ndim == 0:
@@ -49,6 +51,7 @@ def _scalar_map(fn, yp, sbar):
 # --------------------------------------------------------------------------------------------
 # Lode-dependent deviatoric measure t of the linear form
 # --------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class LodeMeasure:
@@ -75,6 +78,7 @@ class LodeMeasure:
 # --------------------------------------------------------------------------------------------
 # Yield functions
 # --------------------------------------------------------------------------------------------
+
 
 class _YieldFunction:
     """F(sigma, sigma_bar) (n,) in MPa for stresses (n, 6) and yield stresses (n,) or scalar."""
@@ -103,7 +107,9 @@ class LinearYield(_YieldFunction):
 
     @property
     def kernel_params(self) -> np.ndarray:
-        return np.array([_K.LINEAR, self.tan_beta, self.lode.A, self.lode.B, self.d_hat, self.lode.K])
+        return np.array(
+            [_K.LINEAR, self.tan_beta, self.lode.A, self.lode.B, self.d_hat, self.lode.K]
+        )
 
 
 @dataclass(frozen=True)
@@ -117,7 +123,9 @@ class HyperbolicYield(_YieldFunction):
 
     @property
     def kernel_params(self) -> np.ndarray:
-        return np.array([_K.HYPERBOLIC, self.tan_beta, self.l0, self.test.q_hat, self.test.p_hat, 0.0])
+        return np.array(
+            [_K.HYPERBOLIC, self.tan_beta, self.l0, self.test.q_hat, self.test.p_hat, 0.0]
+        )
 
     def cohesion(self, sbar):
         """d'(sigma_bar) (MPa) and its derivative d d'/d sigma_bar (-)."""
@@ -144,6 +152,7 @@ class ExponentYield(_YieldFunction):
 # --------------------------------------------------------------------------------------------
 # Flow potentials
 # --------------------------------------------------------------------------------------------
+
 
 class _Potential:
     def gradient(self, stress):

@@ -1,4 +1,5 @@
-"""Build a surrogate once: design -> training runs -> POD -> regression (selected) -> hold-out validation.
+"""Build a surrogate once: design -> training runs -> POD -> regression (selected) -> hold-out
+validation.
 
 Model selection never sees the hold-out points:
 
@@ -13,6 +14,7 @@ Model selection never sees the hold-out points:
 Cost: every training and hold-out run is counted (``info["cost"]``), so that identifications using
 the surrogate can be charged for it.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -24,7 +26,14 @@ import numpy as np
 from problems.surrogate.design import make_design
 from problems.surrogate.model import SurrogateModel
 from problems.surrogate.pod import fit_pod
-from problems.surrogate.regression import RBF_KERNELS, RBF_SMOOTHING, Scorer, fit_gp, fit_rbf, select_rbf
+from problems.surrogate.regression import (
+    RBF_KERNELS,
+    RBF_SMOOTHING,
+    Scorer,
+    fit_gp,
+    fit_rbf,
+    select_rbf,
+)
 from problems.surrogate.training import Runs, run_points
 from problems.surrogate.validation import FE_UNITS, validate
 
@@ -46,8 +55,8 @@ class SurrogateSettings:
     regression         : ``auto``, ``rbf`` or ``gp``
     selection_fraction : share of the training points set aside to choose the family (auto)
     cv_folds           : folds of the RBF cross-validation
-    rbf_kernels, rbf_smoothing : candidates of the RBF cross-validation ((kernel, eps) pairs; smoothing
-                         values, ``(0.0,)`` forces interpolation of the training points)
+    rbf_kernels, rbf_smoothing : candidates of the RBF cross-validation ((kernel, eps) pairs;
+                         smoothing values, ``(0.0,)`` forces interpolation of the training points)
     gp_nu, gp_individual, gp_restarts : GP kernel smoothness (1.5, 2.5 or inf), number of leading
                          modes with a GP each, optimiser restarts
     batch              : points per mapper call
@@ -74,13 +83,17 @@ class SurrogateSettings:
 
     def __post_init__(self):
         if self.regression not in REGRESSIONS:
-            raise ValueError(f"regression {self.regression!r} is unknown; allowed: {', '.join(REGRESSIONS)}")
+            raise ValueError(
+                f"regression {self.regression!r} is unknown; allowed: {', '.join(REGRESSIONS)}"
+            )
         if self.n_train < 1:
             raise ValueError(f"n_train = {self.n_train} is out of range: must be >= 1")
         if self.n_holdout < 0:
             raise ValueError(f"n_holdout = {self.n_holdout} is out of range: must be >= 0")
         if not 0 < self.selection_fraction < 1:
-            raise ValueError(f"selection_fraction = {self.selection_fraction} is out of range: 0 < f < 1")
+            raise ValueError(
+                f"selection_fraction = {self.selection_fraction} is out of range: 0 < f < 1"
+            )
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -89,9 +102,15 @@ class SurrogateSettings:
 
 
 def training_hash(runs: Runs, settings: dict) -> str:
-    """SHA-256 of the training set (points, values, failed and infeasible points) and the settings."""
+    """SHA-256 of the training set (points, values, failed and infeasible points) and the
+    settings."""
     h = hashlib.sha256()
-    for a in (runs.X, runs.Y, np.array([x for x, _ in runs.failed]), np.array([x for x, _ in runs.infeasible])):
+    for a in (
+        runs.X,
+        runs.Y,
+        np.array([x for x, _ in runs.failed]),
+        np.array([x for x, _ in runs.infeasible]),
+    ):
         a = np.ascontiguousarray(a, dtype="<f8")
         h.update(str(a.shape).encode())
         h.update(a.tobytes())
@@ -103,15 +122,35 @@ def training_hash(runs: Runs, settings: dict) -> str:
 
 def _fit_family(kind: str, Z, A, scorer, s: SurrogateSettings):
     if kind == "rbf":
-        cfg, table = select_rbf(Z, A, scorer, kernels=s.rbf_kernels, smoothing=s.rbf_smoothing, folds=s.cv_folds,
-                                seed=s.seed)
+        cfg, table = select_rbf(
+            Z,
+            A,
+            scorer,
+            kernels=s.rbf_kernels,
+            smoothing=s.rbf_smoothing,
+            folds=s.cv_folds,
+            seed=s.seed,
+        )
         return fit_rbf(Z, A, **cfg), {"rbf_cv": table, "rbf_choice": cfg}
-    return fit_gp(Z, A, nu=s.gp_nu, n_individual=s.gp_individual, restarts=s.gp_restarts, seed=s.seed), {}
+    return fit_gp(
+        Z, A, nu=s.gp_nu, n_individual=s.gp_individual, restarts=s.gp_restarts, seed=s.seed
+    ), {}
 
 
-def fit_surrogate(runs: Runs, lower, upper, sigma, *, names, settings: SurrogateSettings = SurrogateSettings(),
-                  blocks: dict[str, slice] | None = None, design_box=None, checker=None) -> SurrogateModel:
-    """POD + regression of successful training ``runs`` (no validation; see :func:`build_surrogate`).
+def fit_surrogate(
+    runs: Runs,
+    lower,
+    upper,
+    sigma,
+    *,
+    names,
+    settings: SurrogateSettings = SurrogateSettings(),
+    blocks: dict[str, slice] | None = None,
+    design_box=None,
+    checker=None,
+) -> SurrogateModel:
+    """POD + regression of successful training ``runs`` (no validation; see
+    :func:`build_surrogate`).
 
     sigma  : (m,) scale of each measurement (the data's standard deviations)
     blocks : disjoint blocks of the truncation rule and of the scores (default: one block)
@@ -120,8 +159,10 @@ def fit_surrogate(runs: Runs, lower, upper, sigma, *, names, settings: Surrogate
     s = settings
     n, m = runs.Y.shape
     if n < lower.size + 3:
-        raise ValueError(f"only {n} successful training runs for {lower.size} parameters: need at least "
-                         f"{lower.size + 3} (more training points, or a smaller box)")
+        raise ValueError(
+            f"only {n} successful training runs for {lower.size} parameters: need at least "
+            f"{lower.size + 3} (more training points, or a smaller box)"
+        )
     blocks = blocks or {"all": slice(0, m)}
     Z = (runs.X - lower) / (upper - lower)
     selection = {}
@@ -130,7 +171,9 @@ def fit_surrogate(runs: Runs, lower, upper, sigma, *, names, settings: Surrogate
         perm = np.random.default_rng(s.seed).permutation(n)
         n_sel = max(1, int(round(s.selection_fraction * n)))
         sel, fit = perm[:n_sel], perm[n_sel:]
-        pod = fit_pod(runs.Y[fit], sigma, tol_sigma=s.tol_sigma, blocks=blocks, max_modes=s.max_modes)
+        pod = fit_pod(
+            runs.Y[fit], sigma, tol_sigma=s.tol_sigma, blocks=blocks, max_modes=s.max_modes
+        )
         A = pod.coefficients(runs.Y[fit])
         scorer = Scorer(pod.modes, blocks)
         scores = {}
@@ -138,8 +181,11 @@ def fit_surrogate(runs: Runs, lower, upper, sigma, *, names, settings: Surrogate
             reg, _ = _fit_family(family, Z[fit], A, scorer, s)
             E = (pod.reconstruct(reg.predict(Z[sel])) - runs.Y[sel]) / pod.scale
             ms = scorer.scaled_ms(E)
-            scores[family] = {"score": scorer.score(ms), "rms_sigma": {k: float(np.sqrt(v)) for k, v in ms.items()},
-                              "settings": reg.settings() if family == "rbf" else {"kind": "gp"}}
+            scores[family] = {
+                "score": scorer.score(ms),
+                "rms_sigma": {k: float(np.sqrt(v)) for k, v in ms.items()},
+                "settings": reg.settings() if family == "rbf" else {"kind": "gp"},
+            }
         kind = min(scores, key=lambda k: scores[k]["score"])
         selection = {"n_fit": len(fit), "n_selection": n_sel, "scores": scores, "chosen": kind}
     pod = fit_pod(runs.Y, sigma, tol_sigma=s.tol_sigma, blocks=blocks, max_modes=s.max_modes)
@@ -147,23 +193,52 @@ def fit_surrogate(runs: Runs, lower, upper, sigma, *, names, settings: Surrogate
     reg, extra = _fit_family(kind, Z, A, Scorer(pod.modes, blocks), s)
     selection.update(extra)
     box = design_box or (lower, upper)
-    info = {"settings": s.to_dict(), "regression": kind, "n_modes": pod.n_modes,
-            "pod": {"tol_sigma": pod.tol_sigma, "projection_rms_sigma": pod.projection_rms,
-                    "energy_fraction": pod.energy_fraction(), "n_snapshots": n},
-            "selection": selection,
-            "training_hash": training_hash(runs, s.to_dict()),
-            "training": runs.cost(),
-            "failed": [[*map(float, x), msg] for x, msg in runs.failed],
-            "infeasible": [[*map(float, x), msg] for x, msg in runs.infeasible]}
-    return SurrogateModel(tuple(names), lower, upper, pod, reg, Z, (np.asarray(box[0], float), np.asarray(box[1], float)),
-                          checker, None, info)
+    info = {
+        "settings": s.to_dict(),
+        "regression": kind,
+        "n_modes": pod.n_modes,
+        "pod": {
+            "tol_sigma": pod.tol_sigma,
+            "projection_rms_sigma": pod.projection_rms,
+            "energy_fraction": pod.energy_fraction(),
+            "n_snapshots": n,
+        },
+        "selection": selection,
+        "training_hash": training_hash(runs, s.to_dict()),
+        "training": runs.cost(),
+        "failed": [[*map(float, x), msg] for x, msg in runs.failed],
+        "infeasible": [[*map(float, x), msg] for x, msg in runs.infeasible],
+    }
+    return SurrogateModel(
+        tuple(names),
+        lower,
+        upper,
+        pod,
+        reg,
+        Z,
+        (np.asarray(box[0], float), np.asarray(box[1], float)),
+        checker,
+        None,
+        info,
+    )
 
 
-def build_surrogate(model, lower, upper, sigma, *, settings: SurrogateSettings = SurrogateSettings(),
-                    blocks: dict[str, slice] | None = None, report_blocks: dict[str, slice] | None = None,
-                    units: dict | None = None, mapper=None, progress: bool = False,
-                    description: dict | None = None) -> SurrogateModel:
-    """Design, run (through ``mapper``), fit and validate a surrogate of ``model`` over ``[lower, upper]``.
+def build_surrogate(
+    model,
+    lower,
+    upper,
+    sigma,
+    *,
+    settings: SurrogateSettings = SurrogateSettings(),
+    blocks: dict[str, slice] | None = None,
+    report_blocks: dict[str, slice] | None = None,
+    units: dict | None = None,
+    mapper=None,
+    progress: bool = False,
+    description: dict | None = None,
+) -> SurrogateModel:
+    """Design, run (through ``mapper``), fit and validate a surrogate of ``model`` over
+    ``[lower, upper]``.
 
     sigma         : (m,) the data's standard deviations (mm, kN for the FE model)
     blocks        : disjoint blocks of the truncation rule and of the selection score
@@ -175,23 +250,53 @@ def build_surrogate(model, lower, upper, sigma, *, settings: SurrogateSettings =
     t0 = time.perf_counter()
     s = settings
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
-    design = make_design(lower, upper, s.n_train, seed=s.seed, method=s.design, center=s.center,
-                         n_local=s.n_local, local_scale=s.local_scale)
-    runs = run_points(model, design.X, mapper=mapper, batch=s.batch, progress=progress, desc="training")
+    design = make_design(
+        lower,
+        upper,
+        s.n_train,
+        seed=s.seed,
+        method=s.design,
+        center=s.center,
+        n_local=s.n_local,
+        local_scale=s.local_scale,
+    )
+    runs = run_points(
+        model, design.X, mapper=mapper, batch=s.batch, progress=progress, desc="training"
+    )
     if runs.n_ok == 0:
         reasons = [m for _, m in runs.failed[:3]] + [m for _, m in runs.infeasible[:3]]
-        raise ValueError(f"no successful training run out of {len(design)} points: {'; '.join(reasons)}")
-    sur = fit_surrogate(runs, lower, upper, sigma, names=model.names, settings=s, blocks=blocks,
-                        design_box=design.box, checker=model)
+        raise ValueError(
+            f"no successful training run out of {len(design)} points: {'; '.join(reasons)}"
+        )
+    sur = fit_surrogate(
+        runs,
+        lower,
+        upper,
+        sigma,
+        names=model.names,
+        settings=s,
+        blocks=blocks,
+        design_box=design.box,
+        checker=model,
+    )
     info = dict(sur.info, description=description or {})
     cost = {"training": runs.cost()}
     variance = None
     if s.n_holdout:
         hold_design = make_design(*design.box, s.n_holdout, seed=[s.seed, 1], method=s.design)
-        hold = run_points(model, hold_design.X, mapper=mapper, batch=s.batch, progress=progress, desc="hold-out",
-                          n_values=runs.Y.shape[1])
+        hold = run_points(
+            model,
+            hold_design.X,
+            mapper=mapper,
+            batch=s.batch,
+            progress=progress,
+            desc="hold-out",
+            n_values=runs.Y.shape[1],
+        )
         cost["holdout"] = hold.cost()
-        val = validate(sur, hold, sigma, report_blocks or blocks or {"all": slice(0, runs.Y.shape[1])}, units)
+        val = validate(
+            sur, hold, sigma, report_blocks or blocks or {"all": slice(0, runs.Y.shape[1])}, units
+        )
         info["validation"] = val.summary()
         variance = val.variance
     cost["build_wall_s"] = time.perf_counter() - t0
@@ -199,11 +304,19 @@ def build_surrogate(model, lower, upper, sigma, *, settings: SurrogateSettings =
     return dataclasses.replace(sur, hold_out_variance=variance, info=info)
 
 
-def build_case_surrogate(case, *, mesh: str = "coarse", data=None, settings: SurrogateSettings = SurrogateSettings(),
-                         sigma_force_kN: float = 1.0, mapper=None, progress: bool = False) -> SurrogateModel:
-    """Surrogate of the FE forward model of ``case`` on ``mesh`` for the loading and points of ``data``
-    (default: the case's shipped data set); measurements scaled by the data's sigma. A local design
-    without a centre is centred on the data set's parameters."""
+def build_case_surrogate(
+    case,
+    *,
+    mesh: str = "coarse",
+    data=None,
+    settings: SurrogateSettings = SurrogateSettings(),
+    sigma_force_kN: float = 1.0,
+    mapper=None,
+    progress: bool = False,
+) -> SurrogateModel:
+    """Surrogate of the FE forward model of ``case`` on ``mesh`` for the loading and points of
+    ``data`` (default: the case's shipped data set); measurements scaled by the data's sigma. A
+    local design without a centre is centred on the data set's parameters."""
     from problems.inverse import layout
     from problems.inverse.cases import get_case
     from problems.inverse.data import Dataset, get_data, load
@@ -221,14 +334,32 @@ def build_case_surrogate(case, *, mesh: str = "coarse", data=None, settings: Sur
     if settings.n_local and settings.center is None:
         import dataclasses
 
-        settings = dataclasses.replace(settings, center=tuple(float(data.parameters[n]) for n in case.names))
+        settings = dataclasses.replace(
+            settings, center=tuple(float(data.parameters[n]) for n in case.names)
+        )
     model = FEForwardModel(case, mesh, data.settings.loading, data.points)
     N, m = len(data.snapshots_mm), len(data.points)
     all_blocks = layout.blocks(N, m)
     blocks = {k: all_blocks[k] for k in layout.BLOCK_NAMES}
     report = {k: all_blocks[k] for k in ("u_h", "u_v", "displacement", "force")}
-    description = {"case": case.name, "mesh": mesh, "data_hash": data.hash, "sigma_force_kN": sigma_force_kN,
-                   "n_snapshots": N, "n_points": m}
-    return build_surrogate(model, case.lower, case.upper, data.sigma(sigma_force_kN), settings=settings, blocks=blocks,
-                           report_blocks=report, units=FE_UNITS, mapper=mapper, progress=progress,
-                           description=description)
+    description = {
+        "case": case.name,
+        "mesh": mesh,
+        "data_hash": data.hash,
+        "sigma_force_kN": sigma_force_kN,
+        "n_snapshots": N,
+        "n_points": m,
+    }
+    return build_surrogate(
+        model,
+        case.lower,
+        case.upper,
+        data.sigma(sigma_force_kN),
+        settings=settings,
+        blocks=blocks,
+        report_blocks=report,
+        units=FE_UNITS,
+        mapper=mapper,
+        progress=progress,
+        description=description,
+    )

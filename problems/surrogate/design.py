@@ -6,6 +6,7 @@ narrower design around a given point (for example the parameters of the data set
 found earlier) where the surrogate has to be most accurate. Its box is the given point plus or
 minus ``local_scale`` times the width of the global box, clipped to the global box.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -58,31 +59,50 @@ def local_box(lower, upper, center, scale: float) -> tuple[np.ndarray, np.ndarra
     """``center +- scale (upper - lower)``, clipped to ``[lower, upper]`` (physical units)."""
     lower, upper, center = (np.asarray(a, float) for a in (lower, upper, center))
     if not 0 < scale <= 0.5:
-        raise ValueError(f"local scale = {scale} is out of range: 0 < scale <= 0.5 (fraction of the box width)")
+        raise ValueError(
+            f"local scale = {scale} is out of range: 0 < scale <= 0.5 (fraction of the box width)"
+        )
     if center.shape != lower.shape or np.any(center < lower) or np.any(center > upper):
-        raise ValueError(f"local centre {center.tolist()} must lie in the box [{lower.tolist()}, {upper.tolist()}]")
+        raise ValueError(
+            f"local centre {center.tolist()} must lie in the box [{lower.tolist()}, "
+            f"{upper.tolist()}]"
+        )
     half = scale * (upper - lower)
     return np.maximum(center - half, lower), np.minimum(center + half, upper)
 
 
-def make_design(lower, upper, n: int, *, seed: int | list[int] = 0, method: str = "lhs", center=None, n_local: int = 0,
-                local_scale: float = 0.1) -> Design:
+def make_design(
+    lower,
+    upper,
+    n: int,
+    *,
+    seed: int | list[int] = 0,
+    method: str = "lhs",
+    center=None,
+    n_local: int = 0,
+    local_scale: float = 0.1,
+) -> Design:
     """A global design of ``n`` points in ``[lower, upper]``, plus ``n_local`` points in the local
-    box around ``center`` (see :func:`local_box`). The two designs use independent streams of ``seed``
-    (an int or a list of ints: ``[seed, 1]`` gives a design independent of ``seed``'s)."""
+    box around ``center`` (see :func:`local_box`). The two designs use independent streams of
+    ``seed`` (an int or a list of ints: ``[seed, 1]`` gives a design independent of ``seed``'s)."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     if lower.shape != upper.shape or lower.ndim != 1 or np.any(~(upper > lower)):
         raise ValueError("bounds must be 1-D arrays of equal length with upper > lower")
     if n_local and center is None:
         raise ValueError("a local design needs a centre")
     g_seed, l_seed = np.random.SeedSequence(seed).spawn(2)
-    X = qmc.scale(unit_design(n, lower.size, np.random.default_rng(g_seed), method), lower, upper) if n else \
-        np.empty((0, lower.size))
+    X = (
+        qmc.scale(unit_design(n, lower.size, np.random.default_rng(g_seed), method), lower, upper)
+        if n
+        else np.empty((0, lower.size))
+    )
     origin = ["global"] * n
     lbox = None
     if n_local:
         lbox = local_box(lower, upper, center, local_scale)
-        XL = qmc.scale(unit_design(n_local, lower.size, np.random.default_rng(l_seed), method), *lbox)
+        XL = qmc.scale(
+            unit_design(n_local, lower.size, np.random.default_rng(l_seed), method), *lbox
+        )
         X = np.vstack([X, XL])
         origin += ["local"] * n_local
     return Design(X, np.array(origin), (lower, upper), lbox)

@@ -1,4 +1,5 @@
-r"""The surrogate forward model: POD basis + regression of its coefficients, behind the forward-model protocol.
+r"""The surrogate forward model: POD basis + regression of its coefficients, behind the
+forward-model protocol.
 
 ``U(x) = ybar + sigma * (Phi a(z))``,  ``z = (x - lower) / (upper - lower)``, and its Jacobian
 ``dU/dx = diag(sigma) Phi (da/dz) diag(1 / (upper - lower))`` in physical units, exact for the
@@ -12,6 +13,7 @@ distance to the nearest training point and, on request, whether the point lies i
 of the training points (a linear programme; in 6 dimensions the hull of a few hundred points
 fills only a small part of the box, so it is a diagnostic, not the flag).
 """
+
 from __future__ import annotations
 
 import time
@@ -67,27 +69,33 @@ class SurrogateModel:
 
     @property
     def hash(self) -> str | None:
-        """Content hash of the stored model (set by :func:`problems.surrogate.store.save` / ``load``)."""
+        """Content hash of the stored model (set by
+        :func:`problems.surrogate.store.save` / ``load``)."""
         return self.info.get("hash")
 
     def to_scaled(self, x) -> np.ndarray:
         return (np.asarray(x, float) - self.lower) / (self.upper - self.lower)
 
     def check(self, x) -> str | None:
-        """None when ``x`` (physical) is valid: right shape, finite, in the box, accepted by the checker."""
+        """None when ``x`` (physical) is valid: right shape, finite, in the box, accepted by the
+        checker."""
         x = np.asarray(x, float)
         if x.shape != self.lower.shape:
             return f"expected {self.lower.size} parameters {self.names}, got shape {x.shape}"
         if not np.all(np.isfinite(x)):
             return "non-finite parameters"
-        out = [f"{n} = {v:.6g} not in [{lo:.6g}, {hi:.6g}]"
-               for n, v, lo, hi in zip(self.names, x, self.lower, self.upper) if not lo <= v <= hi]
+        out = [
+            f"{n} = {v:.6g} not in [{lo:.6g}, {hi:.6g}]"
+            for n, v, lo, hi in zip(self.names, x, self.lower, self.upper)
+            if not lo <= v <= hi
+        ]
         if out:
             return "outside the box: " + "; ".join(out)
         return None if self.checker is None else self.checker.check(x)
 
     def __call__(self, x, jacobian: bool = False) -> ForwardResult:
-        """Predicted measurement vector at physical ``x`` (and ``dU/dx`` (m, d) with ``jacobian=True``).
+        """Predicted measurement vector at physical ``x`` (and ``dU/dx`` (m, d) with
+        ``jacobian=True``).
         Invalid points give ``ok=False`` with the reason; extrapolation is said in ``message``."""
         t0 = time.perf_counter()
         x = np.asarray(x, float)
@@ -100,10 +108,13 @@ class SurrogateModel:
         J = None
         if jacobian:
             G = self.regression.gradient(z)  # (r, d)
-            # one matrix-vector product per parameter: a threaded (m, r) x (r, d) GEMM is far slower on a busy machine
+            # one matrix-vector product per parameter: a threaded (m, r) x (r, d) GEMM is far slower
+            # on a busy machine
             J = np.column_stack([self.pod.modes @ G[:, i] for i in range(G.shape[1])])
             J *= self.pod.scale[:, None] / (self.upper - self.lower)
-        return ForwardResult(True, values, self.extrapolation_message(x), time.perf_counter() - t0, J)
+        return ForwardResult(
+            True, values, self.extrapolation_message(x), time.perf_counter() - t0, J
+        )
 
     def predict(self, X) -> np.ndarray:
         """(q, m) predictions at the rows of ``X`` (physical), no checks (vectorised)."""
@@ -120,25 +131,35 @@ class SurrogateModel:
         return np.maximum(np.maximum(lo - x, x - hi), 0.0) / (self.upper - self.lower)
 
     def extrapolation_message(self, x) -> str:
-        """``""`` inside the training design box, else ``"extrapolation: ..."`` naming the parameters."""
+        """``""`` inside the training design box, else ``"extrapolation: ..."`` naming the
+        parameters."""
         ex = self.box_excess(x)
         if not np.any(ex > 0):
             return ""
         parts = [f"{n} by {e:.3g}" for n, e in zip(self.names, ex) if e > 0]
-        return "extrapolation: outside the training design box (" + ", ".join(parts) + " of the box width)"
+        return (
+            "extrapolation: outside the training design box ("
+            + ", ".join(parts)
+            + " of the box width)"
+        )
 
     def extrapolation(self, x, *, hull: bool = False) -> dict:
         """Where ``x`` lies relative to the training points (scaled units): ``outside_box``,
-        ``box_excess`` (d,), ``nn_distance`` to the nearest training point, ``nn_ratio`` (that over the
-        median nearest-neighbour distance within the design) and, with ``hull=True``, ``in_hull``."""
+        ``box_excess`` (d,), ``nn_distance`` to the nearest training point, ``nn_ratio`` (that over
+        the median nearest-neighbour distance within the design) and, with ``hull=True``,
+        ``in_hull``."""
         z = self.to_scaled(x)
         d = np.sqrt(np.sum((self.train_z - z) ** 2, axis=1))
         D = np.sqrt(np.sum((self.train_z[:, None] - self.train_z[None]) ** 2, axis=2))
         np.fill_diagonal(D, np.inf)
         typical = float(np.median(D.min(axis=1))) if len(D) > 1 else float("nan")
         ex = self.box_excess(x)
-        out = {"outside_box": bool(np.any(ex > 0)), "box_excess": ex, "nn_distance": float(d.min()),
-               "nn_ratio": float(d.min() / typical) if typical > 0 else float("nan")}
+        out = {
+            "outside_box": bool(np.any(ex > 0)),
+            "box_excess": ex,
+            "nn_distance": float(d.min()),
+            "nn_ratio": float(d.min() / typical) if typical > 0 else float("nan"),
+        }
         if hull:
             out["in_hull"] = in_hull(self.train_z, z)
         return out
@@ -149,11 +170,12 @@ class SurrogateModel:
         s = np.broadcast_to(np.asarray(sigma, float), (self.n_values,))
         if self.hold_out_variance is None:
             return s.copy()
-        return np.sqrt(s ** 2 + self.hold_out_variance)
+        return np.sqrt(s**2 + self.hold_out_variance)
 
 
 def in_hull(points: np.ndarray, z: np.ndarray) -> bool:
-    """True when ``z`` is a convex combination of the rows of ``points`` (linear feasibility problem)."""
+    """True when ``z`` is a convex combination of the rows of ``points``
+    (linear feasibility problem)."""
     from scipy.optimize import linprog
 
     n = len(points)

@@ -20,6 +20,7 @@ values and would be invisible in a global energy fraction. The criterion is met 
 snapshots; new points also carry the (larger) regression error, measured by the hold-out
 validation.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -60,11 +61,13 @@ class POD:
 
     def energy_fraction(self) -> float:
         """Fraction of the centred scaled snapshot energy kept by the truncation."""
-        s2 = self.singular_values ** 2
-        return float(s2[:self.n_modes].sum() / s2.sum()) if s2.sum() > 0 else 1.0
+        s2 = self.singular_values**2
+        return float(s2[: self.n_modes].sum() / s2.sum()) if s2.sum() > 0 else 1.0
 
 
-def truncation_rms(singular_values, Vt, blocks: dict[str, slice], n_snapshots: int) -> dict[str, np.ndarray]:
+def truncation_rms(
+    singular_values, Vt, blocks: dict[str, slice], n_snapshots: int
+) -> dict[str, np.ndarray]:
     """``{block: rms_b(r) for r = 0..k}``: RMS projection error of the training snapshots in
     units of sigma when ``r`` modes are kept (see the module docstring)."""
     s2 = np.asarray(singular_values, float) ** 2
@@ -77,8 +80,14 @@ def truncation_rms(singular_values, Vt, blocks: dict[str, slice], n_snapshots: i
     return out
 
 
-def fit_pod(Y, scale, *, tol_sigma: float = 0.1, blocks: dict[str, slice] | None = None,
-            max_modes: int | None = None) -> POD:
+def fit_pod(
+    Y,
+    scale,
+    *,
+    tol_sigma: float = 0.1,
+    blocks: dict[str, slice] | None = None,
+    max_modes: int | None = None,
+) -> POD:
     """The POD of the snapshots ``Y`` (n, m) scaled by ``scale`` (m,), truncated by the rule of the
     module docstring (``max_modes`` caps ``r``; then the criterion may not be met, see
     ``projection_rms``)."""
@@ -100,4 +109,11 @@ def fit_pod(Y, scale, *, tol_sigma: float = 0.1, blocks: dict[str, slice] | None
     r = max(r, 1)
     if max_modes is not None:
         r = max(1, min(r, int(max_modes)))
-    return POD(mean, scale, np.ascontiguousarray(Vt[:r].T), s, float(tol_sigma), {k: float(v[r]) for k, v in rms.items()})
+    return POD(
+        mean,
+        scale,
+        np.ascontiguousarray(Vt[:r].T),
+        s,
+        float(tol_sigma),
+        {k: float(v[r]) for k, v in rms.items()},
+    )

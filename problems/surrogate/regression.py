@@ -1,4 +1,5 @@
-r"""Regression of the POD coefficients over the scaled parameters ``z = (x - lower) / (upper - lower)``.
+r"""Regression of the POD coefficients over the scaled parameters
+``z = (x - lower) / (upper - lower)``.
 
 Two families, both stored as plain arrays (no fitted library object is kept, so a stored model
 loads without scikit-learn and pickles small), both with a cheap exact gradient ``da/dz``:
@@ -21,6 +22,7 @@ Scores are errors in units of the measurement noise: because the modes are ortho
 scaled space, a coefficient error ``da`` is a measurement error ``sigma * Phi da``, and its mean
 square over block ``b`` is ``da^T (Phi_b^T Phi_b) da / m_b`` (:class:`Scorer`).
 """
+
 from __future__ import annotations
 
 import math
@@ -32,14 +34,22 @@ import numpy as np
 #: kernels of scipy's RBFInterpolator that need no shape parameter (eps = 1)
 SCALE_FREE = ("thin_plate_spline", "cubic", "quintic", "linear")
 #: default candidates of the RBF cross-validation: (kernel, eps) pairs and smoothing values
-RBF_KERNELS = (("thin_plate_spline", 1.0), ("cubic", 1.0), ("quintic", 1.0), ("multiquadric", 1.0),
-               ("multiquadric", 3.0), ("gaussian", 1.0), ("gaussian", 3.0))
+RBF_KERNELS = (
+    ("thin_plate_spline", 1.0),
+    ("cubic", 1.0),
+    ("quintic", 1.0),
+    ("multiquadric", 1.0),
+    ("multiquadric", 3.0),
+    ("gaussian", 1.0),
+    ("gaussian", 3.0),
+)
 RBF_SMOOTHING = (0.0, 1e-6, 1e-4, 1e-2)
 
 
 # --------------------------------------------------------------------------------------------
 # Scores in units of sigma
 # --------------------------------------------------------------------------------------------
+
 
 class Scorer:
     """Mean-square errors per block, in units of sigma^2, of coefficient errors (or of scaled
@@ -55,11 +65,14 @@ class Scorer:
     def coefficient_ms(self, dA) -> dict[str, float]:
         """{block: mean square error, sigma^2} of coefficient errors ``dA`` (q, r)."""
         dA = np.atleast_2d(dA)
-        return {k: float(np.einsum("qi,ij,qj->", dA, G, dA) / (len(dA) * self.sizes[k]))
-                for k, G in self.grams.items()}
+        return {
+            k: float(np.einsum("qi,ij,qj->", dA, G, dA) / (len(dA) * self.sizes[k]))
+            for k, G in self.grams.items()
+        }
 
     def scaled_ms(self, E) -> dict[str, float]:
-        """{block: mean square} of scaled measurement errors ``E`` (q, m) (already divided by sigma)."""
+        """{block: mean square} of scaled measurement errors ``E`` (q, m)
+        (already divided by sigma)."""
         E = np.atleast_2d(E)
         return {k: float(np.mean(E[:, sl] ** 2)) for k, sl in self.blocks.items()}
 
@@ -72,6 +85,7 @@ class Scorer:
 # RBF
 # --------------------------------------------------------------------------------------------
 
+
 def _phi(kernel: str, r: np.ndarray) -> np.ndarray:
     if kernel == "linear":
         return -r
@@ -79,9 +93,9 @@ def _phi(kernel: str, r: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(r > 0, r * r * np.log(np.where(r > 0, r, 1.0)), 0.0)
     if kernel == "cubic":
-        return r ** 3
+        return r**3
     if kernel == "quintic":
-        return -r ** 5
+        return -(r**5)
     if kernel == "multiquadric":
         return -np.sqrt(r * r + 1.0)
     if kernel == "inverse_multiquadric":
@@ -94,7 +108,8 @@ def _phi(kernel: str, r: np.ndarray) -> np.ndarray:
 
 
 def _dphi_over_r(kernel: str, r: np.ndarray) -> np.ndarray:
-    """``phi'(r) / r``; at ``r = 0`` (a centre) the contribution ``(z - z_i) phi'/r`` is set to 0."""
+    """``phi'(r) / r``; at ``r = 0`` (a centre) the contribution ``(z - z_i) phi'/r`` is set to
+    0."""
     safe = np.where(r > 0, r, 1.0)
     if kernel == "linear":
         g = -1.0 / safe
@@ -103,11 +118,11 @@ def _dphi_over_r(kernel: str, r: np.ndarray) -> np.ndarray:
     elif kernel == "cubic":
         g = 3.0 * r
     elif kernel == "quintic":
-        g = -5.0 * r ** 3
+        g = -5.0 * r**3
     elif kernel == "multiquadric":
         g = -1.0 / np.sqrt(r * r + 1.0)
     elif kernel == "inverse_multiquadric":
-        g = -(r * r + 1.0) ** -1.5
+        g = -((r * r + 1.0) ** -1.5)
     elif kernel == "inverse_quadratic":
         g = -2.0 / (r * r + 1.0) ** 2
     elif kernel == "gaussian":
@@ -171,36 +186,65 @@ class RBFFit:
         z = np.asarray(z, float)
         n = len(self.centres)
         diff = z[None, :] - self.centres
-        r = self.epsilon * np.sqrt(np.sum(diff ** 2, axis=1))
-        dK = (_dphi_over_r(self.kernel, r) * self.epsilon ** 2)[:, None] * diff  # (n, d)
+        r = self.epsilon * np.sqrt(np.sum(diff**2, axis=1))
+        dK = (_dphi_over_r(self.kernel, r) * self.epsilon**2)[:, None] * diff  # (n, d)
         out = self.coeffs[:n].T @ dK
         if len(self.powers):
-            out += self.coeffs[n:].T @ _monomial_gradient((z - self.shift) / self.scale, self.powers, self.scale)
+            out += self.coeffs[n:].T @ _monomial_gradient(
+                (z - self.shift) / self.scale, self.powers, self.scale
+            )
         return out
 
     def settings(self) -> dict:
-        return {"kind": "rbf", "kernel": self.kernel, "epsilon": self.epsilon, "smoothing": self.smoothing}
+        return {
+            "kind": "rbf",
+            "kernel": self.kernel,
+            "epsilon": self.epsilon,
+            "smoothing": self.smoothing,
+        }
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {"centres": self.centres, "coeffs": self.coeffs, "shift": self.shift, "scale": self.scale,
-                "powers": self.powers}
+        return {
+            "centres": self.centres,
+            "coeffs": self.coeffs,
+            "shift": self.shift,
+            "scale": self.scale,
+            "powers": self.powers,
+        }
 
     @classmethod
     def from_stored(cls, arrays: dict, settings: dict) -> "RBFFit":
-        return cls(arrays["centres"], arrays["coeffs"], arrays["shift"], arrays["scale"],
-                   np.asarray(arrays["powers"], int), settings["kernel"], float(settings["epsilon"]),
-                   float(settings["smoothing"]))
+        return cls(
+            arrays["centres"],
+            arrays["coeffs"],
+            arrays["shift"],
+            arrays["scale"],
+            np.asarray(arrays["powers"], int),
+            settings["kernel"],
+            float(settings["epsilon"]),
+            float(settings["smoothing"]),
+        )
 
 
-def fit_rbf(Z, A, *, kernel: str = "thin_plate_spline", epsilon: float = 1.0, smoothing: float = 0.0) -> RBFFit:
-    """Fit the coefficients ``A`` (n, r) over scaled points ``Z`` (n, d) with scipy's RBFInterpolator."""
+def fit_rbf(
+    Z, A, *, kernel: str = "thin_plate_spline", epsilon: float = 1.0, smoothing: float = 0.0
+) -> RBFFit:
+    """Fit the coefficients ``A`` (n, r) over scaled points ``Z`` (n, d) with scipy's
+    RBFInterpolator."""
     from scipy.interpolate import RBFInterpolator
 
     Z, A = np.asarray(Z, float), np.asarray(A, float)
     itp = RBFInterpolator(Z, A, kernel=kernel, epsilon=epsilon, smoothing=smoothing)
-    return RBFFit(Z.copy(), np.asarray(itp._coeffs, float).reshape(len(Z) + len(itp.powers), -1),
-                  np.asarray(itp._shift, float), np.asarray(itp._scale, float), np.asarray(itp.powers, int),
-                  kernel, float(itp.epsilon), float(smoothing))
+    return RBFFit(
+        Z.copy(),
+        np.asarray(itp._coeffs, float).reshape(len(Z) + len(itp.powers), -1),
+        np.asarray(itp._shift, float),
+        np.asarray(itp._scale, float),
+        np.asarray(itp.powers, int),
+        kernel,
+        float(itp.epsilon),
+        float(smoothing),
+    )
 
 
 def kfold(n: int, folds: int, seed: int) -> list[np.ndarray]:
@@ -209,8 +253,16 @@ def kfold(n: int, folds: int, seed: int) -> list[np.ndarray]:
     return np.array_split(np.random.default_rng(seed).permutation(n), folds)
 
 
-def select_rbf(Z, A, scorer: Scorer, *, kernels=RBF_KERNELS, smoothing=RBF_SMOOTHING, folds: int = 5,
-               seed: int = 0) -> tuple[dict, list[dict]]:
+def select_rbf(
+    Z,
+    A,
+    scorer: Scorer,
+    *,
+    kernels=RBF_KERNELS,
+    smoothing=RBF_SMOOTHING,
+    folds: int = 5,
+    seed: int = 0,
+) -> tuple[dict, list[dict]]:
     """The (kernel, epsilon, smoothing) with the lowest k-fold cross-validation score, and the table
     of all candidates (``{"kernel", "epsilon", "smoothing", "score", "rms_sigma": {block: ...}}``;
     score ``inf`` when a fit was singular)."""
@@ -225,24 +277,36 @@ def select_rbf(Z, A, scorer: Scorer, *, kernels=RBF_KERNELS, smoothing=RBF_SMOOT
             try:
                 for test in splits:
                     train = np.setdiff1d(np.arange(len(Z)), test)
-                    pred[test] = fit_rbf(Z[train], A[train], kernel=kernel, epsilon=eps, smoothing=lam).predict(Z[test])
+                    pred[test] = fit_rbf(
+                        Z[train], A[train], kernel=kernel, epsilon=eps, smoothing=lam
+                    ).predict(Z[test])
                 ms = scorer.coefficient_ms(pred - A)
                 score = scorer.score(ms)
             except (LinAlgError, ValueError):
                 ms, score = {}, math.inf
             if not np.isfinite(score):
                 score = math.inf
-            table.append({"kernel": kernel, "epsilon": float(eps), "smoothing": float(lam), "score": score,
-                          "rms_sigma": {k: math.sqrt(v) for k, v in ms.items()}})
+            table.append(
+                {
+                    "kernel": kernel,
+                    "epsilon": float(eps),
+                    "smoothing": float(lam),
+                    "score": score,
+                    "rms_sigma": {k: math.sqrt(v) for k, v in ms.items()},
+                }
+            )
     best = min(table, key=lambda row: row["score"])
     if not math.isfinite(best["score"]):
-        raise ValueError("every RBF candidate failed (singular systems): too few or duplicate training points")
+        raise ValueError(
+            "every RBF candidate failed (singular systems): too few or duplicate training points"
+        )
     return {k: best[k] for k in ("kernel", "epsilon", "smoothing")}, table
 
 
 # --------------------------------------------------------------------------------------------
 # Gaussian process
 # --------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True, eq=False)
 class GPComponent:
@@ -275,7 +339,9 @@ class GPComponent:
             return a * (1.0 + math.sqrt(3.0) * d) * e, -3.0 * a * e
         if self.nu == 2.5:
             e = np.exp(-math.sqrt(5.0) * d)
-            return a * (1.0 + math.sqrt(5.0) * d + 5.0 / 3.0 * d * d) * e, -5.0 / 3.0 * a * (1.0 + math.sqrt(5.0) * d) * e
+            return a * (1.0 + math.sqrt(5.0) * d + 5.0 / 3.0 * d * d) * e, -5.0 / 3.0 * a * (
+                1.0 + math.sqrt(5.0) * d
+            ) * e
         k = a * np.exp(-0.5 * d * d)
         return k, -k
 
@@ -288,7 +354,7 @@ class GPComponent:
         """(k, d) derivative of the predicted modes at one point ``z``."""
         diff = np.asarray(z, float)[None, :] - self.X
         _, f = self._k(diff)
-        dk = f[:, None] * diff / self.length_scale ** 2  # (n, d)
+        dk = f[:, None] * diff / self.length_scale**2  # (n, d)
         return (self.alpha.T @ dk) * self.y_std[:, None]
 
 
@@ -315,9 +381,13 @@ class GPFit:
         return out
 
     def settings(self) -> dict:
-        return {"kind": "gp", "n_outputs": self.n_outputs, "nu": [float(c.nu) for c in self.components],
-                "amplitude": [c.amplitude for c in self.components],
-                "length_scale": [c.length_scale.tolist() for c in self.components]}
+        return {
+            "kind": "gp",
+            "n_outputs": self.n_outputs,
+            "nu": [float(c.nu) for c in self.components],
+            "amplitude": [c.amplitude for c in self.components],
+            "length_scale": [c.length_scale.tolist() for c in self.components],
+        }
 
     def arrays(self) -> dict[str, np.ndarray]:
         out = {}
@@ -330,38 +400,64 @@ class GPFit:
     def from_stored(cls, arrays: dict, settings: dict) -> "GPFit":
         comps = []
         for i, (nu, amp) in enumerate(zip(settings["nu"], settings["amplitude"])):
-            comps.append(GPComponent(np.asarray(arrays[f"gp{i}_outputs"], int), arrays[f"gp{i}_X"],
-                                     arrays[f"gp{i}_alpha"], arrays[f"gp{i}_y_mean"], arrays[f"gp{i}_y_std"],
-                                     float(amp), arrays[f"gp{i}_length_scale"], float(nu)))
+            comps.append(
+                GPComponent(
+                    np.asarray(arrays[f"gp{i}_outputs"], int),
+                    arrays[f"gp{i}_X"],
+                    arrays[f"gp{i}_alpha"],
+                    arrays[f"gp{i}_y_mean"],
+                    arrays[f"gp{i}_y_std"],
+                    float(amp),
+                    arrays[f"gp{i}_length_scale"],
+                    float(nu),
+                )
+            )
         return cls(tuple(comps), int(settings["n_outputs"]))
 
 
-def fit_gp_component(Z, Y, outputs, *, nu: float = 2.5, restarts: int = 2, seed: int = 0) -> GPComponent:
+def fit_gp_component(
+    Z, Y, outputs, *, nu: float = 2.5, restarts: int = 2, seed: int = 0
+) -> GPComponent:
     """Fit one scikit-learn GP to the columns ``outputs`` of ``Y`` (shared hyper-parameters)."""
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.gaussian_process import GaussianProcessRegressor
-    from sklearn.gaussian_process.kernels import ConstantKernel, Matern, RBF, WhiteKernel
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
     Z = np.asarray(Z, float)
     y = np.asarray(Y, float)[:, outputs]
     d = Z.shape[1]
-    shape = Matern(np.full(d, 0.5), (1e-2, 1e3), nu=nu) if math.isfinite(nu) else RBF(np.full(d, 0.5), (1e-2, 1e3))
+    shape = (
+        Matern(np.full(d, 0.5), (1e-2, 1e3), nu=nu)
+        if math.isfinite(nu)
+        else RBF(np.full(d, 0.5), (1e-2, 1e3))
+    )
     kernel = ConstantKernel(1.0, (1e-3, 1e5)) * shape + WhiteKernel(1e-6, (1e-12, 1e-1))
-    gp = GaussianProcessRegressor(kernel, normalize_y=True, n_restarts_optimizer=restarts, random_state=seed)
+    gp = GaussianProcessRegressor(
+        kernel, normalize_y=True, n_restarts_optimizer=restarts, random_state=seed
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         gp.fit(Z, y)
     k = len(outputs)
     amp = float(gp.kernel_.k1.k1.constant_value)
     ls = np.broadcast_to(np.asarray(gp.kernel_.k1.k2.length_scale, float), (d,)).copy()
-    return GPComponent(np.asarray(outputs, int), Z.copy(), np.asarray(gp.alpha_, float).reshape(len(Z), k),
-                       np.broadcast_to(np.asarray(gp._y_train_mean, float), (k,)).copy(),
-                       np.broadcast_to(np.asarray(gp._y_train_std, float), (k,)).copy(), amp, ls, float(nu))
+    return GPComponent(
+        np.asarray(outputs, int),
+        Z.copy(),
+        np.asarray(gp.alpha_, float).reshape(len(Z), k),
+        np.broadcast_to(np.asarray(gp._y_train_mean, float), (k,)).copy(),
+        np.broadcast_to(np.asarray(gp._y_train_std, float), (k,)).copy(),
+        amp,
+        ls,
+        float(nu),
+    )
 
 
-def fit_gp(Z, A, *, nu: float = 2.5, n_individual: int = 8, restarts: int = 2, seed: int = 0) -> GPFit:
-    """GP regression of all coefficients ``A`` (n, r): one GP per leading mode up to ``n_individual``,
-    one shared multi-output GP for the rest."""
+def fit_gp(
+    Z, A, *, nu: float = 2.5, n_individual: int = 8, restarts: int = 2, seed: int = 0
+) -> GPFit:
+    """GP regression of all coefficients ``A`` (n, r): one GP per leading mode up to
+    ``n_individual``, one shared multi-output GP for the rest."""
     if nu not in (1.5, 2.5) and math.isfinite(nu):
         raise ValueError(f"GP nu = {nu} is unsupported; allowed: 1.5, 2.5, inf")
     A = np.asarray(A, float)
@@ -369,7 +465,10 @@ def fit_gp(Z, A, *, nu: float = 2.5, n_individual: int = 8, restarts: int = 2, s
     groups = [np.array([j]) for j in range(min(n_individual, r))]
     if r > n_individual:
         groups.append(np.arange(n_individual, r))
-    comps = tuple(fit_gp_component(Z, A, g, nu=nu, restarts=restarts, seed=seed + i) for i, g in enumerate(groups))
+    comps = tuple(
+        fit_gp_component(Z, A, g, nu=nu, restarts=restarts, seed=seed + i)
+        for i, g in enumerate(groups)
+    )
     return GPFit(comps, r)
 
 

@@ -1,4 +1,5 @@
-"""Store and load surrogates: ``surrogate.npz`` (arrays) + ``surrogate.json`` (settings, validation, hash).
+"""Store and load surrogates: ``surrogate.npz`` (arrays) + ``surrogate.json``
+(settings, validation, hash).
 
 One surrogate is one folder. The JSON (format ``femubench-surrogate/1``) holds the settings,
 cost, selection and validation, the description of the checker, the list of arrays and
@@ -12,6 +13,7 @@ in a root folder: ``<root>/<name>/``. The root is the ``root`` argument, else
 ``bench.commands.surrogate``). The default name of the surrogate of a case on a mesh is
 :func:`default_name` ``(case, mesh)``, e.g. ``linear-compression__coarse``.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -36,7 +38,8 @@ SURROGATE_DIR_ENV = "FEMUBENCH_SURROGATE_DIR"
 
 def default_name(case: str, mesh: str) -> str:
     """Folder name of the surrogate of ``case`` on ``mesh``: ``<case>__<mesh>``, mesh characters
-    other than letters, digits, ``.``, ``_`` and ``-`` replaced by ``_`` (``3,3,6`` -> ``3_3_6``)."""
+    other than letters, digits, ``.``, ``_`` and ``-`` replaced by ``_``
+    (``3,3,6`` -> ``3_3_6``)."""
     return f"{case}__{re.sub(r'[^A-Za-z0-9._-]', '_', mesh)}"
 
 
@@ -56,7 +59,9 @@ def resolve(name_or_path: str | Path, root: str | Path | None = None) -> Path:
     root = Path(root).expanduser() if root is not None else default_root()
     if root is not None and (root / str(name_or_path)).is_dir():
         return root / str(name_or_path)
-    where = f" nor in {root}" if root is not None else f" (set {SURROGATE_DIR_ENV} to look names up)"
+    where = (
+        f" nor in {root}" if root is not None else f" (set {SURROGATE_DIR_ENV} to look names up)"
+    )
     raise FileNotFoundError(f"surrogate {str(name_or_path)!r} is neither a folder or file{where}")
 
 
@@ -86,8 +91,15 @@ def _checker_spec(checker) -> tuple[dict, dict]:
     from problems.inverse.forward import FEForwardModel
 
     if isinstance(checker, FEForwardModel):
-        return ({"kind": "fe", "case": checker.case.name, "mesh": checker.mesh, "loading": asdict(checker.loading)},
-                {"checker_points": np.asarray(checker.points, float)})
+        return (
+            {
+                "kind": "fe",
+                "case": checker.case.name,
+                "mesh": checker.mesh,
+                "loading": asdict(checker.loading),
+            },
+            {"checker_points": np.asarray(checker.points, float)},
+        )
     cls = type(checker)
     kwargs = checker.to_spec() if hasattr(checker, "to_spec") else {}
     return {"kind": "object", "class": f"{cls.__module__}:{cls.__qualname__}", "kwargs": kwargs}, {}
@@ -102,7 +114,12 @@ def _make_checker(spec: dict, arrays: dict):
         from problems.inverse.cases import get_case
         from problems.inverse.forward import FEForwardModel
 
-        return FEForwardModel(get_case(spec["case"]), spec["mesh"], Loading(**spec["loading"]), arrays["checker_points"])
+        return FEForwardModel(
+            get_case(spec["case"]),
+            spec["mesh"],
+            Loading(**spec["loading"]),
+            arrays["checker_points"],
+        )
     if kind == "object":
         module, _, qualname = spec["class"].partition(":")
         try:
@@ -110,7 +127,9 @@ def _make_checker(spec: dict, arrays: dict):
             for part in qualname.split("."):
                 obj = getattr(obj, part)
         except (ImportError, AttributeError) as exc:
-            raise ValueError(f"checker class {spec['class']} cannot be imported ({exc}); pass checker= to load") from None
+            raise ValueError(
+                f"checker class {spec['class']} cannot be imported ({exc}); pass checker= to load"
+            ) from None
         return obj(**spec.get("kwargs", {}))
     raise ValueError(f"checker kind {kind!r} is unknown")
 
@@ -122,23 +141,41 @@ def _json_ready(value):
 
 
 def save(model: SurrogateModel, folder: str | Path) -> Path:
-    """Write ``model`` into ``folder`` (created); returns the folder. Sets ``model.info["hash"]``."""
+    """Write ``model`` into ``folder`` (created); returns the folder. Sets
+    ``model.info["hash"]``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     spec, checker_arrays = _checker_spec(model.checker)
-    arrays = {"pod_mean": model.pod.mean, "pod_scale": model.pod.scale, "pod_modes": model.pod.modes,
-              "pod_singular_values": model.pod.singular_values, "train_z": model.train_z,
-              "lower": model.lower, "upper": model.upper, "design_lower": model.design_box[0],
-              "design_upper": model.design_box[1], **checker_arrays,
-              **{f"reg_{k}": v for k, v in model.regression.arrays().items()}}
+    arrays = {
+        "pod_mean": model.pod.mean,
+        "pod_scale": model.pod.scale,
+        "pod_modes": model.pod.modes,
+        "pod_singular_values": model.pod.singular_values,
+        "train_z": model.train_z,
+        "lower": model.lower,
+        "upper": model.upper,
+        "design_lower": model.design_box[0],
+        "design_upper": model.design_box[1],
+        **checker_arrays,
+        **{f"reg_{k}": v for k, v in model.regression.arrays().items()},
+    }
     if model.hold_out_variance is not None:
         arrays["hold_out_variance"] = model.hold_out_variance
     arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
     info = {k: v for k, v in model.info.items() if k != "hash"}
-    doc = _json_ready({"format": FORMAT, "names": list(model.names), "checker": spec,
-                       "pod": {"tol_sigma": model.pod.tol_sigma, "projection_rms": model.pod.projection_rms},
-                       "regression": model.regression.settings(), "info": info,
-                       "arrays": {k: {"dtype": v.dtype.str, "shape": list(v.shape)} for k, v in arrays.items()}})
+    doc = _json_ready(
+        {
+            "format": FORMAT,
+            "names": list(model.names),
+            "checker": spec,
+            "pod": {"tol_sigma": model.pod.tol_sigma, "projection_rms": model.pod.projection_rms},
+            "regression": model.regression.settings(),
+            "info": info,
+            "arrays": {
+                k: {"dtype": v.dtype.str, "shape": list(v.shape)} for k, v in arrays.items()
+            },
+        }
+    )
     doc["hash"] = content_hash(doc, arrays)
     tmp_npz, tmp_json = folder / (NPZ_NAME + ".tmp.npz"), folder / (JSON_NAME + ".tmp")
     np.savez(tmp_npz, **arrays)
@@ -149,7 +186,9 @@ def save(model: SurrogateModel, folder: str | Path) -> Path:
     return folder
 
 
-def load(name_or_path: str | Path, *, root: str | Path | None = None, checker=None) -> SurrogateModel:
+def load(
+    name_or_path: str | Path, *, root: str | Path | None = None, checker=None
+) -> SurrogateModel:
     """Load a stored surrogate (see the module docstring for names); verifies the content hash.
 
     checker : object whose ``check`` replaces the stored checker (needed when it cannot be rebuilt)
@@ -172,17 +211,36 @@ def load(name_or_path: str | Path, *, root: str | Path | None = None, checker=No
         raise ValueError(f"{folder}: the arrays of {NPZ_NAME} do not match {JSON_NAME}")
     digest = content_hash(doc, arrays)
     if digest != doc.get("hash"):
-        raise ValueError(f"{folder}: content hash mismatch (stored {str(doc.get('hash'))[:12]}, computed "
-                         f"{digest[:12]}): the files were changed after they were written")
+        raise ValueError(
+            f"{folder}: content hash mismatch (stored {str(doc.get('hash'))[:12]}, computed "
+            f"{digest[:12]}): the files were changed after they were written"
+        )
     pod_doc = doc["pod"]
-    pod = POD(arrays["pod_mean"], arrays["pod_scale"], arrays["pod_modes"], arrays["pod_singular_values"],
-              float(pod_doc["tol_sigma"]), dict(pod_doc["projection_rms"]))
-    reg = from_stored({k[4:]: v for k, v in arrays.items() if k.startswith("reg_")}, doc["regression"])
+    pod = POD(
+        arrays["pod_mean"],
+        arrays["pod_scale"],
+        arrays["pod_modes"],
+        arrays["pod_singular_values"],
+        float(pod_doc["tol_sigma"]),
+        dict(pod_doc["projection_rms"]),
+    )
+    reg = from_stored(
+        {k[4:]: v for k, v in arrays.items() if k.startswith("reg_")}, doc["regression"]
+    )
     if checker is None:
         checker = _make_checker(doc["checker"], arrays)
     from problems.io.jsonio import decode
 
     info = dict(decode(doc["info"]), hash=doc["hash"])
-    return SurrogateModel(tuple(doc["names"]), arrays["lower"], arrays["upper"], pod, reg, arrays["train_z"],
-                          (arrays["design_lower"], arrays["design_upper"]), checker,
-                          arrays.get("hold_out_variance"), info)
+    return SurrogateModel(
+        tuple(doc["names"]),
+        arrays["lower"],
+        arrays["upper"],
+        pod,
+        reg,
+        arrays["train_z"],
+        (arrays["design_lower"], arrays["design_upper"]),
+        checker,
+        arrays.get("hold_out_variance"),
+        info,
+    )

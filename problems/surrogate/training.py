@@ -7,6 +7,7 @@ Runs that fail (``ok=False``, non-finite or wrongly shaped values, or the model 
 recorded and excluded from the snapshot matrix. The wall time of each run (measured where it
 ran) is summed, so that the cost of a surrogate can be charged to the identifications using it.
 """
+
 from __future__ import annotations
 
 import time
@@ -57,19 +58,33 @@ class Runs:
 
     def cost(self) -> dict:
         """The counts and times, JSON-ready."""
-        return {"n_runs": self.n_runs, "n_ok": self.n_ok, "n_failed": self.n_failed,
-                "n_infeasible": self.n_infeasible, "fe_wall_s": float(self.fe_wall_s),
-                "elapsed_s": float(self.elapsed_s),
-                "median_run_s": float(np.median(self.wall_s)) if len(self.wall_s) else float("nan")}
+        return {
+            "n_runs": self.n_runs,
+            "n_ok": self.n_ok,
+            "n_failed": self.n_failed,
+            "n_infeasible": self.n_infeasible,
+            "fe_wall_s": float(self.fe_wall_s),
+            "elapsed_s": float(self.elapsed_s),
+            "median_run_s": float(np.median(self.wall_s)) if len(self.wall_s) else float("nan"),
+        }
 
     def subset(self, index) -> "Runs":
         """The successful runs ``index`` (failures and infeasible points are not carried over)."""
         return Runs(self.X[index], self.Y[index], self.wall_s[index])
 
 
-def run_points(model, X, *, mapper=None, batch: int = 16, progress: bool = False, desc: str = "runs",
-               n_values: int | None = None) -> Runs:
-    """Run ``model`` at the rows of ``X`` (physical units) through ``mapper`` in batches of ``batch``.
+def run_points(
+    model,
+    X,
+    *,
+    mapper=None,
+    batch: int = 16,
+    progress: bool = False,
+    desc: str = "runs",
+    n_values: int | None = None,
+) -> Runs:
+    """Run ``model`` at the rows of ``X`` (physical units) through ``mapper`` in batches of
+    ``batch``.
 
     n_values : expected length of a measurement vector (default: that of the first success)
     """
@@ -90,7 +105,7 @@ def run_points(model, X, *, mapper=None, batch: int = 16, progress: bool = False
     t0 = time.perf_counter()
     with tqdm(total=len(feasible), desc=desc, unit="run", disable=not progress) as bar:
         for i in range(0, len(feasible), batch):
-            chunk = feasible[i:i + batch]
+            chunk = feasible[i : i + batch]
             for x, res in zip(chunk, mapper(fn, chunk)):
                 total += float(res.wall_s)
                 reason = _failure(res, n_values)
@@ -103,8 +118,15 @@ def run_points(model, X, *, mapper=None, batch: int = 16, progress: bool = False
                 walls.append(float(res.wall_s))
             bar.update(len(chunk))
     d = X.shape[1]
-    return Runs(np.array(xs).reshape(-1, d), np.array(ys).reshape(len(xs), -1) if ys else np.empty((0, n_values or 0)),
-                np.array(walls), failed, infeasible, total, time.perf_counter() - t0)
+    return Runs(
+        np.array(xs).reshape(-1, d),
+        np.array(ys).reshape(len(xs), -1) if ys else np.empty((0, n_values or 0)),
+        np.array(walls),
+        failed,
+        infeasible,
+        total,
+        time.perf_counter() - t0,
+    )
 
 
 def _failure(res, n_values: int | None) -> str | None:

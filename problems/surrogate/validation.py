@@ -14,6 +14,7 @@ squared): the surrogate's error variance that a likelihood adds to the noise var
 The cost of one evaluation is measured in the same run: the median wall time of the surrogate
 (``__call__``, checks included) and of the model (the hold-out runs), and their ratio.
 """
+
 from __future__ import annotations
 
 import time
@@ -22,7 +23,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: display units of the FE measurement blocks: (label, factor from the model's unit)
-FE_UNITS = {"u_h": ("um", 1e3), "u_v": ("um", 1e3), "displacement": ("um", 1e3), "force": ("kN", 1.0)}
+FE_UNITS = {
+    "u_h": ("um", 1e3),
+    "u_v": ("um", 1e3),
+    "displacement": ("um", 1e3),
+    "force": ("kN", 1.0),
+}
 
 
 @dataclass
@@ -45,11 +51,19 @@ class Validation:
         return self.fe_eval_s / self.surrogate_eval_s if self.surrogate_eval_s > 0 else float("inf")
 
     def summary(self) -> dict:
-        """JSON-ready summary (the per-measurement variance is left out: it is stored as an array)."""
-        return {"n_points": self.n_points, "n_failed": self.n_failed, "n_infeasible": self.n_infeasible,
-                "n_extrapolated": self.n_extrapolated, "blocks": self.blocks,
-                "surrogate_eval_s": self.surrogate_eval_s, "surrogate_jacobian_s": self.surrogate_jacobian_s,
-                "fe_eval_s": self.fe_eval_s, "speed_ratio": self.speed_ratio}
+        """JSON-ready summary (the per-measurement variance is left out: it is stored as an
+        array)."""
+        return {
+            "n_points": self.n_points,
+            "n_failed": self.n_failed,
+            "n_infeasible": self.n_infeasible,
+            "n_extrapolated": self.n_extrapolated,
+            "blocks": self.blocks,
+            "surrogate_eval_s": self.surrogate_eval_s,
+            "surrogate_jacobian_s": self.surrogate_jacobian_s,
+            "fe_eval_s": self.fe_eval_s,
+            "speed_ratio": self.speed_ratio,
+        }
 
     def format(self) -> str:
         """A printable table."""
@@ -58,20 +72,30 @@ class Validation:
 
 def format_summary(s: dict) -> str:
     """The printable table of a validation summary (as stored in a model's JSON)."""
-    lines = [f"hold-out validation: {s['n_points']} points ({s['n_failed']} failed, {s['n_infeasible']} infeasible, "
-             f"{s['n_extrapolated']} extrapolated)",
-             f"  {'block':>12} {'rms/sigma':>10} {'max/sigma':>10} {'mean |e|':>10} {'max |e|':>10}  unit"]
+    lines = [
+        f"hold-out validation: {s['n_points']} points ({s['n_failed']} failed, "
+        f"{s['n_infeasible']} infeasible, {s['n_extrapolated']} extrapolated)",
+        f"  {'block':>12} {'rms/sigma':>10} {'max/sigma':>10} {'mean |e|':>10} {'max |e|':>10}  "
+        "unit",
+    ]
     for name, b in s["blocks"].items():
-        lines.append(f"  {name:>12} {b['rms_sigma']:10.3g} {b['max_sigma']:10.3g} {b['mean_abs']:10.3g} "
-                     f"{b['max_abs']:10.3g}  {b['unit']}")
-    lines.append(f"  one evaluation: surrogate {s['surrogate_eval_s'] * 1e3:.3g} ms (with Jacobian "
-                 f"{s['surrogate_jacobian_s'] * 1e3:.3g} ms), model {s['fe_eval_s']:.3g} s: "
-                 f"ratio {s['speed_ratio']:.3g}")
+        lines.append(
+            f"  {name:>12} {b['rms_sigma']:10.3g} {b['max_sigma']:10.3g} {b['mean_abs']:10.3g} "
+            f"{b['max_abs']:10.3g}  {b['unit']}"
+        )
+    lines.append(
+        f"  one evaluation: surrogate {s['surrogate_eval_s'] * 1e3:.3g} ms (with Jacobian "
+        f"{s['surrogate_jacobian_s'] * 1e3:.3g} ms), model {s['fe_eval_s']:.3g} s: "
+        f"ratio {s['speed_ratio']:.3g}"
+    )
     return "\n".join(lines)
 
 
-def validate(surrogate, runs, sigma, blocks: dict[str, slice], units: dict | None = None) -> Validation:
-    """Compare ``surrogate`` with the successful hold-out ``runs`` (:class:`~problems.surrogate.training.Runs`).
+def validate(
+    surrogate, runs, sigma, blocks: dict[str, slice], units: dict | None = None
+) -> Validation:
+    """Compare ``surrogate`` with the successful hold-out ``runs``
+    (:class:`~problems.surrogate.training.Runs`).
 
     sigma  : (m,) the data's standard deviations, units of the model
     blocks : named slices of the measurement vector
@@ -88,7 +112,9 @@ def validate(surrogate, runs, sigma, blocks: dict[str, slice], units: dict | Non
         res = surrogate(x)
         times.append(time.perf_counter() - t0)
         if not res.ok:
-            raise ValueError(f"surrogate rejected a hold-out point the model accepted: {res.message}")
+            raise ValueError(
+                f"surrogate rejected a hold-out point the model accepted: {res.message}"
+            )
         n_extra += res.message.startswith("extrapolation")
         pred.append(res.values)
     jt = []
@@ -101,8 +127,21 @@ def validate(surrogate, runs, sigma, blocks: dict[str, slice], units: dict | Non
     for name, sl in blocks.items():
         e, s = E[:, sl], sigma[sl]
         label, factor = units.get(name, ("", 1.0))
-        out[name] = {"rms_sigma": float(np.sqrt(np.mean((e / s) ** 2))), "max_sigma": float(np.max(np.abs(e / s))),
-                     "mean_abs": float(np.mean(np.abs(e)) * factor), "max_abs": float(np.max(np.abs(e)) * factor),
-                     "unit": label}
-    return Validation(runs.n_ok, runs.n_failed, runs.n_infeasible, out, float(np.median(times)),
-                      float(np.median(jt)), float(np.median(runs.wall_s)), int(n_extra), np.mean(E ** 2, axis=0))
+        out[name] = {
+            "rms_sigma": float(np.sqrt(np.mean((e / s) ** 2))),
+            "max_sigma": float(np.max(np.abs(e / s))),
+            "mean_abs": float(np.mean(np.abs(e)) * factor),
+            "max_abs": float(np.max(np.abs(e)) * factor),
+            "unit": label,
+        }
+    return Validation(
+        runs.n_ok,
+        runs.n_failed,
+        runs.n_infeasible,
+        out,
+        float(np.median(times)),
+        float(np.median(jt)),
+        float(np.median(runs.wall_s)),
+        int(n_extra),
+        np.mean(E**2, axis=0),
+    )
