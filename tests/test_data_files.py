@@ -10,6 +10,7 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import problems.inverse.data as D
@@ -18,7 +19,7 @@ from problems.inverse.cases import CASES
 
 ROOT = Path(__file__).resolve().parent.parent
 FE_CASES = [name for name in CASES if not name.startswith("analytic-")]
-SHIPPED = D.SHIPPED_DIR / "linear-compression.json"
+SHIPPED = D.SHIPPED_DIR / "consistent" / "linear-compression.json"
 
 
 @pytest.fixture(autouse=True)
@@ -35,7 +36,7 @@ def fake_make_data(monkeypatch):
 
     def fake(case, settings=None, *, progress=False, image_dir=None, **kw):
         calls.append({"case": case, "settings": settings, "image_dir": image_dir})
-        return D.load(D.SHIPPED_DIR / f"{case}.json")
+        return D.load(D.SHIPPED_DIR / "consistent" / f"{case}.json")
 
     monkeypatch.setattr(D, "make_data", fake)
     return calls
@@ -49,25 +50,30 @@ def test_the_shipped_data_sets_are_declared_package_data():
         "package-data"
     ]
     globs = package_data["problems.inverse"]
-    shipped = sorted(
-        p.relative_to(D.SHIPPED_DIR.parent).as_posix() for p in D.SHIPPED_DIR.glob("*.json")
-    )
-    assert len(shipped) == len(FE_CASES) == 9
-    assert all(any(fnmatch.fnmatch(f, g) for g in globs) for f in shipped)
-    for case in FE_CASES:
-        res = resources.files("problems.inverse").joinpath("datasets", f"{case}.json")
-        assert res.is_file() and D.default_path(case) == Path(str(res)).resolve()
-        assert json.loads(res.read_text())["case"] == case
+    for tier in D.TIERS:
+        shipped = sorted(
+            p.relative_to(D.SHIPPED_DIR.parent).as_posix()
+            for p in (D.SHIPPED_DIR / tier).glob("*.json")
+        )
+        assert len(shipped) == len(FE_CASES) == 9
+        assert all(any(fnmatch.fnmatch(f, g) for g in globs) for f in shipped)
+        for case in FE_CASES:
+            res = resources.files("problems.inverse").joinpath("datasets", tier, f"{case}.json")
+            assert res.is_file() and D.default_path(case, tier) == Path(str(res)).resolve()
+            doc = json.loads(res.read_text())
+            assert doc["case"] == case and doc["settings"]["tier"] == tier
     assert not (ROOT / "results" / "data" / "linear-compression.json").exists()  # one copy only
 
 
 def test_FEMUBENCH_DATA_DIR_points_the_default_data_elsewhere(monkeypatch, tmp_path):
     mine = tmp_path / "mine"
-    mine.mkdir()
-    shutil.copy(SHIPPED, mine)
+    (mine / "consistent").mkdir(parents=True)
+    shutil.copy(SHIPPED, mine / "consistent")
     monkeypatch.setenv(D.DATA_DIR_ENV, str(mine))
-    assert D.default_path("linear-compression") == mine / "linear-compression.json"
-    assert D.get_data("linear-compression").hash == D.load(SHIPPED).hash
+    path = D.default_path("linear-compression", "consistent")
+    assert path == mine / "consistent" / "linear-compression.json"
+    consistent = D.tier_settings("consistent")
+    assert D.get_data("linear-compression", consistent).hash == D.load(SHIPPED).hash
 
 
 def test_the_cache_is_a_user_directory_never_the_package(monkeypatch, tmp_path):
@@ -114,21 +120,21 @@ def test_data_never_overwrites_the_shipped_file_without_force(
     tmp_path, capsys, fake_make_data, monkeypatch
 ):
     before = SHIPPED.read_bytes()
-    assert main(["data", "linear-compression"]) == 2
+    assert main(["data", "linear-compression", "--tier", "consistent"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(SHIPPED) in err and "--force" in err
     assert main(["data", "linear-compression", "--out", str(SHIPPED)]) == 2
     assert fake_make_data == [] and SHIPPED.read_bytes() == before
-    assert main(["data", "all", "--check"]) == 0  # checking compares, writes nothing: allowed
+    assert main(["data", "all", "--check", "--tier", "consistent"]) == 0  # compares, writes nothing
 
     # --force writes the default data set (here into an overriding directory)
     mine = tmp_path / "mine"
-    mine.mkdir()
-    (mine / "linear-compression.json").write_text("old")
+    (mine / "consistent").mkdir(parents=True)
+    (mine / "consistent" / "linear-compression.json").write_text("old")
     monkeypatch.setenv(D.DATA_DIR_ENV, str(mine))
-    assert main(["data", "linear-compression"]) == 2
-    assert main(["data", "linear-compression", "--force"]) == 0
-    assert (mine / "linear-compression.json").read_bytes() == before
+    assert main(["data", "linear-compression", "--tier", "consistent"]) == 2
+    assert main(["data", "linear-compression", "--tier", "consistent", "--force"]) == 0
+    assert (mine / "consistent" / "linear-compression.json").read_bytes() == before
 
 
 def test_dic_images_go_next_to_the_users_output(tmp_path, capsys, fake_make_data):
@@ -155,18 +161,14 @@ def test_make_data_hands_the_image_directory_to_the_dic_route(monkeypatch, tmp_p
 
     seen = {}
 
-    def fake_dic(case, settings, x, response, *, progress=True, image_dir=None):
+    def fake_dic(response, points, *, seed=0, progress=True, image_dir=None):
         seen["image_dir"] = image_dir
-        return "dataset"
+        u = np.zeros((len(response.snapshots_mm), len(points)))
+        return u, u, np.ones((2,) + u.shape), {"dic": {"seed": seed}}
 
-    monkeypatch.setattr(route, "dic_dataset", fake_dic)
-    assert (
-        D.make_data(
-            "linear-compression", mesh="2,2,4", snapshots=1, route="dic", image_dir=tmp_path
-        )
-        == "dataset"
-    )
-    assert seen["image_dir"] == tmp_path
+    monkeypatch.setattr(route, "measure_by_dic", fake_dic)
+    ds = D.make_data("linear-compression", mesh="2,2,4", snapshots=1, route="dic", image_dir=tmp_path)
+    assert seen["image_dir"] == tmp_path and ds.meta["dic"] == {"seed": 0}
 
 
 # --- bad data files ----------------------------------------------------------------------------

@@ -186,7 +186,7 @@ def test_gsa_cli_on_an_analytic_case_and_fe_dry_run(tmp_path, capsys):
         main(
             [
                 "gsa",
-                "exponent-compression",
+                "hyperbolic-tension",
                 "--samples",
                 "16",
                 "--dry-run",

@@ -160,7 +160,7 @@ def test_sensitivity_cli_on_a_tiny_fe_mesh(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "least to most sensitive" in text and "7 FE evaluations" in text
     rows = list(csv.DictReader((out / "sensitivity.csv").open()))
-    assert [r["parameter"] for r in rows] == ["E", "psi", "sigma0", "H", "a", "b"]
+    assert [r["parameter"] for r in rows] == ["E", "psi", "sigma0", "H", "pt0", "b"]
     assert all(np.isfinite(float(r[k])) for r in rows for k in ("s_ux", "s_uy", "s_r"))
     assert len(list(csv.DictReader((out / "sensitivity_snapshots.csv").open()))) == 6 * 10
     for name in (

@@ -65,11 +65,12 @@ def test_identify_writes_run_result_plus_errors(tmp_path, capsys):
     assert "omega" in text and "forward evaluations" in text
     doc = json.loads(out.read_text())
     errors = doc.pop("errors_percent")
+    assert doc.pop("package_version") and doc.pop("iterations") == doc["n_iterations"]
     res = RunResult.from_dict(doc)  # the rest is exactly a RunResult
     assert (
         res.n_evals <= 250
         and res.options["n_starts"] == 6
-        and res.extra["case"] == "analytic-multimodal"
+        and res.provenance["case"] == "analytic-multimodal"
     )
     assert errors == pytest.approx(
         {n: 100 * (xn - 1) for n, xn in zip(res.parameter_names, res.x_normalised)}

@@ -133,6 +133,9 @@ def run_model_error(case: str, *, meshes=("coarse",), treatments=TREATMENT_ORDER
                 row = jsonio.loads(path.read_text())
             except ValueError:
                 path.rename(path.with_suffix(".json.corrupt"))  # torn: recompute, keep it for inspection
+            if row is not None and cfg.route == "fe" and row["provenance"].get("data_hash") != _data_hash(
+                    case, cfg.mesh, data):
+                row = None  # made with other data: stale, recompute
         if row is None:
             row = one_row(case, cfg, budget=budget, mapper=mapper, data=None if cfg.route == "dic" else data,
                           hifi_mesh=hifi_mesh)
@@ -144,6 +147,14 @@ def run_model_error(case: str, *, meshes=("coarse",), treatments=TREATMENT_ORDER
             progress(cfg, row)
     write_csv(d / "summary.csv", [_flat(r) for r in run.rows])
     return run
+
+
+def _data_hash(case: str, mesh: str, data) -> str:
+    """Content hash of the model-error data a row of ``case`` on ``mesh`` is made with."""
+    from problems.inverse.build import resolve_data
+    from problems.inverse.cases import get_case
+
+    return (data if data is not None else resolve_data(get_case(case), mesh, "model-error", None)).hash
 
 
 def _flat(row: dict) -> dict:

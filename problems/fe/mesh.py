@@ -24,7 +24,7 @@ MESH_PRESETS: dict[str, tuple[int, int, int]] = {
     "coarse": (6, 6, 12),   # 432 elements, 12.5 mm cubes
     "paper": (14, 14, 26),  # 5 096 elements (was 14 x 14 x 25: nz even gives the exact eighth model)
     "fine": (20, 20, 40),   # 16 000 elements, 3.75 mm cubes
-    "xfine": (32, 32, 64),  # 65 536 elements, 2.34 mm cubes: the model-error data only
+    "xfine": (24, 24, 48),  # 27 648 elements, 3.125 mm cubes: the model-error data only
 }
 
 #: models of the quarter mesh: ``eighth`` solves z in [0, 75] mm and unfolds it (nz even only), ``quarter`` all of it

@@ -5,7 +5,7 @@ settings that made them and a SHA-256 content hash. The same settings give the s
 
 Two tiers, labelled in every file, record and report:
 
-* ``model-error``: made on ``xfine`` (32 x 32 x 64), a discretisation finer than every model of
+* ``model-error``: made on ``xfine`` (24 x 24 x 48), a discretisation finer than every model of
   the inverse loop (inverse model, high-fidelity model of a correction, BAE statistics,
   surrogate training): the honest pseudo-experiment, with the inverse model's discretisation
   error in it;
