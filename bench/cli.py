@@ -1,4 +1,5 @@
 """The ``femubench`` command line: discovers the sub-commands in :mod:`bench.commands`."""
+
 from __future__ import annotations
 
 import argparse
@@ -11,7 +12,8 @@ import bench.commands
 
 
 class UsageError(ValueError):
-    """A command line argparse rejected (unknown option, bad value); ``prog`` is the (sub-)command."""
+    """A command line argparse rejected (unknown option, bad value); ``prog`` is the
+    (sub-)command."""
 
     def __init__(self, prog: str, message: str):
         super().__init__(message)
@@ -19,7 +21,8 @@ class UsageError(ValueError):
 
 
 class Parser(argparse.ArgumentParser):
-    """An ArgumentParser whose errors are one line (no usage block): ``femubench CMD: error: ...``."""
+    """An ArgumentParser whose errors are one line (no usage block):
+    ``femubench CMD: error: ...``."""
 
     def error(self, message):
         raise UsageError(self.prog, message)
@@ -29,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     """Return the top-level parser with one sub-parser per module of :mod:`bench.commands`.
 
     Every sub-parser goes through :func:`bench.commands._args.harden`: options declared with a bare
-    ``int``/``float`` or none get checked types (finite numbers, seeds >= 0, counts >= 1, mesh specs).
+    ``int``/``float`` or none get checked types (finite numbers, seeds >= 0, counts >= 1, mesh
+    specs).
     """
     from bench.commands._args import harden
 
@@ -89,7 +93,11 @@ def run(argv: list[str] | None = None) -> int:
     try:
         args = parser.parse_args(argv)
     except UsageError as exc:
-        hint = f" (see '{exc.prog} --help')" if exc.prog != "femubench" else " (see 'femubench --help')"
+        hint = (
+            f" (see '{exc.prog} --help')"
+            if exc.prog != "femubench"
+            else " (see 'femubench --help')"
+        )
         print(f"{exc.prog}: error: {one_line(exc)}{hint}", file=sys.stderr)
         return 2
     if not getattr(args, "_main", None):
@@ -105,18 +113,24 @@ def run(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - the last resort: never a raw library traceback
         if os.environ.get("FEMUBENCH_DEBUG"):
             raise
-        print(f"femubench {args.command}: internal error: {type(exc).__name__}: {one_line(exc)} "
-              "(set FEMUBENCH_DEBUG=1 for the traceback)", file=sys.stderr)
+        print(
+            f"femubench {args.command}: internal error: {type(exc).__name__}: {one_line(exc)} "
+            "(set FEMUBENCH_DEBUG=1 for the traceback)",
+            file=sys.stderr,
+        )
         return 1
 
 
 def one_line(exc: BaseException) -> str:
     """The message of ``exc`` on one line (its class name if it has none). A deliberate list of
-    problems (lines starting ``  - ``, e.g. every error of a suite file) keeps one line per problem."""
+    problems (lines starting ``  - ``, e.g. every error of a suite file) keeps one line per
+    problem."""
     text = str(exc).strip()
     if "\n  - " in text:
-        return "\n".join(("  " if line.startswith("  - ") else "") + " ".join(line.split())
-                         for line in text.splitlines())
+        return "\n".join(
+            ("  " if line.startswith("  - ") else "") + " ".join(line.split())
+            for line in text.splitlines()
+        )
     return " ".join(text.split()) or type(exc).__name__
 
 

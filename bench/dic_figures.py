@@ -3,6 +3,7 @@ subset / converged warped subset / deformed-image window with the warped outline
 computed by :func:`problems.dic.subsets.subset_figure_data` (saved by the DIC route as
 ``dic_subsets.npz`` beside its images); style and saving: :mod:`bench.plotting`.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,9 +24,14 @@ def subsets_figure(panels, path) -> Path:
     for r in range(n):
         ref = panels.reference[r]
         lo, hi = np.nanmin(ref), np.nanmax(ref)
-        cells = ((ref, f"reference subset\n{panels.labels[r]}"),
-                 (panels.warped[r], f"warped subset g(W(ξ; p))\nZNCC = {panels.zncc[r]:.5f}"),
-                 (panels.deformed[r], f"deformed image\nu = {panels.u[r]:+.3f}, v = {panels.v[r]:+.3f} px"))
+        cells = (
+            (ref, f"reference subset\n{panels.labels[r]}"),
+            (panels.warped[r], f"warped subset g(W(ξ; p))\nZNCC = {panels.zncc[r]:.5f}"),
+            (
+                panels.deformed[r],
+                f"deformed image\nu = {panels.u[r]:+.3f}, v = {panels.v[r]:+.3f} px",
+            ),
+        )
         for c, (img, text) in enumerate(cells):
             ax = axes[r, c]
             ax.imshow(img, cmap="gray", vmin=lo, vmax=hi, interpolation="nearest")
@@ -50,5 +56,7 @@ def render_subsets(folder, path=None) -> Path:
     folder = Path(folder)
     source = folder / PANELS_FILE
     if not source.is_file():
-        raise FileNotFoundError(f"{source} does not exist: run the DIC route with an image folder first")
+        raise FileNotFoundError(
+            f"{source} does not exist: run the DIC route with an image folder first"
+        )
     return subsets_figure(SubsetPanels.load(source), path or folder / FIGURE_FILE)

@@ -7,6 +7,7 @@ triggers is counted in the returned :class:`~solvers.result.RunResult`: the solv
 high-fidelity runs of a correction, the BAE statistics), and ``provenance`` says where the data
 and the models came from.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
@@ -50,29 +51,46 @@ class Identification:
 
     def __post_init__(self):
         if self.treatment not in TREATMENTS:
-            raise ValueError(f"treatment = {self.treatment!r} is unknown; allowed: {', '.join(TREATMENTS)}")
+            raise ValueError(
+                f"treatment = {self.treatment!r} is unknown; allowed: {', '.join(TREATMENTS)}"
+            )
         if int(self.budget) < 1:
             raise ValueError(f"budget = {self.budget!r} is out of range: a whole number >= 1")
         if int(self.bae_samples) < 2:
-            raise ValueError(f"bae_samples = {self.bae_samples!r} is out of range: a whole number >= 2")
+            raise ValueError(
+                f"bae_samples = {self.bae_samples!r} is out of range: a whole number >= 2"
+            )
 
 
 def bae_path(spec: Identification, hifi_mesh: str, data) -> Path:
-    """Where the BAE statistics of ``spec`` are kept (results/model_error/, keyed by what makes them)."""
+    """Where the BAE statistics of ``spec`` are kept (results/model_error/, keyed by what makes
+    them)."""
     import hashlib
     import json
 
     from bench.paths import results_root
 
-    key = {"case": spec.case, "mesh": spec.mesh, "hifi": hifi_mesh, "margin": spec.plate_margin_mm,
-           "samples": spec.bae_samples, "seed": spec.bae_seed, "loading": asdict(data.settings.loading),
-           "points": data.points.tolist()}
+    key = {
+        "case": spec.case,
+        "mesh": spec.mesh,
+        "hifi": hifi_mesh,
+        "margin": spec.plate_margin_mm,
+        "samples": spec.bae_samples,
+        "seed": spec.bae_seed,
+        "loading": asdict(data.settings.loading),
+        "points": data.points.tolist(),
+    }
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
-    return results_root() / "model_error" / f"{spec.case}__{spec.mesh}__{hifi_mesh}__bae{spec.bae_samples}__{digest}.npz"
+    return (
+        results_root()
+        / "model_error"
+        / f"{spec.case}__{spec.mesh}__{hifi_mesh}__bae{spec.bae_samples}__{digest}.npz"
+    )
 
 
 def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, mapper=None):
-    """The BAE statistics of ``spec``: loaded when stored (hash-checked), else computed and stored."""
+    """The BAE statistics of ``spec``: loaded when stored (hash-checked), else computed and
+    stored."""
     from problems.inverse.cases import get_case
     from problems.inverse.model_error import Correction, bae_statistics
 
@@ -80,9 +98,16 @@ def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, ma
     if path.exists():
         return Correction.load(path)
     case = get_case(spec.case)
-    corr = bae_statistics(hifi, inverse, case.lower, case.upper, samples=spec.bae_samples, seed=spec.bae_seed,
-                          mapper=mapper, provenance={"case": spec.case, "inverse_mesh": spec.mesh,
-                                                     "hifi_mesh": hifi_mesh})
+    corr = bae_statistics(
+        hifi,
+        inverse,
+        case.lower,
+        case.upper,
+        samples=spec.bae_samples,
+        seed=spec.bae_seed,
+        mapper=mapper,
+        provenance={"case": spec.case, "inverse_mesh": spec.mesh, "hifi_mesh": hifi_mesh},
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     corr.save(path)
     return corr
@@ -96,7 +121,13 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     """
     from dataclasses import replace
 
-    from problems.inverse.build import Region, build_objective, hifi_mesh_for, model_pair, resolve_data
+    from problems.inverse.build import (
+        Region,
+        build_objective,
+        hifi_mesh_for,
+        model_pair,
+        resolve_data,
+    )
     from problems.inverse.cases import get_case
     from problems.inverse.model_error import one_point
     from problems.inverse.starts import start_point
@@ -108,7 +139,9 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     if case.is_analytic:
         objective = build_objective(case, mapper=mapper)
         objective.observers.extend(observers)
-        return solve(objective, spec.method, budget=spec.budget, seed=spec.seed, x0=x0, **spec.options)
+        return solve(
+            objective, spec.method, budget=spec.budget, seed=spec.seed, x0=x0, **spec.options
+        )
     data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
     region = Region(spec.plate_margin_mm)
     hifi_mesh = None
@@ -116,25 +149,59 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         hifi_mesh = spec.hifi_mesh or hifi_mesh_for(spec.mesh)
 
     def objective_with(correction):
-        obj = build_objective(case, mesh=spec.mesh, data=data, region=region, correction=correction,
-                              hifi_mesh=hifi_mesh, mapper=mapper)
+        obj = build_objective(
+            case,
+            mesh=spec.mesh,
+            data=data,
+            region=region,
+            correction=correction,
+            hifi_mesh=hifi_mesh,
+            mapper=mapper,
+        )
         obj.observers.extend(observers)
         return obj
 
     if spec.treatment == "none":
-        result = solve(objective_with(None), spec.method, budget=spec.budget, seed=spec.seed, x0=x0,
-                       **spec.options)
+        result = solve(
+            objective_with(None),
+            spec.method,
+            budget=spec.budget,
+            seed=spec.seed,
+            x0=x0,
+            **spec.options,
+        )
     else:
         objective_with(None)  # checks the honesty rule before any high-fidelity run
         hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
         if spec.treatment == "iterated":
-            result = solve_iterated(objective_with, lambda x: one_point(hifi, inverse, x, mapper=mapper),
-                                    spec.method, budget=spec.budget, seed=spec.seed, x0=x0, **spec.options)
+            result = solve_iterated(
+                objective_with,
+                lambda x: one_point(hifi, inverse, x, mapper=mapper),
+                spec.method,
+                budget=spec.budget,
+                seed=spec.seed,
+                x0=x0,
+                **spec.options,
+            )
         else:
-            corr = (one_point(hifi, inverse, x0, mapper=mapper) if spec.treatment == "one-point"
-                    else bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper))
-            result = solve(objective_with(corr), spec.method, budget=spec.budget, seed=spec.seed, x0=x0,
-                           **spec.options)
-    provenance = {**result.provenance, "start": spec.start, "start_index": spec.start_index,
-                  "data_file": spec.data, "treatment": spec.treatment}
+            corr = (
+                one_point(hifi, inverse, x0, mapper=mapper)
+                if spec.treatment == "one-point"
+                else bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
+            )
+            result = solve(
+                objective_with(corr),
+                spec.method,
+                budget=spec.budget,
+                seed=spec.seed,
+                x0=x0,
+                **spec.options,
+            )
+    provenance = {
+        **result.provenance,
+        "start": spec.start,
+        "start_index": spec.start_index,
+        "data_file": spec.data,
+        "treatment": spec.treatment,
+    }
     return replace(result, provenance=provenance)

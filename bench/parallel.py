@@ -3,6 +3,7 @@
 A *mapper* is any callable ``mapper(fn, items) -> list`` with the semantics of ``list(map(fn,
 items))``; the objective uses it to evaluate Jacobian columns and populations as one batch.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -13,8 +14,16 @@ from collections.abc import Callable, Iterator
 from problems.inverse.evaluator import sequential_map
 
 #: environment that pins BLAS/OpenMP to one thread in each worker process
-SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                                       "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")}
+SINGLE_THREAD_ENV = {
+    k: "1"
+    for k in (
+        "OMP_NUM_THREADS",
+        "OPENBLAS_NUM_THREADS",
+        "MKL_NUM_THREADS",
+        "VECLIB_MAXIMUM_THREADS",
+        "NUMEXPR_NUM_THREADS",
+    )
+}
 
 
 class DaskMapper:
@@ -77,8 +86,16 @@ def cluster(workers: int | None = None, scheduler: str | None = None) -> Iterato
         return
     os.environ.update(SINGLE_THREAD_ENV)  # inherited by the worker processes
     n = workers or os.cpu_count() or 1
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.ERROR) as lc, Client(lc) as client:
+    with (
+        LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as lc,
+        Client(lc) as client,
+    ):
         yield client
 
 

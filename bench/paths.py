@@ -1,9 +1,11 @@
-"""Where commands write when the user gives no ``--out``: one results root, never the current directory.
+"""Where commands write when the user gives no ``--out``: one results root, never the current
+directory.
 
 The root is ``$FEMUBENCH_RESULTS_DIR`` if set; else the ``results/`` folder of the source checkout
 this package runs from (the folder holding ``pyproject.toml``); else, for an installed package,
 ``$XDG_DATA_HOME/femubench/results`` (default ``~/.local/share/femubench/results``).
 """
+
 from __future__ import annotations
 
 import os

@@ -8,6 +8,7 @@ by line style *and* marker (:func:`line_style`), bars by grey *and* hatch; colou
 (:data:`COLOURS`) is only used where a series also differs otherwise. Sizes are in inches,
 resolution in dots per inch.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -16,12 +17,24 @@ import numpy as np
 
 #: matplotlib rc settings of every figure (font sizes in points, line widths in points)
 RC = {
-    "font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "xtick.labelsize": 8, "ytick.labelsize": 8,
-    "legend.fontsize": 7, "legend.frameon": False, "figure.titlesize": 9,
-    "axes.grid": True, "grid.color": "0.85", "grid.linewidth": 0.5,
-    "lines.linewidth": 1.2, "lines.markersize": 4, "errorbar.capsize": 2,
-    "image.cmap": "gray", "savefig.dpi": 150,
-    "svg.hashsalt": "femubench", "pdf.compression": 6,  # reproducible vector files
+    "font.size": 9,
+    "axes.titlesize": 9,
+    "axes.labelsize": 9,
+    "xtick.labelsize": 8,
+    "ytick.labelsize": 8,
+    "legend.fontsize": 7,
+    "legend.frameon": False,
+    "figure.titlesize": 9,
+    "axes.grid": True,
+    "grid.color": "0.85",
+    "grid.linewidth": 0.5,
+    "lines.linewidth": 1.2,
+    "lines.markersize": 4,
+    "errorbar.capsize": 2,
+    "image.cmap": "gray",
+    "savefig.dpi": 150,
+    "svg.hashsalt": "femubench",
+    "pdf.compression": 6,  # reproducible vector files
 }
 DPI = 150
 
@@ -37,9 +50,9 @@ COLOURS = ("C0", "C3", "C2", "C4", "C1", "C5")
 REFERENCE_LINE = {"color": "0.3", "linewidth": 0.8, "linestyle": (0, (1, 1))}
 
 #: figure sizes (width, height) in inches
-SINGLE = (5.2, 3.6)        # one panel with a legend beside it
-DOUBLE = (9.0, 3.6)        # two panels side by side
-PANEL_WIDTH = 4.2          # width of one panel in a row of k panels
+SINGLE = (5.2, 3.6)  # one panel with a legend beside it
+DOUBLE = (9.0, 3.6)  # two panels side by side
+PANEL_WIDTH = 4.2  # width of one panel in a row of k panels
 
 
 def row(k: int, height: float = 3.6) -> tuple[float, float]:
@@ -80,19 +93,47 @@ def _metadata(suffix: str) -> dict:
 
 def line_style(i: int) -> dict:
     """The ``i``-th black-and-white line: line style x marker, then grey."""
-    return {"linestyle": LINESTYLES[i % 4], "marker": MARKERS[i % len(MARKERS)],
-            "color": LINE_GREYS[(i // len(MARKERS)) % len(LINE_GREYS)]}
+    return {
+        "linestyle": LINESTYLES[i % 4],
+        "marker": MARKERS[i % len(MARKERS)],
+        "color": LINE_GREYS[(i // len(MARKERS)) % len(LINE_GREYS)],
+    }
 
 
 def bar_style(i: int) -> dict:
     """The ``i``-th black-and-white bar: grey fill and hatch, black edge."""
-    return {"color": BAR_GREYS[i % len(BAR_GREYS)], "hatch": HATCHES[i % len(HATCHES)], "edgecolor": "black"}
+    return {
+        "color": BAR_GREYS[i % len(BAR_GREYS)],
+        "hatch": HATCHES[i % len(HATCHES)],
+        "edgecolor": "black",
+    }
 
 
 # --- parameter labels ---------------------------------------------------------------------------
 
-_GREEK = {"alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "kappa", "lambda", "mu", "nu",
-          "xi", "pi", "rho", "sigma", "tau", "phi", "chi", "psi", "omega"}
+_GREEK = {
+    "alpha",
+    "beta",
+    "gamma",
+    "delta",
+    "epsilon",
+    "zeta",
+    "eta",
+    "theta",
+    "kappa",
+    "lambda",
+    "mu",
+    "nu",
+    "xi",
+    "pi",
+    "rho",
+    "sigma",
+    "tau",
+    "phi",
+    "chi",
+    "psi",
+    "omega",
+}
 
 
 def tex(name: str) -> str:
@@ -121,6 +162,7 @@ def normalised_label(name: str) -> str:
 
 # --- axes ---------------------------------------------------------------------------------------
 
+
 def integer_axis(ax, axis: str = "x") -> None:
     """Ticks at integers only (iterations, snapshots, steps)."""
     from matplotlib.ticker import MaxNLocator
@@ -132,7 +174,8 @@ def log_axis(ax, axis: str = "y") -> None:
     """Log scale labelled for reading: decades (at most about seven, thinned over wide ranges),
     written as plain numbers (``0.01``, ``100``) when the whole axis lies between 0.001 and 10 000
     and as ``10^k`` otherwise; unlabelled minor ticks at 2..9, of which the 2 and 5 multiples are
-    labelled when the axis spans at most 2.5 decades, and all when it spans less than half a decade."""
+    labelled when the axis spans at most 2.5 decades, and all when it spans less than half a
+    decade."""
     from matplotlib.ticker import FuncFormatter, LogLocator
 
     getattr(ax, f"set_{axis}scale")("log")
@@ -169,10 +212,12 @@ def _log_tick(v: float, plain: bool) -> str:
     return f"$10^{{{k}}}$" if abs(digit - 1) < 1e-6 else f"${digit:.0f}\\times10^{{{k}}}$"
 
 
-def place_labels(ax, xs, ys, texts, *, offset=(4, 4), fontsize: float = 8, pad: float = 1.5) -> list:
-    """Annotate points ``(xs[i], ys[i])`` with ``texts[i]`` so that no two labels overlap: each label
-    starts up-right of its point (``offset`` in points) and is pushed upwards past any label it
-    would cover (``pad`` points apart); a pushed label gets a thin leader line to its point.
+def place_labels(
+    ax, xs, ys, texts, *, offset=(4, 4), fontsize: float = 8, pad: float = 1.5
+) -> list:
+    """Annotate points ``(xs[i], ys[i])`` with ``texts[i]`` so that no two labels overlap: each
+    label starts up-right of its point (``offset`` in points) and is pushed upwards past any label
+    it would cover (``pad`` points apart); a pushed label gets a thin leader line to its point.
     Call after the axes limits are final. Returns the annotations."""
     from matplotlib.text import Text
 
@@ -182,15 +227,31 @@ def place_labels(ax, xs, ys, texts, *, offset=(4, 4), fontsize: float = 8, pad: 
     to_points = 72.0 / fig.dpi
     placed, boxes = [], []
     for i in np.argsort(np.asarray(ys, float), kind="stable"):
-        ann = ax.annotate(texts[i], (xs[i], ys[i]), xytext=offset, textcoords="offset points", fontsize=fontsize,
-                          va="bottom", ha="left",
-                          arrowprops={"arrowstyle": "-", "color": "0.5", "lw": 0.5, "shrinkA": 0, "shrinkB": 3})
+        ann = ax.annotate(
+            texts[i],
+            (xs[i], ys[i]),
+            xytext=offset,
+            textcoords="offset points",
+            fontsize=fontsize,
+            va="bottom",
+            ha="left",
+            arrowprops={"arrowstyle": "-", "color": "0.5", "lw": 0.5, "shrinkA": 0, "shrinkB": 3},
+        )
         dy = float(offset[1])
         for _ in range(100):
             ann.update_positions(renderer)
             box = Text.get_window_extent(ann, renderer)
-            hit = next((b for b in boxes if box.x0 < b.x1 and b.x0 < box.x1 and box.y0 < b.y1 + pad / to_points
-                        and b.y0 < box.y1 + pad / to_points), None)
+            hit = next(
+                (
+                    b
+                    for b in boxes
+                    if box.x0 < b.x1
+                    and b.x0 < box.x1
+                    and box.y0 < b.y1 + pad / to_points
+                    and b.y0 < box.y1 + pad / to_points
+                ),
+                None,
+            )
             if hit is None:
                 break
             dy += (hit.y1 - box.y0) * to_points + pad

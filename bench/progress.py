@@ -15,16 +15,17 @@ the growth measured between ``coarse`` (0.30 s, 1 029 dofs) and ``paper`` (11.0 
 docs/fe_model.md (the sparse factorisation grows faster than linearly). ``paper`` is then ~35 s
 per plastic run, ``fine`` (27 783 dofs) ~3 min. Analytic cases cost nothing.
 """
+
 from __future__ import annotations
 
 import math
 import sys
 import time
 
-COARSE_RUN_S = 1.0       #: s, one plastic forward run on coarse (eighth, 1 029 dofs), one core
-COARSE_DOFS = 1029       #: dofs of the coarse eighth model
-DOFS_EXPONENT = 1.6      #: run time ~ dofs ** DOFS_EXPONENT (coarse -> paper, docs/fe_model.md)
-WARN_ABOVE_S = 3600.0    #: warn when an estimate exceeds this, s
+COARSE_RUN_S = 1.0  #: s, one plastic forward run on coarse (eighth, 1 029 dofs), one core
+COARSE_DOFS = 1029  #: dofs of the coarse eighth model
+DOFS_EXPONENT = 1.6  #: run time ~ dofs ** DOFS_EXPONENT (coarse -> paper, docs/fe_model.md)
+WARN_ABOVE_S = 3600.0  #: warn when an estimate exceeds this, s
 
 
 def enabled(quiet: bool = False, stream=None) -> bool:
@@ -51,13 +52,21 @@ class EvaluationProgress:
     or handed to code that builds its evaluators (``identify(spec, observers=[bar])``).
     """
 
-    def __init__(self, evaluator=None, *, total: int | None = None, desc: str = "",
-                 disable: bool = False):
+    def __init__(
+        self, evaluator=None, *, total: int | None = None, desc: str = "", disable: bool = False
+    ):
         from tqdm import tqdm
 
         self.evaluator = evaluator
-        self.bar = tqdm(total=total, desc=desc, unit="eval", file=sys.stderr, disable=disable,
-                        dynamic_ncols=True, leave=False)
+        self.bar = tqdm(
+            total=total,
+            desc=desc,
+            unit="eval",
+            file=sys.stderr,
+            disable=disable,
+            dynamic_ncols=True,
+            leave=False,
+        )
         # id(evaluator) -> (id of its log, n_evals seen)
         self._last: dict[int, tuple[int, int]] = {}
         self._best = math.inf
@@ -126,8 +135,9 @@ def time_estimate(n_runs: float, mesh: str, workers: int = 1) -> float:
     return n_runs * forward_run_s(mesh) / max(1, workers)
 
 
-def warn_if_long(command: str, n_runs: float, mesh: str, *, workers: int | None = 1, what: str = "",
-                 stream=None) -> float:
+def warn_if_long(
+    command: str, n_runs: float, mesh: str, *, workers: int | None = 1, what: str = "", stream=None
+) -> float:
     """Print one warning line on stderr when ``n_runs`` FE runs on ``mesh`` likely take more than an
     hour; return the estimate, s. ``workers`` None means one per core."""
     import os
@@ -136,8 +146,12 @@ def warn_if_long(command: str, n_runs: float, mesh: str, *, workers: int | None 
     est = time_estimate(n_runs, mesh, w)
     if est > WARN_ABOVE_S:
         per = forward_run_s(mesh)
-        print(f"femubench {command}: warning: {what or 'these settings'}: up to {n_runs:.0f} "
-              f"forward run(s) on mesh {mesh} at ~{format_duration(per)} each on {w} worker(s) "
-              f"take about {format_duration(est)} (rough estimate: 1 s per coarse run, scaled by "
-              "solved dofs^1.6)", file=stream or sys.stderr, flush=True)
+        print(
+            f"femubench {command}: warning: {what or 'these settings'}: up to {n_runs:.0f} "
+            f"forward run(s) on mesh {mesh} at ~{format_duration(per)} each on {w} worker(s) "
+            f"take about {format_duration(est)} (rough estimate: 1 s per coarse run, scaled by "
+            "solved dofs^1.6)",
+            file=stream or sys.stderr,
+            flush=True,
+        )
     return est

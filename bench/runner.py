@@ -5,9 +5,9 @@
   message (and in ``record["error"]``), so one crash never takes a suite down.
 * :func:`run_suite` skips every run that already has a record in ``DIR/runs/`` and runs the
   rest (a record file that cannot be read is moved into ``DIR/runs/corrupt/``, logged, and its
-  run runs again): ``workers=1`` in a plain loop in this process (debugging, profiling), otherwise on a
-  Dask ``LocalCluster`` of ``workers`` single-threaded worker processes (default: one per
-  core, BLAS/OpenMP pinned to one thread), or on an existing cluster given by ``scheduler``.
+  run runs again): ``workers=1`` in a plain loop in this process (debugging, profiling), otherwise
+  on a Dask ``LocalCluster`` of ``workers`` single-threaded worker processes (default: one per core,
+  BLAS/OpenMP pinned to one thread), or on an existing cluster given by ``scheduler``.
   Records are written by this process (the client) as runs complete, atomically, so a
   ``kill -9`` at any moment loses at most the runs in flight and never leaves half a record.
 
@@ -16,6 +16,7 @@ default: with one run per core the cluster is already saturated. ``fan_out=True`
 ``--fan-out``) hands the objective a mapper that submits those batches to the same cluster
 through :func:`distributed.worker_client` — useful when there are fewer runs than cores.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -33,7 +34,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from bench import store
-from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper  # thread pinning for every worker process
+
+# thread pinning for every worker process
+from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper
 from bench.suite import RunConfig, Suite, config_hash
 
 log = logging.getLogger("femubench.runner")
@@ -41,8 +44,20 @@ log = logging.getLogger("femubench.runner")
 #: Distinct warnings kept per record.
 MAX_WARNINGS = 20
 #: Packages whose versions go into every record.
-VERSIONED = ("femubench", "numpy", "scipy", "nlopt", "pymoo", "pyswarms", "emcee", "dask",
-             "distributed", "pandas", "meshio", "SALib")
+VERSIONED = (
+    "femubench",
+    "numpy",
+    "scipy",
+    "nlopt",
+    "pymoo",
+    "pyswarms",
+    "emcee",
+    "dask",
+    "distributed",
+    "pandas",
+    "meshio",
+    "SALib",
+)
 
 
 def now() -> str:
@@ -96,9 +111,13 @@ def machine() -> dict[str, Any]:
     except AttributeError:  # pragma: no cover - macOS, Windows
         affinity = os.cpu_count()
     return {
-        "hostname": platform.node(), "platform": platform.platform(), "machine": platform.machine(),
-        "processor": platform.processor(), "python": sys.version.split()[0],
-        "cpu_count": os.cpu_count(), "cpu_affinity": affinity,
+        "hostname": platform.node(),
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "processor": platform.processor(),
+        "python": sys.version.split()[0],
+        "cpu_count": os.cpu_count(),
+        "cpu_affinity": affinity,
         "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
     }
 
@@ -126,11 +145,16 @@ def dataset_for(config: RunConfig, *, progress: bool = False):
         return None
     from problems.inverse.data import get_data, tier_settings
 
-    return get_data(config.case, tier_settings(config.tier, inverse_mesh=config.mesh, **config.data),
-                    progress=progress)
+    return get_data(
+        config.case,
+        tier_settings(config.tier, inverse_mesh=config.mesh, **config.data),
+        progress=progress,
+    )
 
 
-def failed_result(config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0):
+def failed_result(
+    config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0
+):
     """A RunResult for a run that crashed before (or while) its solver returned."""
     import math
 
@@ -151,19 +175,36 @@ def failed_result(config: RunConfig, message: str, *, case=None, x0=None, n_eval
     x0 = [float(v) for v in x0] if x0 is not None else []
     xn = [a / b if b else math.nan for a, b in zip(x0, ref)] if len(x0) == len(ref) else []
     return RunResult(
-        method=config.method, options=dict(config.options), seed=config.seed, budget=config.budget,
-        parameter_names=names, reference=ref, x0=x0, x=list(x0), x_normalised=xn, cost=math.nan,
-        status="failed", success=False, message=message, n_evals=int(n_evals), wall_s=wall_s,
+        method=config.method,
+        options=dict(config.options),
+        seed=config.seed,
+        budget=config.budget,
+        parameter_names=names,
+        reference=ref,
+        x0=x0,
+        x=list(x0),
+        x_normalised=xn,
+        cost=math.nan,
+        status="failed",
+        success=False,
+        message=message,
+        n_evals=int(n_evals),
+        wall_s=wall_s,
     )
 
 
-def run_one(config: RunConfig | dict, *, mapper: Callable | None = None, suite: str | None = None,
-            dataset=None) -> dict[str, Any]:
+def run_one(
+    config: RunConfig | dict,
+    *,
+    mapper: Callable | None = None,
+    suite: str | None = None,
+    dataset=None,
+) -> dict[str, Any]:
     """Run one identification and return its record (see :mod:`bench.store`); never raises
     (except KeyboardInterrupt/SystemExit).
 
-    ``dataset``: the run's measured data (a problems.inverse.data.Dataset) when the caller prepared it;
-    by default it is loaded (or made) here with :func:`dataset_for`.
+    ``dataset``: the run's measured data (a problems.inverse.data.Dataset) when the caller prepared
+    it; by default it is loaded (or made) here with :func:`dataset_for`.
     """
     if isinstance(config, dict):
         config = RunConfig.from_dict(config)
@@ -173,8 +214,15 @@ def run_one(config: RunConfig | dict, *, mapper: Callable | None = None, suite: 
         warnings.simplefilter("ignore", DeprecationWarning)
         warnings.simplefilter("ignore", PendingDeprecationWarning)
         result, data_hash, error = _run_guarded(config, mapper, dataset, t0)
-    record = make_record(config, result, suite=suite, data_hash=data_hash, error=error,
-                         started=started, finished=now())
+    record = make_record(
+        config,
+        result,
+        suite=suite,
+        data_hash=data_hash,
+        error=error,
+        started=started,
+        finished=now(),
+    )
     seen = []
     for w in caught:
         text = f"{w.category.__name__}: {w.message}"
@@ -196,39 +244,78 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
         if dataset is None and not is_analytic(config.case):
             dataset = dataset_for(config)
         x0 = initial_point(case, config)
-        spec = Identification(config.case, config.method, mesh=config.mesh, tier=config.tier,
-                              treatment=config.treatment, plate_margin_mm=config.plate_margin_mm,
-                              budget=config.budget, seed=config.seed, start=config.start,
-                              start_index=config.start_index, options=dict(config.options))
-        result = identify(spec, mapper=mapper, dataset=dataset,
-                          observers=[lambda ev, _: evaluations.__setitem__(0, ev.n_evals)])
+        spec = Identification(
+            config.case,
+            config.method,
+            mesh=config.mesh,
+            tier=config.tier,
+            treatment=config.treatment,
+            plate_margin_mm=config.plate_margin_mm,
+            budget=config.budget,
+            seed=config.seed,
+            start=config.start,
+            start_index=config.start_index,
+            options=dict(config.options),
+        )
+        result = identify(
+            spec,
+            mapper=mapper,
+            dataset=dataset,
+            observers=[lambda ev, _: evaluations.__setitem__(0, ev.n_evals)],
+        )
         data_hash = result.provenance.get("data_hash")
     except Exception as exc:  # a crash must never take a suite down
         error = "".join(traceback.format_exception(exc))
-        result = failed_result(config, f"{type(exc).__name__}: {exc}\n{error}", case=case, x0=x0,
-                               n_evals=evaluations[0], wall_s=time.perf_counter() - t0)
+        result = failed_result(
+            config,
+            f"{type(exc).__name__}: {exc}\n{error}",
+            case=case,
+            x0=x0,
+            n_evals=evaluations[0],
+            wall_s=time.perf_counter() - t0,
+        )
     return result, data_hash, error
 
 
-def make_record(config: RunConfig, result, *, suite=None, data_hash=None, error=None,
-                started=None, finished=None) -> dict[str, Any]:
+def make_record(
+    config: RunConfig,
+    result,
+    *,
+    suite=None,
+    data_hash=None,
+    error=None,
+    started=None,
+    finished=None,
+) -> dict[str, Any]:
     res = result.to_dict() if hasattr(result, "to_dict") else dict(result)
     return {
-        "schema": store.RECORD_SCHEMA, "config_hash": config_hash(config), "config": config.to_dict(),
-        "suite": suite, "result": res, "data_hash": data_hash, "error": error,
-        "versions": versions(), "machine": machine(), "started": started, "finished": finished,
+        "schema": store.RECORD_SCHEMA,
+        "config_hash": config_hash(config),
+        "config": config.to_dict(),
+        "suite": suite,
+        "result": res,
+        "data_hash": data_hash,
+        "error": error,
+        "versions": versions(),
+        "machine": machine(),
+        "started": started,
+        "finished": finished,
         "warnings": [],
     }
 
 
 # --- inside a Dask task --------------------------------------------------------------------
 
+
 def _dask_task(config: dict, suite: str | None, fan_out: bool, dataset=None) -> dict:
     """The Dask task: one identification (module-level so that it pickles by reference)."""
-    return run_one(config, mapper=WorkerClientMapper() if fan_out else None, suite=suite, dataset=dataset)
+    return run_one(
+        config, mapper=WorkerClientMapper() if fan_out else None, suite=suite, dataset=dataset
+    )
 
 
 # --- suites -----------------------------------------------------------------------------------
+
 
 @dataclass
 class SuiteSummary:
@@ -248,12 +335,16 @@ class SuiteSummary:
     set_aside: list[Path] = field(default_factory=list)
 
     def __str__(self) -> str:
-        text = (f"suite {self.name!r}: {self.total} runs, {self.skipped} already done, {self.ran} run now "
-                f"({self.failed} not successful, {self.crashed} crashed) in {self.wall_s:.1f} s; "
-                f"records in {store.runs_dir(self.out_dir)}")
+        text = (
+            f"suite {self.name!r}: {self.total} runs, {self.skipped} already done, {self.ran} run "
+            f"now ({self.failed} not successful, {self.crashed} crashed) in {self.wall_s:.1f} s; "
+            f"records in {store.runs_dir(self.out_dir)}"
+        )
         if self.set_aside:
-            text += (f"; {len(self.set_aside)} unreadable record(s) moved to {store.corrupt_dir(self.out_dir)} "
-                     "(their runs were run again)")
+            text += (
+                f"; {len(self.set_aside)} unreadable record(s) moved to "
+                f"{store.corrupt_dir(self.out_dir)} (their runs were run again)"
+            )
         return text
 
 
@@ -275,7 +366,9 @@ def _dir_lock(out_dir: Path):
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise ValueError(f"another 'femubench run' is writing to {out_dir}; wait for it or use another --out") from None
+            raise ValueError(
+                f"another 'femubench run' is writing to {out_dir}; wait for it or use another --out"
+            ) from None
         yield
     finally:
         fh.close()
@@ -297,7 +390,9 @@ def _suite_log(path: Path):
         handler.close()
 
 
-def pending_runs(suite: Suite, out_dir: str | Path, *, force: bool = False, retry_failed: bool = False):
+def pending_runs(
+    suite: Suite, out_dir: str | Path, *, force: bool = False, retry_failed: bool = False
+):
     """``(all_runs, pending)``: the suite's runs and those to run now (no readable record yet, or
     all of them with ``force``, or also the crashed ones with ``retry_failed``)."""
     runs = suite.runs()
@@ -314,14 +409,24 @@ def set_aside_unreadable(out_dir: Path) -> list[Path]:
     """Move the unreadable records of ``out_dir`` aside (logged); return their new paths."""
     moved = []
     for old, new, why in store.set_aside_unreadable(out_dir):
-        log.warning("unreadable record %s (%s) moved to %s; its run counts as not done", old.name, why, new)
+        log.warning(
+            "unreadable record %s (%s) moved to %s; its run counts as not done", old.name, why, new
+        )
         moved.append(new)
     return moved
 
 
-def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, scheduler: str | None = None,
-              force: bool = False, retry_failed: bool = False, progress: bool = True,
-              fan_out: bool = False) -> SuiteSummary:
+def run_suite(
+    suite: Suite,
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    retry_failed: bool = False,
+    progress: bool = True,
+    fan_out: bool = False,
+) -> SuiteSummary:
     """Run every run of ``suite`` that has no record in ``out_dir`` (all of them with ``force``)."""
     out_dir = Path(out_dir)
     if workers is not None and workers < 1:
@@ -338,14 +443,34 @@ def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, 
         with _suite_log(log_file):
             set_aside = set_aside_unreadable(out_dir)
             runs, pending = pending_runs(suite, out_dir, force=force, retry_failed=retry_failed)
-            summary = SuiteSummary(suite.name, out_dir, len(runs), len(runs) - len(pending),
-                                   removed_tmp=removed, log_file=log_file, set_aside=set_aside)
+            summary = SuiteSummary(
+                suite.name,
+                out_dir,
+                len(runs),
+                len(runs) - len(pending),
+                removed_tmp=removed,
+                log_file=log_file,
+                set_aside=set_aside,
+            )
             if removed:
-                log.warning("removed %d stray temporary file(s) left by an interrupted run", removed)
-            n_workers = workers if workers is not None else min(default_workers(), max(1, len(pending)))
-            where = scheduler or ("in-process" if n_workers == 1 else f"local cluster of {n_workers} workers")
-            log.info("suite %s: %d runs, %d with a record, %d to run (%s)%s", suite.name, len(runs),
-                     summary.skipped, len(pending), where, ", --force" if force else "")
+                log.warning(
+                    "removed %d stray temporary file(s) left by an interrupted run", removed
+                )
+            n_workers = (
+                workers if workers is not None else min(default_workers(), max(1, len(pending)))
+            )
+            where = scheduler or (
+                "in-process" if n_workers == 1 else f"local cluster of {n_workers} workers"
+            )
+            log.info(
+                "suite %s: %d runs, %d with a record, %d to run (%s)%s",
+                suite.name,
+                len(runs),
+                summary.skipped,
+                len(pending),
+                where,
+                ", --force" if force else "",
+            )
             datasets = prepare_datasets(pending, progress=progress)
             bar = _progress(suite.name, len(runs), summary.skipped, progress)
             try:
@@ -354,8 +479,14 @@ def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, 
                     ds = datasets.get(data_key(cfg))
                     if isinstance(ds, BaseException):
                         msg = "".join(traceback.format_exception(ds))
-                        rec = make_record(cfg, failed_result(cfg, f"data set: {type(ds).__name__}: {ds}\n{msg}"),
-                                          suite=suite.name, error=msg, started=now(), finished=now())
+                        rec = make_record(
+                            cfg,
+                            failed_result(cfg, f"data set: {type(ds).__name__}: {ds}\n{msg}"),
+                            suite=suite.name,
+                            error=msg,
+                            started=now(),
+                            finished=now(),
+                        )
                         _finish(summary, out_dir, cfg, rec, bar)
                     else:
                         todo.append(cfg)
@@ -366,11 +497,23 @@ def run_suite(suite: Suite, out_dir: str | Path, *, workers: int | None = None, 
                         rec = run_one(cfg, suite=suite.name, dataset=datasets.get(data_key(cfg)))
                         _finish(summary, out_dir, cfg, rec, bar)
                 else:
-                    _run_dask(summary, out_dir, todo, suite.name, bar, n_workers=n_workers,
-                              scheduler=scheduler, fan_out=fan_out, datasets=datasets)
+                    _run_dask(
+                        summary,
+                        out_dir,
+                        todo,
+                        suite.name,
+                        bar,
+                        n_workers=n_workers,
+                        scheduler=scheduler,
+                        fan_out=fan_out,
+                        datasets=datasets,
+                    )
             except KeyboardInterrupt:
-                log.warning("interrupted: %d runs finished now, %d left for the next 'femubench run'",
-                            summary.ran, len(pending) - summary.ran)
+                log.warning(
+                    "interrupted: %d runs finished now, %d left for the next 'femubench run'",
+                    summary.ran,
+                    len(pending) - summary.ran,
+                )
                 raise
             finally:
                 bar.close()
@@ -401,8 +544,13 @@ def prepare_datasets(pending: list[RunConfig], *, progress: bool = False) -> dic
         t0 = time.perf_counter()
         try:
             out[key] = dataset_for(cfg, progress=progress)
-            log.info("data set of %s %s: hash %s (%.1f s)", cfg.case, key[1], getattr(out[key], "hash", "?")[:12],
-                     time.perf_counter() - t0)
+            log.info(
+                "data set of %s %s: hash %s (%.1f s)",
+                cfg.case,
+                key[1],
+                getattr(out[key], "hash", "?")[:12],
+                time.perf_counter() - t0,
+            )
         except Exception as exc:  # noqa: BLE001 - reported per run
             out[key] = exc
             log.error("data set of %s with %s could not be made: %s", cfg.case, key[1], exc)
@@ -412,8 +560,16 @@ def prepare_datasets(pending: list[RunConfig], *, progress: bool = False) -> dic
 def _progress(name: str, total: int, initial: int, enabled: bool):
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, initial=initial, desc=name, unit="run", disable=not enabled,
-                dynamic_ncols=True, smoothing=0.05, file=sys.stderr)
+    return tqdm(
+        total=total,
+        initial=initial,
+        desc=name,
+        unit="run",
+        disable=not enabled,
+        dynamic_ncols=True,
+        smoothing=0.05,
+        file=sys.stderr,
+    )
 
 
 def _finish(summary: SuiteSummary, out_dir: Path, cfg: RunConfig, record: dict, bar) -> None:
@@ -426,24 +582,38 @@ def _finish(summary: SuiteSummary, out_dir: Path, cfg: RunConfig, record: dict, 
         summary.crashed += 1
         summary.failures.append(cfg.label)
         log.error("run %s crashed:\n%s", cfg.label, record["error"])
-    log.info("%s: %s cost=%s n_evals=%s wall=%.2fs [%s]", cfg.label, res.get("status"), res.get("cost"),
-             res.get("n_evals"), float(res.get("wall_s") or 0.0), record["config_hash"][:12])
+    log.info(
+        "%s: %s cost=%s n_evals=%s wall=%.2fs [%s]",
+        cfg.label,
+        res.get("status"),
+        res.get("cost"),
+        res.get("n_evals"),
+        float(res.get("wall_s") or 0.0),
+        record["config_hash"][:12],
+    )
     for w in record.get("warnings") or []:
         log.warning("%s: %s", cfg.label, w)
     bar.update(1)
     bar.set_postfix(unsuccessful=summary.failed, crashed=summary.crashed, refresh=False)
 
 
-def _run_dask(summary, out_dir, pending, suite_name, bar, *, n_workers, scheduler, fan_out, datasets=None):
+def _run_dask(
+    summary, out_dir, pending, suite_name, bar, *, n_workers, scheduler, fan_out, datasets=None
+):
     import uuid
 
     from distributed import Client, LocalCluster, as_completed
 
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", env=dict(SINGLE_THREAD_ENV),
-                               silence_logs=logging.ERROR)
+        cluster = LocalCluster(
+            n_workers=n_workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            env=dict(SINGLE_THREAD_ENV),
+            silence_logs=logging.ERROR,
+        )
         client = Client(cluster)
     else:
         try:
@@ -453,14 +623,24 @@ def _run_dask(summary, out_dir, pending, suite_name, bar, *, n_workers, schedule
     try:
         log.info("dask: %s, dashboard %s", client, getattr(client, "dashboard_link", "?"))
         tag = uuid.uuid4().hex[:8]
-        scattered = {k: client.scatter(ds, hash=False) for k, ds in (datasets or {}).items()
-                     if not isinstance(ds, BaseException)}
+        scattered = {
+            k: client.scatter(ds, hash=False)
+            for k, ds in (datasets or {}).items()
+            if not isinstance(ds, BaseException)
+        }
         by_key = {}
         futures = []
         for cfg in pending:
             key = f"femubench-{config_hash(cfg)[:16]}-{tag}"
-            fut = client.submit(_dask_task, cfg.to_dict(), suite_name, fan_out, scattered.get(data_key(cfg)),
-                                key=key, pure=False)
+            fut = client.submit(
+                _dask_task,
+                cfg.to_dict(),
+                suite_name,
+                fan_out,
+                scattered.get(data_key(cfg)),
+                key=key,
+                pure=False,
+            )
             by_key[fut.key] = cfg
             futures.append(fut)
         for fut in as_completed(futures):
@@ -469,8 +649,14 @@ def _run_dask(summary, out_dir, pending, suite_name, bar, *, n_workers, schedule
                 record = fut.result()
             except Exception as exc:  # worker died (KilledWorker), unpicklable result, ...
                 msg = "".join(traceback.format_exception(exc))
-                record = make_record(cfg, failed_result(cfg, f"{type(exc).__name__}: {exc}\n{msg}"),
-                                     suite=suite_name, error=msg, started=None, finished=now())
+                record = make_record(
+                    cfg,
+                    failed_result(cfg, f"{type(exc).__name__}: {exc}\n{msg}"),
+                    suite=suite_name,
+                    error=msg,
+                    started=None,
+                    finished=now(),
+                )
             _finish(summary, out_dir, cfg, record, bar)
             fut.release()
     finally:

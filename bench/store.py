@@ -28,6 +28,7 @@ Record (JSON object)::
     started      ISO-8601 UTC time
     finished     ISO-8601 UTC time
 """
+
 from __future__ import annotations
 
 import json
@@ -95,7 +96,9 @@ def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:
     """Write one record atomically to ``DIR/runs/<config_hash>.json``; return its path."""
     h = record["config_hash"]
     path = record_path(out_dir, h)
-    atomic_write_text(path, json.dumps(_json_safe(record), sort_keys=True, separators=(",", ":")) + "\n")
+    atomic_write_text(
+        path, json.dumps(_json_safe(record), sort_keys=True, separators=(",", ":")) + "\n"
+    )
     return path
 
 
@@ -168,7 +171,9 @@ def scan_records(out_dir: str | Path) -> tuple[list[dict[str, Any]], list[tuple[
         return [], []
     tmp = stray_tmp(out_dir)
     if tmp:
-        log.warning("ignoring %d stray temporary file(s) in %s (left by an interrupted run)", len(tmp), d)
+        log.warning(
+            "ignoring %d stray temporary file(s) in %s (left by an interrupted run)", len(tmp), d
+        )
     records, unreadable = [], []
     for p in sorted(d.glob("*.json")):
         try:
@@ -198,7 +203,8 @@ def done_hashes(out_dir: str | Path) -> set[str]:
 
 
 def set_aside(path: Path) -> Path:
-    """Move the record file ``path`` into ``runs/corrupt/<name>.corrupt-<UTC time>``; return the new path."""
+    """Move the record file ``path`` into ``runs/corrupt/<name>.corrupt-<UTC time>``; return the new
+    path."""
     dest_dir = path.parent / CORRUPT
     dest_dir.mkdir(exist_ok=True)
     stem = f"{path.name}.corrupt-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
@@ -257,10 +263,10 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
     ``runs``: one row per run — configuration columns (case, ``method`` = :func:`method_label`,
     ``solver``, ``tier``, ``treatment``, seed, start, start_index, budget, mesh, ``data.<key>``,
     options as JSON), outcome (``forward_equivalents`` of the solver's evaluations,
-    ``charged_equivalents`` of the runs made for it, ``total_equivalents``) (status, success, cost, n_evals, ...,
-    wall_s), per parameter ``x.<p>`` (physical), ``xn.<p>`` (x / reference), ``err.<p>`` (signed
-    error in percent; NaN where the parameter is inactive) and ``x0.<p>``, plus provenance
-    (data_hash, hostname, started, finished, crashed).
+    ``charged_equivalents`` of the runs made for it, ``total_equivalents``) (status, success, cost,
+    n_evals, ..., wall_s), per parameter ``x.<p>`` (physical), ``xn.<p>`` (x / reference),
+    ``err.<p>`` (signed error in percent; NaN where the parameter is inactive) and ``x0.<p>``, plus
+    provenance (data_hash, hostname, started, finished, crashed).
 
     ``history``: one row per history row of each run — config_hash, case, method, seed, start,
     start_index, budget, iteration, n_evals, cost, best_cost and ``xn.<p>``/``err.<p>``.
@@ -283,9 +289,14 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
         xn = np.array([_num(v) for v in res.get("x_normalised", [])], float)
         x0 = np.array([_num(v) for v in res.get("x0", [])], float)
         key = {
-            "config_hash": rec["config_hash"], "suite": rec.get("suite"), "case": cfg["case"],
-            "method": method_label(cfg), "seed": int(cfg["seed"]), "start": cfg["start"],
-            "start_index": int(cfg["start_index"]), "budget": int(cfg["budget"]),
+            "config_hash": rec["config_hash"],
+            "suite": rec.get("suite"),
+            "case": cfg["case"],
+            "method": method_label(cfg),
+            "seed": int(cfg["seed"]),
+            "start": cfg["start"],
+            "start_index": int(cfg["start_index"]),
+            "budget": int(cfg["budget"]),
         }
         row = dict(key)
         row["solver"] = cfg["method"]
@@ -294,22 +305,34 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
         row["mesh"] = cfg.get("mesh")
         charges = res.get("charges") or {}
         row["forward_equivalents"] = _num(res.get("forward_equivalents"))
-        row["charged_equivalents"] = sum(_num(c.get("forward_equivalents")) for c in charges.values())
+        row["charged_equivalents"] = sum(
+            _num(c.get("forward_equivalents")) for c in charges.values()
+        )
         row["total_equivalents"] = row["forward_equivalents"] + row["charged_equivalents"]
         for k, v in sorted((cfg.get("data") or {}).items()):
             row[f"data.{k}"] = v
         row["options"] = json.dumps(cfg.get("options") or {}, sort_keys=True)
-        row.update({
-            "status": res.get("status"), "success_solver": bool(res.get("success")),
-            "cost": _num(res.get("cost")), "n_evals": int(res.get("n_evals") or 0),
-            "n_failed": int(res.get("n_failed") or 0), "n_infeasible": int(res.get("n_infeasible") or 0),
-            "n_cache_hits": int(res.get("n_cache_hits") or 0),
-            "n_iterations": int(res.get("n_iterations") or 0), "wall_s": _num(res.get("wall_s")),
-            "message": res.get("message", ""), "crashed": bool(rec.get("error")),
-            "data_hash": rec.get("data_hash"), "hostname": (rec.get("machine") or {}).get("hostname"),
-            "started": rec.get("started"), "finished": rec.get("finished"),
-            "n_params": len(names), "max_abs_err": float(np.max(np.abs(100.0 * (xn - 1.0)))) if len(xn) else math.nan,
-        })
+        row.update(
+            {
+                "status": res.get("status"),
+                "success_solver": bool(res.get("success")),
+                "cost": _num(res.get("cost")),
+                "n_evals": int(res.get("n_evals") or 0),
+                "n_failed": int(res.get("n_failed") or 0),
+                "n_infeasible": int(res.get("n_infeasible") or 0),
+                "n_cache_hits": int(res.get("n_cache_hits") or 0),
+                "n_iterations": int(res.get("n_iterations") or 0),
+                "wall_s": _num(res.get("wall_s")),
+                "message": res.get("message", ""),
+                "crashed": bool(rec.get("error")),
+                "data_hash": rec.get("data_hash"),
+                "hostname": (rec.get("machine") or {}).get("hostname"),
+                "started": rec.get("started"),
+                "finished": rec.get("finished"),
+                "n_params": len(names),
+                "max_abs_err": float(np.max(np.abs(100.0 * (xn - 1.0)))) if len(xn) else math.nan,
+            }
+        )
         idx = {n: i for i, n in enumerate(names)}
         for p in params:
             i = idx.get(p)
@@ -326,8 +349,11 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
             hr["cost"] = _num(h.get("cost"))
             hr["best_cost"] = _num(h.get("best_cost", h.get("cost")))
             hx = h.get("x")
-            hxn = (np.array([_num(v) for v in hx], float) / ref) if hx is not None and len(hx) == len(ref) \
+            hxn = (
+                (np.array([_num(v) for v in hx], float) / ref)
+                if hx is not None and len(hx) == len(ref)
                 else np.full(len(names), math.nan)
+            )
             for p in params:
                 i = idx.get(p)
                 hr[f"xn.{p}"] = hxn[i] if i is not None else math.nan
@@ -348,7 +374,8 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
 
 
 def write_parquet(out_dir: str | Path, dest: str | Path | None = None) -> tuple[Path, Path]:
-    """Write ``runs.parquet`` and ``history.parquet`` (default: into ``DIR``); return their paths."""
+    """Write ``runs.parquet`` and ``history.parquet`` (default: into ``DIR``); return their
+    paths."""
     runs, history = to_frames(out_dir)
     dest = Path(dest) if dest is not None else Path(out_dir)
     dest.mkdir(parents=True, exist_ok=True)

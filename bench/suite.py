@@ -24,6 +24,7 @@ The schema is documented in ``docs/suites.md``; in short::
     [options.lm]                     # optional, per-method solver options
     xtol = 1e-10
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -51,7 +52,9 @@ SUITE_KEYS = {
     "budgets": "list of positive integers: forward evaluations per run",
     "mesh": "FE mesh name (default 'coarse')",
     "tiers": 'list of data tiers, "model-error" and/or "consistent" (default ["model-error"])',
-    "treatments": 'list of model-error treatments: "none", "one-point", "iterated", "bae" (default ["none"])',
+    "treatments": (
+        'list of model-error treatments: "none", "one-point", "iterated", "bae" (default ["none"])'
+    ),
     "plate_margin_mm": "leave out front-face points closer than this to the plates, mm (default 0)",
 }
 TOP_KEYS = ("suite", "data", "options")
@@ -81,19 +84,36 @@ class RunConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "case": self.case, "method": self.method, "seed": self.seed, "start": self.start,
-            "start_index": self.start_index, "budget": self.budget, "mesh": self.mesh,
-            "data": dict(sorted(self.data.items())), "options": dict(sorted(self.options.items())),
-            "tier": self.tier, "treatment": self.treatment, "plate_margin_mm": self.plate_margin_mm,
+            "case": self.case,
+            "method": self.method,
+            "seed": self.seed,
+            "start": self.start,
+            "start_index": self.start_index,
+            "budget": self.budget,
+            "mesh": self.mesh,
+            "data": dict(sorted(self.data.items())),
+            "options": dict(sorted(self.options.items())),
+            "tier": self.tier,
+            "treatment": self.treatment,
+            "plate_margin_mm": self.plate_margin_mm,
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "RunConfig":
-        return cls(case=d["case"], method=d["method"], seed=int(d["seed"]), start=d["start"],
-                   start_index=int(d["start_index"]), budget=int(d["budget"]), mesh=d["mesh"],
-                   data=dict(d.get("data") or {}), options=dict(d.get("options") or {}),
-                   tier=d.get("tier", "model-error"), treatment=d.get("treatment", "none"),
-                   plate_margin_mm=float(d.get("plate_margin_mm", 0.0)))
+        return cls(
+            case=d["case"],
+            method=d["method"],
+            seed=int(d["seed"]),
+            start=d["start"],
+            start_index=int(d["start_index"]),
+            budget=int(d["budget"]),
+            mesh=d["mesh"],
+            data=dict(d.get("data") or {}),
+            options=dict(d.get("options") or {}),
+            tier=d.get("tier", "model-error"),
+            treatment=d.get("treatment", "none"),
+            plate_margin_mm=float(d.get("plate_margin_mm", 0.0)),
+        )
 
     @property
     def hash(self) -> str:
@@ -101,9 +121,12 @@ class RunConfig:
 
     @property
     def label(self) -> str:
-        """Short human-readable label, e.g. ``linear-shear/lm/s0/default0/b200/model-error/none``."""
-        return (f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}/"
-                f"{self.tier}/{self.treatment}")
+        """Short human-readable label, e.g.
+        ``linear-shear/lm/s0/default0/b200/model-error/none``."""
+        return (
+            f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}/"
+            f"{self.tier}/{self.treatment}"
+        )
 
 
 def canonical_json(obj: Any) -> str:
@@ -151,9 +174,22 @@ class Suite:
                                 for start in self.starts:
                                     n = 1 if start == "default" else self.random_starts
                                     for i in range(n):
-                                        out.append(RunConfig(case, method, seed, start, i, budget, self.mesh,
-                                                             dict(self.data), dict(self.options.get(method, {})),
-                                                             tier, treatment, self.plate_margin_mm))
+                                        out.append(
+                                            RunConfig(
+                                                case,
+                                                method,
+                                                seed,
+                                                start,
+                                                i,
+                                                budget,
+                                                self.mesh,
+                                                dict(self.data),
+                                                dict(self.options.get(method, {})),
+                                                tier,
+                                                treatment,
+                                                self.plate_margin_mm,
+                                            )
+                                        )
         return out
 
     def __len__(self) -> int:
@@ -167,8 +203,10 @@ class Suite:
 
 # --- what is allowed ------------------------------------------------------------------------
 
+
 def _mesh_error(mesh) -> str | None:
-    """Why ``mesh`` is not a valid mesh spec (``coarse``, ``NX,NY,NZ``, optionally ``:quarter``), or None."""
+    """Why ``mesh`` is not a valid mesh spec (``coarse``, ``NX,NY,NZ``, optionally ``:quarter``), or
+    None."""
     from problems.fe.mesh import parse_mesh_spec
 
     if not isinstance(mesh, str):
@@ -181,11 +219,13 @@ def _mesh_error(mesh) -> str | None:
 
 
 def _data_settings() -> dict[str, tuple]:
-    """Allowed [data] keys (the fields of problems.inverse.data.DataSettings) -> accepted Python types."""
+    """Allowed [data] keys (the fields of problems.inverse.data.DataSettings) -> accepted Python
+    types."""
     from problems.inverse.data import DataSettings
 
-    return {f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings)
-            if f.name != "tier"}  # the tier is a suite dimension: [suite] tiers
+    return {
+        f.name: _types_like(f.default) for f in dataclasses.fields(DataSettings) if f.name != "tier"
+    }  # the tier is a suite dimension: [suite] tiers
 
 
 def _check_data_settings(data: dict) -> str | None:
@@ -225,6 +265,7 @@ def _types_like(default) -> tuple:
 
 # --- loading and validation -----------------------------------------------------------------
 
+
 def load_suite(path: str | Path) -> Suite:
     """Read and validate a suite TOML file; raise ValueError naming every problem."""
     path = Path(path)
@@ -238,7 +279,9 @@ def load_suite(path: str | Path) -> Suite:
     return parse_suite(raw, name=path.stem, source=text, where=str(path))
 
 
-def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, where: str = "suite") -> Suite:
+def parse_suite(
+    raw: dict, *, name: str = "suite", source: str | None = None, where: str = "suite"
+) -> Suite:
     """Validate a suite given as a dict (the parsed TOML); raise ValueError listing all errors."""
     errors: list[str] = []
 
@@ -249,7 +292,10 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         raise ValueError(f"{where}: a suite is a TOML table")
     for key in raw:
         if key not in TOP_KEYS:
-            err(f"unknown top-level table [{key}]; allowed: {', '.join('[' + k + ']' for k in TOP_KEYS)}")
+            err(
+                f"unknown top-level table [{key}]; allowed: "
+                f"{', '.join('[' + k + ']' for k in TOP_KEYS)}"
+            )
     s = raw.get("suite")
     if s is None:
         err("missing table [suite] (with at least 'cases', 'methods' and 'budgets')")
@@ -282,7 +328,7 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     known_cases = all_cases()
     cases = s.get("cases")
     if cases is None:
-        err('[suite] missing key \'cases\' ("all" or a list of case names)')
+        err("[suite] missing key 'cases' (\"all\" or a list of case names)")
         cases = []
     elif cases == "all":
         cases = list(CASES)
@@ -292,7 +338,10 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     else:
         for c in cases:
             if not isinstance(c, str) or c not in known_cases:
-                err(f"[suite] cases: case {c!r} is unknown; allowed: \"all\" or {', '.join(known_cases)}")
+                err(
+                    f'[suite] cases: case {c!r} is unknown; allowed: "all" or '
+                    f"{', '.join(known_cases)}"
+                )
         _no_duplicates("cases", cases, err)
 
     # methods
@@ -308,8 +357,10 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         for m in methods:
             if not isinstance(m, str) or find_method(m) is None:
                 hint = _did_you_mean(m, allowed) if isinstance(m, str) else ""
-                err(f"[suite] methods: method {m!r} is unknown{hint}; allowed: {', '.join(allowed)}"
-                    " (or nlopt:<ALGORITHM>)")
+                err(
+                    f"[suite] methods: method {m!r} is unknown{hint}; allowed: {', '.join(allowed)}"
+                    " (or nlopt:<ALGORITHM>)"
+                )
         _no_duplicates("methods", methods, err)
 
     seeds = _int_list(s, "seeds", [0], minimum=0, err=err)
@@ -322,7 +373,9 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     else:
         for st in starts:
             if st not in START_KINDS:
-                err(f"[suite] starts: {st!r} is not a start kind; allowed: {', '.join(START_KINDS)}")
+                err(
+                    f"[suite] starts: {st!r} is not a start kind; allowed: {', '.join(START_KINDS)}"
+                )
         _no_duplicates("starts", starts, err)
         starts = [st for st in START_KINDS if st in starts]  # canonical order
 
@@ -344,8 +397,11 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     tiers = _choice_list(s, "tiers", ["model-error"], TIERS, err)
     treatments = _choice_list(s, "treatments", ["none"], TREATMENTS, err)
     plate_margin = s.get("plate_margin_mm", 0.0)
-    if isinstance(plate_margin, bool) or not isinstance(plate_margin, (int, float)) \
-            or not (math.isfinite(plate_margin) and 0 <= plate_margin < 75):
+    if (
+        isinstance(plate_margin, bool)
+        or not isinstance(plate_margin, (int, float))
+        or not (math.isfinite(plate_margin) and 0 <= plate_margin < 75)
+    ):
         err(f"[suite] plate_margin_mm = {plate_margin!r} is out of range: 0 <= margin < 75 mm")
         plate_margin = 0.0
 
@@ -358,12 +414,18 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     allowed_data = _data_settings()
     for key, value in raw_data.items():
         if key not in allowed_data:
-            err(f"[data] unknown key {key!r}{_did_you_mean(key, allowed_data)}; allowed: {', '.join(allowed_data)}")
+            err(
+                f"[data] unknown key {key!r}{_did_you_mean(key, allowed_data)}; allowed: "
+                f"{', '.join(allowed_data)}"
+            )
             continue
         types = allowed_data[key]
         ok, value = _coerce(value, types)
         if not ok:
-            err(f"[data] {key} must be of type {'/'.join(t.__name__ for t in types)}, got {raw_data[key]!r}")
+            err(
+                f"[data] {key} must be of type {'/'.join(t.__name__ for t in types)}, got "
+                f"{raw_data[key]!r}"
+            )
         elif isinstance(value, float) and not math.isfinite(value):
             err(f"[data] {key} must be finite, got {value!r}")
         data[key] = value
@@ -380,8 +442,10 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     clean_options: dict[str, dict] = {}
     for m, opts in options.items():
         if m not in methods:
-            err(f"[options.{_q(m)}] is for method {m!r}, which the suite does not run; "
-                f"the suite's methods: {', '.join(map(str, methods)) or '(none)'}")
+            err(
+                f"[options.{_q(m)}] is for method {m!r}, which the suite does not run; "
+                f"the suite's methods: {', '.join(map(str, methods)) or '(none)'}"
+            )
             continue
         if not isinstance(opts, dict):
             err(f"[options.{_q(m)}] must be a table of option = value")
@@ -391,22 +455,32 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
         for key, value in opts.items():
             if table is not None and key not in table:
                 allowed = ", ".join(table) or "(this method takes no options)"
-                err(f"[options.{_q(m)}] unknown option {key!r}{_did_you_mean(key, table)}; allowed: {allowed}")
+                err(
+                    f"[options.{_q(m)}] unknown option {key!r}{_did_you_mean(key, table)}; "
+                    f"allowed: {allowed}"
+                )
                 continue
             if table is not None:
                 default = table[key][0] if isinstance(table[key], tuple) else table[key]
                 ok, value2 = _coerce(value, _types_like(default))
                 if not ok:
-                    err(f"[options.{_q(m)}] {key} must be like its default {default!r} "
-                        f"({type(default).__name__}), got {value!r}")
+                    err(
+                        f"[options.{_q(m)}] {key} must be like its default {default!r} "
+                        f"({type(default).__name__}), got {value!r}"
+                    )
                     continue
                 value = value2
-                why = option_value_error(key, value, default, table[key][1] if isinstance(table[key], tuple) else "")
+                why = option_value_error(
+                    key, value, default, table[key][1] if isinstance(table[key], tuple) else ""
+                )
                 if why:
                     err(f"[options.{_q(m)}] {key} = {why}")
                     continue
             if isinstance(value, float) and not math.isfinite(value):
-                err(f"[options.{_q(m)}] {key} must be finite (leave it out to use its default), got {value!r}")
+                err(
+                    f"[options.{_q(m)}] {key} must be finite (leave it out to use its default), "
+                    f"got {value!r}"
+                )
                 continue
             clean[key] = value
         if clean:
@@ -415,11 +489,23 @@ def parse_suite(raw: dict, *, name: str = "suite", source: str | None = None, wh
     if errors:
         raise ValueError(f"{where}: invalid suite:\n  - " + "\n  - ".join(errors))
 
-    return Suite(name=sname, cases=tuple(cases), methods=tuple(methods), seeds=tuple(seeds),
-                 starts=tuple(starts), random_starts=random_starts, budgets=tuple(budgets),
-                 mesh=mesh, data=dict(data), options=clean_options, tiers=tuple(tiers),
-                 treatments=tuple(treatments), plate_margin_mm=float(plate_margin), description=description,
-                 source=source)
+    return Suite(
+        name=sname,
+        cases=tuple(cases),
+        methods=tuple(methods),
+        seeds=tuple(seeds),
+        starts=tuple(starts),
+        random_starts=random_starts,
+        budgets=tuple(budgets),
+        mesh=mesh,
+        data=dict(data),
+        options=clean_options,
+        tiers=tuple(tiers),
+        treatments=tuple(treatments),
+        plate_margin_mm=float(plate_margin),
+        description=description,
+        source=source,
+    )
 
 
 def _q(m: str) -> str:
@@ -430,7 +516,10 @@ def _choice_list(s: dict, key: str, default: list[str], allowed, err) -> list[st
     """A non-empty list of distinct names from ``allowed`` (in the order of ``allowed``)."""
     value = s.get(key, default)
     if not isinstance(value, list) or not value:
-        err(f"[suite] {key} must be a non-empty list of {', '.join(map(repr, allowed))}, got {value!r}")
+        err(
+            f"[suite] {key} must be a non-empty list of {', '.join(map(repr, allowed))}, got "
+            f"{value!r}"
+        )
         return list(default)
     bad = [v for v in value if v not in allowed]
     if bad:

@@ -15,6 +15,7 @@ option name: ``--seed`` >= 0, ``--budget`` >= 1, ``--mesh`` a mesh spec, ``--dat
 file, ...) or at least a whole or finite number, so that no command accepts ``--seed -1``,
 ``--budget 0``, ``--mesh bogus`` or ``nan``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,14 +27,20 @@ ArgumentTypeError = argparse.ArgumentTypeError
 
 # --- numbers -----------------------------------------------------------------------------------
 
+
 def _integer(text: str, minimum: int | None = None, maximum: int | None = None) -> int:
     try:
         value = int(str(text).strip())
     except ValueError:
         raise ArgumentTypeError(f"{text!r} is not a whole number") from None
     if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
-        allowed = (f">= {minimum}" if maximum is None else
-                   f"<= {maximum}" if minimum is None else f"in [{minimum}, {maximum}]")
+        allowed = (
+            f">= {minimum}"
+            if maximum is None
+            else f"<= {maximum}"
+            if minimum is None
+            else f"in [{minimum}, {maximum}]"
+        )
         raise ArgumentTypeError(f"{value} is out of range: must be a whole number {allowed}")
     return value
 
@@ -55,16 +62,20 @@ def nonneg_int(text: str) -> int:
 
 def int_at_least(minimum: int):
     """Type: a whole number >= ``minimum``."""
+
     def check(text: str) -> int:
         return _integer(text, minimum)
+
     check.__name__ = f"int>={minimum}"
     return check
 
 
 def int_in(minimum: int, maximum: int):
     """Type: a whole number in ``[minimum, maximum]``."""
+
     def check(text: str) -> int:
         return _integer(text, minimum, maximum)
+
     check.__name__ = f"int in [{minimum}, {maximum}]"
     return check
 
@@ -80,21 +91,31 @@ def finite_float(text: str) -> float:
     return value
 
 
-def float_in(low: float | None = None, high: float | None = None, *, low_open: bool = False,
-             high_open: bool = False, unit: str = ""):
+def float_in(
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = "",
+):
     """Type: a finite number in the interval ``low .. high`` (open or closed ends; None: unbounded).
 
     ``unit`` is printed after the bounds (e.g. ``"um"``).
     """
+
     def check(text: str) -> float:
         value = finite_float(text)
-        bad = ((low is not None and (value <= low if low_open else value < low))
-               or (high is not None and (value >= high if high_open else value > high)))
+        bad = (low is not None and (value <= low if low_open else value < low)) or (
+            high is not None and (value >= high if high_open else value > high)
+        )
         if bad:
             allowed = describe_interval(low, high, low_open, high_open)
-            raise ArgumentTypeError(f"{value:g} is out of range: must be {allowed}"
-                                    + (f" {unit}" if unit else ""))
+            raise ArgumentTypeError(
+                f"{value:g} is out of range: must be {allowed}" + (f" {unit}" if unit else "")
+            )
         return value
+
     check.__name__ = "number"
     return check
 
@@ -114,14 +135,18 @@ nonneg_float = float_in(0.0)
 
 # --- names, lists, files --------------------------------------------------------------------------
 
+
 def comma_list(item_type, *, what: str = "value"):
     """Type: a non-empty comma-separated list of ``item_type`` values."""
+
     def check(text: str) -> tuple:
         items = [s.strip() for s in str(text).split(",")]
         if not text.strip() or any(not s for s in items):
             raise ArgumentTypeError(
-                f"{text!r} is malformed: a comma-separated list of {what}s, none empty")
+                f"{text!r} is malformed: a comma-separated list of {what}s, none empty"
+            )
         return tuple(item_type(s) for s in items)
+
     check.__name__ = "list"
     return check
 
@@ -185,8 +210,9 @@ def study_data(text: str) -> str:
     try:
         return input_file(text)
     except ArgumentTypeError as exc:
-        raise ArgumentTypeError(f"{exc}; allowed: auto, shipped, synthetic or a data file") \
-            from None
+        raise ArgumentTypeError(
+            f"{exc}; allowed: auto, shipped, synthetic or a data file"
+        ) from None
 
 
 def assignments(items, option: str, names=None, *, units: dict | None = None) -> dict[str, float]:
@@ -202,8 +228,9 @@ def assignments(items, option: str, names=None, *, units: dict | None = None) ->
         if not sep or not name:
             raise ValueError(f"{option} {item!r} is malformed: expected NAME=VALUE with a number")
         if names is not None and name not in names:
-            raise ValueError(f"{option} {item!r}: parameter {name!r} is unknown; "
-                             f"allowed: {', '.join(names)}")
+            raise ValueError(
+                f"{option} {item!r}: parameter {name!r} is unknown; allowed: {', '.join(names)}"
+            )
         try:
             v = float(value)
         except ValueError:
@@ -223,24 +250,38 @@ MESH_HELP = "coarse | paper | fine | NX,NY,NZ, optionally :eighth or :quarter"
 
 def add_mesh_argument(parser, default: str = "coarse", help: str | None = None) -> None:
     """``--mesh`` (checked when parsed; see :func:`mesh_spec`)."""
-    parser.add_argument("--mesh", type=mesh_spec, default=default, metavar="MESH",
-                        help=help or f"FE mesh: {MESH_HELP} (default: {default})")
+    parser.add_argument(
+        "--mesh",
+        type=mesh_spec,
+        default=default,
+        metavar="MESH",
+        help=help or f"FE mesh: {MESH_HELP} (default: {default})",
+    )
 
 
-def add_cluster_arguments(parser, *, default_workers: int | None = None,
-                          workers_help: str | None = None) -> None:
+def add_cluster_arguments(
+    parser, *, default_workers: int | None = None, workers_help: str | None = None
+) -> None:
     """``--workers N`` (>= 1) or ``--scheduler ADDRESS`` (mutually exclusive).
 
     ``default_workers`` None means one local Dask worker process per core.
     """
     where = parser.add_mutually_exclusive_group()
     if workers_help is None:
-        workers_help = (f"Dask worker processes (default {default_workers})" if default_workers else
-                        "local Dask worker processes (default: one per core); 1 runs in-process")
-    where.add_argument("--workers", type=positive_int, default=default_workers, metavar="N",
-                       help=workers_help)
-    where.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS",
-                       help="submit to an existing Dask cluster, e.g. tcp://host:8786")
+        workers_help = (
+            f"Dask worker processes (default {default_workers})"
+            if default_workers
+            else "local Dask worker processes (default: one per core); 1 runs in-process"
+        )
+    where.add_argument(
+        "--workers", type=positive_int, default=default_workers, metavar="N", help=workers_help
+    )
+    where.add_argument(
+        "--scheduler",
+        type=scheduler_address,
+        metavar="ADDRESS",
+        help="submit to an existing Dask cluster, e.g. tcp://host:8786",
+    )
 
 
 def scheduler_address(text: str) -> str:
@@ -252,8 +293,9 @@ def scheduler_address(text: str) -> str:
     if not sep:
         rest, proto = t, "tcp"
     if proto not in ("tcp", "tls", "inproc", "ucx", "ws", "wss"):
-        raise ArgumentTypeError(f"{text!r}: protocol {proto!r} is unknown; "
-                                "allowed: tcp://HOST:PORT (or tls, ucx, ws)")
+        raise ArgumentTypeError(
+            f"{text!r}: protocol {proto!r} is unknown; allowed: tcp://HOST:PORT (or tls, ucx, ws)"
+        )
     host, colon, port = rest.rpartition(":")
     valid_port = port.isdigit() and 0 < int(port) < 65536
     if proto != "inproc" and (not colon or not host or not valid_port):
@@ -269,11 +311,20 @@ def add_quiet_argument(parser) -> None:
 
 #: checked types of options declared without one (or with a bare int/float), by option name
 BY_NAME = {
-    "seed": nonneg_int, "budget": positive_int, "workers": positive_int, "samples": positive_int,
-    "steps": positive_int, "snapshots": positive_int, "batch": positive_int,
+    "seed": nonneg_int,
+    "budget": positive_int,
+    "workers": positive_int,
+    "samples": positive_int,
+    "steps": positive_int,
+    "snapshots": positive_int,
+    "batch": positive_int,
     "walkers": positive_int,
-    "mesh": mesh_spec, "hifi_mesh": mesh_spec, "scheduler": scheduler_address, "data": input_file,
-    "json": output_file, "plate_margin_mm": nonneg_float,
+    "mesh": mesh_spec,
+    "hifi_mesh": mesh_spec,
+    "scheduler": scheduler_address,
+    "data": input_file,
+    "json": output_file,
+    "plate_margin_mm": nonneg_float,
 }
 _INT_TYPES = (nonneg_int, positive_int)
 _FLOAT_TYPES = (nonneg_float, positive_float)

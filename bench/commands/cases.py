@@ -1,4 +1,5 @@
 """``femubench cases``: the nine Table-1 cases with their parameters, bounds and default starts."""
+
 from __future__ import annotations
 
 NAME = "cases"
@@ -22,7 +23,13 @@ def main(args) -> int:
     for case in cases.values():
         fixed = ", ".join(f"{k} = {v}" for k, v in case.fixed.items())
         print(f"\n{case.name}  (form {case.form}, hardening {case.hardening}; fixed: {fixed})")
-        print(f"  {'parameter':10} {'unit':10} {'reference':>12} {'lower':>12} {'upper':>12} {'start':>12}")
+        print(
+            f"  {'parameter':10} {'unit':10} {'reference':>12} {'lower':>12} {'upper':>12} "
+            f"{'start':>12}"
+        )
         for p, s in zip(case.parameters, case.start):
-            print(f"  {p.name:10} {p.unit:10} {p.reference:12.6g} {p.lower:12.6g} {p.upper:12.6g} {s:12.6g}")
+            print(
+                f"  {p.name:10} {p.unit:10} {p.reference:12.6g} {p.lower:12.6g} {p.upper:12.6g} "
+                f"{s:12.6g}"
+            )
     return 0

@@ -6,39 +6,75 @@ Where a data set is written: ``--out FILE`` for one case, ``--out DIR`` (``DIR/<
 cache (``$FEMUBENCH_CACHE_DIR``). DIC-route images go next to the data file, in
 ``<stem>__dic_images/``.
 """
+
 from __future__ import annotations
 
 NAME = "data"
-HELP = ("Compute a pseudo-experimental data set of a case: the reference response, rounded (and noised), "
-        "in the model-error tier (xfine mesh) or the consistent tier (the inverse model's mesh).")
+HELP = (
+    "Compute a pseudo-experimental data set of a case: the reference response, rounded (and "
+    "noised), in the model-error tier (xfine mesh) or the consistent tier (the inverse model's "
+    "mesh)."
+)
 
 
 def add_arguments(p) -> None:
     from bench.commands._args import add_quiet_argument, mesh_spec, nonneg_float, nonneg_int
 
     p.add_argument("case", help="case name, or 'all' for the nine cases")
-    p.add_argument("--tier", choices=["model-error", "consistent"], default="model-error",
-                   help="model-error: made on a discretisation finer than any model of the inverse loop; "
-                        "consistent: made with the inverse model's own mesh (default model-error)")
-    p.add_argument("--mesh", default=None, type=mesh_spec,
-                   help="data mesh (default: xfine for the model-error tier; for the consistent tier the "
-                        "inverse model's mesh, default coarse)")
-    p.add_argument("--resolution-um", type=nonneg_float, default=1.0,
-                   help="displacement rounding, um, >= 0 (default 1.0; 0: no rounding)")
-    p.add_argument("--noise-um", type=nonneg_float, default=0.0,
-                   help="Gaussian displacement noise std, um, >= 0 (default 0)")
-    p.add_argument("--force-resolution-kN", type=nonneg_float, default=0.1,
-                   help="force rounding, kN, >= 0 (default 0.1; 0: no rounding)")
+    p.add_argument(
+        "--tier",
+        choices=["model-error", "consistent"],
+        default="model-error",
+        help="model-error: made on a discretisation finer than any model of the inverse loop; "
+        "consistent: made with the inverse model's own mesh (default model-error)",
+    )
+    p.add_argument(
+        "--mesh",
+        default=None,
+        type=mesh_spec,
+        help="data mesh (default: xfine for the model-error tier; for the consistent tier the "
+        "inverse model's mesh, default coarse)",
+    )
+    p.add_argument(
+        "--resolution-um",
+        type=nonneg_float,
+        default=1.0,
+        help="displacement rounding, um, >= 0 (default 1.0; 0: no rounding)",
+    )
+    p.add_argument(
+        "--noise-um",
+        type=nonneg_float,
+        default=0.0,
+        help="Gaussian displacement noise std, um, >= 0 (default 0)",
+    )
+    p.add_argument(
+        "--force-resolution-kN",
+        type=nonneg_float,
+        default=0.1,
+        help="force rounding, kN, >= 0 (default 0.1; 0: no rounding)",
+    )
     p.add_argument("--seed", type=nonneg_int, default=0, help="noise seed, >= 0 (default 0)")
-    p.add_argument("--route", choices=["fe", "dic"], default="fe",
-                   help="fe: displacements from the FE field; dic: rendered speckle images correlated by DIC "
-                        "(images in <data file stem>__dic_images/ next to the data file)")
-    p.add_argument("--out", metavar="FILE|DIR",
-                   help="write here: a file for one case, a directory (DIR/<case>.json) for 'all' "
-                        "(default: the shipped file for default settings, else the cache)")
-    p.add_argument("--force", action="store_true", help="allow overwriting a shipped (default) data set")
-    p.add_argument("--check", action="store_true",
-                   help="recompute and compare byte for byte with the existing file (exit 1 on a difference)")
+    p.add_argument(
+        "--route",
+        choices=["fe", "dic"],
+        default="fe",
+        help="fe: displacements from the FE field; dic: rendered speckle images correlated by DIC "
+        "(images in <data file stem>__dic_images/ next to the data file)",
+    )
+    p.add_argument(
+        "--out",
+        metavar="FILE|DIR",
+        help="write here: a file for one case, a directory (DIR/<case>.json) for 'all' "
+        "(default: the shipped file for default settings, else the cache)",
+    )
+    p.add_argument(
+        "--force", action="store_true", help="allow overwriting a shipped (default) data set"
+    )
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="recompute and compare byte for byte with the existing file (exit 1 on a difference)",
+    )
     add_quiet_argument(p)
 
 
@@ -51,11 +87,16 @@ def target_paths(names: list[str], settings, out: str | None, *, every: bool) ->
 
     if out is None:
         default = is_default(settings)
-        return {n: default_path(n, settings.tier) if default else cached_path(n, settings) for n in names}
+        return {
+            n: default_path(n, settings.tier) if default else cached_path(n, settings)
+            for n in names
+        }
     out = Path(out)
     if every:
         if (out.exists() and not out.is_dir()) or out.suffix == ".json":
-            raise ValueError(f"--out {out}: 'all' writes one file per case, so --out must be a directory")
+            raise ValueError(
+                f"--out {out}: 'all' writes one file per case, so --out must be a directory"
+            )
         return {n: out / f"{n}.json" for n in names}
     if out.exists() and not out.is_dir() and out.suffix != ".json":
         raise ValueError(f"--out {out}: a data set is a .json file (or give a directory)")
@@ -89,8 +130,15 @@ def main(args) -> int:
     every = args.case == "all"
     names = list(CASES) if every else [get_case(args.case).name]
     mesh = {"mesh": args.mesh} if args.mesh else {}
-    settings = tier_settings(args.tier, **mesh, resolution_um=args.resolution_um, noise_um=args.noise_um,
-                             force_resolution_kN=args.force_resolution_kN, seed=args.seed, route=args.route)
+    settings = tier_settings(
+        args.tier,
+        **mesh,
+        resolution_um=args.resolution_um,
+        noise_um=args.noise_um,
+        force_resolution_kN=args.force_resolution_kN,
+        seed=args.seed,
+        route=args.route,
+    )
     paths = target_paths(names, settings, args.out, every=every)
     if not args.check:
         refuse_shipped(paths.values(), args.force)

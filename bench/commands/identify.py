@@ -1,34 +1,86 @@
 """``femubench identify``: one identification run of a case with one solver."""
+
 from __future__ import annotations
 
 NAME = "identify"
-HELP = "Identify a case's parameters with one solver; print found values, errors, cost, evaluations, time."
+HELP = (
+    "Identify a case's parameters with one solver; print found values, errors, cost, evaluations, "
+    "time."
+)
 
 
 def add_arguments(p) -> None:
     p.add_argument("case", help="case name (see `femubench cases --analytic`)")
-    p.add_argument("--solver", required=True, metavar="METHOD", help="method name (see `femubench solvers`)")
-    p.add_argument("--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)")
-    p.add_argument("--tier", choices=["model-error", "consistent"], default="model-error",
-                   help="data tier: model-error (made on a finer discretisation than any model of the loop) or "
-                        "consistent (made with the inverse mesh itself: judges the optimiser alone); "
-                        "default model-error")
-    p.add_argument("--data", metavar="FILE", help="data set to fit (default: the tier's shipped data set)")
-    p.add_argument("--correction", choices=["none", "one-point", "iterated", "bae"], default="none",
-                   help="model-error treatment (default none; see `femubench cases` for each case's default)")
-    p.add_argument("--hifi-mesh", metavar="MESH",
-                   help="high-fidelity mesh of the correction (default: paper for coarse, fine for paper)")
-    p.add_argument("--plate-margin-mm", type=float, default=0.0, metavar="MM",
-                   help="leave out front-face points closer than MM to the plates (default 0)")
-    p.add_argument("--budget", type=int, default=300, metavar="N", help="maximum forward evaluations (default 300)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the solver and of random starts (default 0)")
-    p.add_argument("--start", choices=["default", "random"], default="default",
-                   help="default start of the case, or a seeded Latin-hypercube point (default: default)")
-    p.add_argument("--option", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
-                   help="solver option (value parsed as JSON, else a string), e.g. --option scheme=central")
+    p.add_argument(
+        "--solver", required=True, metavar="METHOD", help="method name (see `femubench solvers`)"
+    )
+    p.add_argument(
+        "--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)"
+    )
+    p.add_argument(
+        "--tier",
+        choices=["model-error", "consistent"],
+        default="model-error",
+        help="data tier: model-error (made on a finer discretisation than any model of the loop) "
+        "or consistent (made with the inverse mesh itself: judges the optimiser alone); default "
+        "model-error",
+    )
+    p.add_argument(
+        "--data", metavar="FILE", help="data set to fit (default: the tier's shipped data set)"
+    )
+    p.add_argument(
+        "--correction",
+        choices=["none", "one-point", "iterated", "bae"],
+        default="none",
+        help="model-error treatment (default none; see `femubench cases` for each case's default)",
+    )
+    p.add_argument(
+        "--hifi-mesh",
+        metavar="MESH",
+        help="high-fidelity mesh of the correction (default: paper for coarse, fine for paper)",
+    )
+    p.add_argument(
+        "--plate-margin-mm",
+        type=float,
+        default=0.0,
+        metavar="MM",
+        help="leave out front-face points closer than MM to the plates (default 0)",
+    )
+    p.add_argument(
+        "--budget",
+        type=int,
+        default=300,
+        metavar="N",
+        help="maximum forward evaluations (default 300)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="seed of the solver and of random starts (default 0)",
+    )
+    p.add_argument(
+        "--start",
+        choices=["default", "random"],
+        default="default",
+        help="default start of the case, or a seeded Latin-hypercube point (default: default)",
+    )
+    p.add_argument(
+        "--option",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="NAME=VALUE",
+        help="solver option (value parsed as JSON, else a string), e.g. --option scheme=central",
+    )
     p.add_argument("--json", metavar="FILE", help="write the RunResult plus errors_percent as JSON")
-    p.add_argument("--quiet", action="store_true",
-                   help="no progress bar (evaluations, best cost, time left; never drawn when stderr is not a terminal)")
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bar (evaluations, best cost, time left; never drawn when stderr is not "
+        "a terminal)",
+    )
 
 
 def parse_options(items: list[str]) -> dict:
@@ -48,25 +100,39 @@ def parse_options(items: list[str]) -> dict:
 
 
 def format_identification(case, result) -> str:
-    """Parameters (reference, start, found, signed error %), then cost, status, evaluations, time."""
+    """Parameters (reference, start, found, signed error %), then cost, status, evaluations,
+    time."""
     errors = result.errors_percent()
     units = {p.name: p.unit for p in case.parameters}
-    lines = [f"{case.name}: {result.method} (seed {result.seed}, budget {result.budget})",
-             f"  {'parameter':10} {'unit':10} {'reference':>12} {'start':>12} {'found':>12} {'error %':>9}"]
+    lines = [
+        f"{case.name}: {result.method} (seed {result.seed}, budget {result.budget})",
+        f"  {'parameter':10} {'unit':10} {'reference':>12} {'start':>12} {'found':>12} "
+        f"{'error %':>9}",
+    ]
     for name, ref, x0, x in zip(result.parameter_names, result.reference, result.x0, result.x):
-        lines.append(f"  {name:10} {units.get(name, ''):10} {ref:12.6g} {x0:12.6g} {x:12.6g} {errors[name]:+9.3f}")
+        lines.append(
+            f"  {name:10} {units.get(name, ''):10} {ref:12.6g} {x0:12.6g} {x:12.6g} "
+            f"{errors[name]:+9.3f}"
+        )
     lines += [
         f"  cost {result.cost:.6g}   status {result.status}: {result.message}",
-        f"  forward evaluations {result.n_evals} (failed {result.n_failed}, infeasible {result.n_infeasible}; "
-        f"cache hits {result.n_cache_hits} not counted), iterations {result.n_iterations}, wall {result.wall_s:.2f} s",
+        f"  forward evaluations {result.n_evals} (failed {result.n_failed}, infeasible "
+        f"{result.n_infeasible}; cache hits {result.n_cache_hits} not counted), iterations "
+        f"{result.n_iterations}, wall {result.wall_s:.2f} s",
         f"  forward-equivalents {result.forward_equivalents:.1f}"
-        + "".join(f", {k} {c['n']} runs = {c['forward_equivalents']:.1f} fe" for k, c in result.charges.items()),
+        + "".join(
+            f", {k} {c['n']} runs = {c['forward_equivalents']:.1f} fe"
+            for k, c in result.charges.items()
+        ),
     ]
     prov = result.provenance
     if prov.get("data_tier"):
-        lines.append(f"  data: {prov['data_tier']} tier, mesh {prov.get('data_mesh')}, hash {str(prov.get('data_hash'))[:12]}; "
-                     f"inverse mesh {prov.get('inverse_mesh')}; treatment {prov.get('treatment')}"
-                     + (f" (high-fidelity mesh {prov['hifi_mesh']})" if prov.get("hifi_mesh") else ""))
+        lines.append(
+            f"  data: {prov['data_tier']} tier, mesh {prov.get('data_mesh')}, hash "
+            f"{str(prov.get('data_hash'))[:12]}; inverse mesh {prov.get('inverse_mesh')}; "
+            f"treatment {prov.get('treatment')}"
+            + (f" (high-fidelity mesh {prov['hifi_mesh']})" if prov.get("hifi_mesh") else "")
+        )
     return "\n".join(lines)
 
 
@@ -76,8 +142,12 @@ def result_document(result) -> dict:
     ``errors_percent`` and the package version."""
     from bench.cli import package_version
 
-    return {**result.to_dict(), "iterations": result.n_iterations, "errors_percent": result.errors_percent(),
-            "package_version": package_version()}
+    return {
+        **result.to_dict(),
+        "iterations": result.n_iterations,
+        "errors_percent": result.errors_percent(),
+        "package_version": package_version(),
+    }
 
 
 def main(args) -> int:
@@ -88,16 +158,27 @@ def main(args) -> int:
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
-    spec = Identification(case.name, args.solver, mesh=args.mesh, tier=args.tier, data=args.data,
-                          treatment=args.correction, hifi_mesh=args.hifi_mesh,
-                          plate_margin_mm=args.plate_margin_mm, budget=args.budget, seed=args.seed,
-                          start=args.start, options=parse_options(args.option))
+    spec = Identification(
+        case.name,
+        args.solver,
+        mesh=args.mesh,
+        tier=args.tier,
+        data=args.data,
+        treatment=args.correction,
+        hifi_mesh=args.hifi_mesh,
+        plate_margin_mm=args.plate_margin_mm,
+        budget=args.budget,
+        seed=args.seed,
+        start=args.start,
+        options=parse_options(args.option),
+    )
     from bench.progress import EvaluationProgress, enabled, warn_if_long
 
     if not case.is_analytic:
         warn_if_long(NAME, args.budget, args.mesh, what=f"budget {args.budget}")
-    with EvaluationProgress(total=args.budget, desc=f"{case.name} {args.solver}",
-                            disable=not enabled(args.quiet)) as progress:
+    with EvaluationProgress(
+        total=args.budget, desc=f"{case.name} {args.solver}", disable=not enabled(args.quiet)
+    ) as progress:
         result = identify(spec, observers=[progress])
     print(format_identification(case, result))
     if args.json:

@@ -1,33 +1,69 @@
 """``femubench model-error CASE``: the parameter bias of the discretisation error and what each
 model-error treatment buys, at what cost (see bench/studies/model_error.py)."""
+
 from __future__ import annotations
 
 NAME = "model-error"
-HELP = ("model-error study of FE cases: LM errors and the linearised perfect-optimiser bias for inverse "
-        "meshes x treatments (none, one-point, iterated, bae) x plate margins, with their costs")
+HELP = (
+    "model-error study of FE cases: LM errors and the linearised perfect-optimiser bias for "
+    "inverse meshes x treatments (none, one-point, iterated, bae) x plate margins, with their costs"
+)
 
 
 def add_arguments(p) -> None:
-    from bench.commands._args import (add_cluster_arguments, add_quiet_argument, comma_list, mesh_spec,
-                                      nonneg_float, output_dir, positive_int)
+    from bench.commands._args import (
+        add_cluster_arguments,
+        add_quiet_argument,
+        comma_list,
+        mesh_spec,
+        nonneg_float,
+        output_dir,
+        positive_int,
+    )
 
     p.add_argument("cases", nargs="+", metavar="CASE", help="FE case name(s), or all")
-    p.add_argument("--meshes", type=comma_list(mesh_spec, what="mesh"), default=("coarse",),
-                   help="inverse meshes, comma-separated (default coarse)")
-    p.add_argument("--treatments", type=comma_list(_treatment, what="treatment"),
-                   default=("none", "one-point", "iterated", "bae"),
-                   help="treatments, comma-separated (default none,one-point,iterated,bae)")
-    p.add_argument("--margins", type=comma_list(nonneg_float, what="margin"), default=(0.0, 30.0),
-                   help="plate margins of the measurement region, mm, comma-separated (default 0,30)")
-    p.add_argument("--dic", action="store_true", help="add one row with DIC-route data (images correlated back)")
-    p.add_argument("--budget", type=positive_int, default=200, help="LM evaluations per row (default 200)")
-    p.add_argument("--out", metavar="DIR", type=output_dir,
-                   help="output directory (default results/studies/model_error/<case>; with several cases DIR/<case>)")
-    add_cluster_arguments(p, default_workers=1, workers_help="Dask worker processes (default 1: in-process)")
+    p.add_argument(
+        "--meshes",
+        type=comma_list(mesh_spec, what="mesh"),
+        default=("coarse",),
+        help="inverse meshes, comma-separated (default coarse)",
+    )
+    p.add_argument(
+        "--treatments",
+        type=comma_list(_treatment, what="treatment"),
+        default=("none", "one-point", "iterated", "bae"),
+        help="treatments, comma-separated (default none,one-point,iterated,bae)",
+    )
+    p.add_argument(
+        "--margins",
+        type=comma_list(nonneg_float, what="margin"),
+        default=(0.0, 30.0),
+        help="plate margins of the measurement region, mm, comma-separated (default 0,30)",
+    )
+    p.add_argument(
+        "--dic",
+        action="store_true",
+        help="add one row with DIC-route data (images correlated back)",
+    )
+    p.add_argument(
+        "--budget", type=positive_int, default=200, help="LM evaluations per row (default 200)"
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        type=output_dir,
+        help="output directory (default results/studies/model_error/<case>; with several cases "
+        "DIR/<case>)",
+    )
+    add_cluster_arguments(
+        p, default_workers=1, workers_help="Dask worker processes (default 1: in-process)"
+    )
     add_quiet_argument(p)
     figures = p.add_mutually_exclusive_group()
     figures.add_argument("--no-figures", action="store_true", help="write the JSON/CSV files only")
-    figures.add_argument("--render", action="store_true", help="compute nothing: re-draw from the output folder")
+    figures.add_argument(
+        "--render", action="store_true", help="compute nothing: re-draw from the output folder"
+    )
 
 
 def _treatment(text: str) -> str:
@@ -51,7 +87,10 @@ def main(args) -> int:
     analytic = [c for c in cases if get_case(c).is_analytic]
     if analytic:
         raise ValueError(f"case {analytic[0]}: the model-error study needs an FE case")
-    outs = {name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name for name in cases}
+    outs = {
+        name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name
+        for name in cases
+    }
     if args.render:
         for name in cases:
             print(f"wrote {render_model_error(existing_dir('model_error', name, outs[name]))}")
@@ -60,14 +99,26 @@ def main(args) -> int:
     def report(cfg, row):
         if not args.quiet:
             errs = ", ".join(f"{n} {v:+.1f}" for n, v in row["lm_error_percent"].items())
-            print(f"  {row['case']} {cfg.mesh} {cfg.treatment} margin {cfg.plate_margin_mm:g} {cfg.route}: "
-                  f"max |error| {row['max_abs_error_percent']:.2f} % ({errs}); "
-                  f"{row['total_forward_equivalents']:.0f} forward-equivalents", flush=True)
+            print(
+                f"  {row['case']} {cfg.mesh} {cfg.treatment} margin {cfg.plate_margin_mm:g} "
+                f"{cfg.route}: max |error| {row['max_abs_error_percent']:.2f} % ({errs}); "
+                f"{row['total_forward_equivalents']:.0f} forward-equivalents",
+                flush=True,
+            )
 
     with mapper(args.workers, args.scheduler) as m:
         for name in cases:
-            run = run_model_error(name, meshes=args.meshes, treatments=args.treatments, margins=args.margins,
-                                  dic=args.dic, budget=args.budget, mapper=m, out=outs[name], progress=report)
+            run = run_model_error(
+                name,
+                meshes=args.meshes,
+                treatments=args.treatments,
+                margins=args.margins,
+                dic=args.dic,
+                budget=args.budget,
+                mapper=m,
+                out=outs[name],
+                progress=report,
+            )
             if not args.no_figures:
                 print(f"wrote {render_model_error(run.dir)}")
             print(f"{name}: {len(run.rows)} rows in {run.dir}")

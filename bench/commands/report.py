@@ -1,4 +1,5 @@
 """``femubench report DIR``: tables and figures of a results directory."""
+
 from __future__ import annotations
 
 NAME = "report"
@@ -11,11 +12,20 @@ def add_arguments(parser) -> None:
     from bench.commands._args import float_in
 
     parser.add_argument("dir", metavar="DIR", help="results directory written by 'femubench run'")
-    parser.add_argument("--format", default="md,csv,tex", metavar="LIST",
-                        help="comma-separated: md, csv, tex (tables), pdf (figures also as PDF), "
-                             "parquet (the tidy DataFrames); default md,csv,tex")
-    parser.add_argument("--tol", type=float_in(0.0, low_open=True, unit="%"), default=1.0, metavar="PERCENT",
-                        help="a run succeeds when every |parameter error| <= PERCENT, > 0 (default 1)")
+    parser.add_argument(
+        "--format",
+        default="md,csv,tex",
+        metavar="LIST",
+        help="comma-separated: md, csv, tex (tables), pdf (figures also as PDF), "
+        "parquet (the tidy DataFrames); default md,csv,tex",
+    )
+    parser.add_argument(
+        "--tol",
+        type=float_in(0.0, low_open=True, unit="%"),
+        default=1.0,
+        metavar="PERCENT",
+        help="a run succeeds when every |parameter error| <= PERCENT, > 0 (default 1)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -26,8 +36,10 @@ def main(args) -> int:
     formats = [f.strip().lower() for f in args.format.split(",") if f.strip()]
     bad = [f for f in formats if f not in FORMATS]
     if bad or not formats:
-        raise ValueError(f"--format {args.format!r}: unknown format(s) {', '.join(bad) or '(none given)'}; "
-                         f"allowed: a comma-separated list of {', '.join(FORMATS)}")
+        raise ValueError(
+            f"--format {args.format!r}: unknown format(s) {', '.join(bad) or '(none given)'}; "
+            f"allowed: a comma-separated list of {', '.join(FORMATS)}"
+        )
     if not Path(args.dir).is_dir():
         what = "is a file, not a directory" if Path(args.dir).exists() else "does not exist"
         raise FileNotFoundError(f"results directory {args.dir!r} {what}")
@@ -35,6 +47,8 @@ def main(args) -> int:
     from bench.progress import enabled
     from bench.report import write_report
 
-    out = write_report(args.dir, formats, tol=args.tol, figures=not args.no_figures, progress=enabled(args.quiet))
+    out = write_report(
+        args.dir, formats, tol=args.tol, figures=not args.no_figures, progress=enabled(args.quiet)
+    )
     print(f"report: {out}")
     return 0

@@ -1,4 +1,5 @@
 """``femubench run SUITE``: run a suite of identifications, resumably, in parallel."""
+
 from __future__ import annotations
 
 NAME = "run"
@@ -9,16 +10,32 @@ def add_arguments(parser) -> None:
     from bench.commands._args import add_cluster_arguments, output_dir
 
     parser.add_argument("suite", metavar="SUITE", help="suite file, e.g. suites/default.toml")
-    parser.add_argument("--out", metavar="DIR", default=None, type=output_dir,
-                        help="results directory (default: results/<suite name>)")
+    parser.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        type=output_dir,
+        help="results directory (default: results/<suite name>)",
+    )
     add_cluster_arguments(parser)
-    parser.add_argument("--force", action="store_true", help="rerun runs that already have a record")
-    parser.add_argument("--retry-failed", action="store_true",
-                        help="also rerun the runs whose record is a crash (an exception)")
-    parser.add_argument("--fan-out", action="store_true",
-                        help="let each run send its Jacobian columns / populations to the cluster too")
-    parser.add_argument("--dry-run", action="store_true",
-                        help="validate the suite and print what would run, without running anything")
+    parser.add_argument(
+        "--force", action="store_true", help="rerun runs that already have a record"
+    )
+    parser.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="also rerun the runs whose record is a crash (an exception)",
+    )
+    parser.add_argument(
+        "--fan-out",
+        action="store_true",
+        help="let each run send its Jacobian columns / populations to the cluster too",
+    )
+    parser.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="validate the suite and print what would run, without running anything",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -35,26 +52,46 @@ def main(args) -> int:
     out = Path(args.out) if args.out else Path("results") / suite.name
     runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
     fe_evals = sum(r.budget for r in pending if not get_case(r.case).is_analytic)
-    warn_if_long(NAME, fe_evals, suite.mesh, workers=args.workers, what=f"{len(pending)} pending runs")
+    warn_if_long(
+        NAME, fe_evals, suite.mesh, workers=args.workers, what=f"{len(pending)} pending runs"
+    )
 
     if args.dry_run:
-        print(f"suite {suite.name!r}: {len(suite.cases)} cases x {len(suite.methods)} methods x "
-              f"{len(suite.budgets)} budgets x {len(suite.seeds)} seeds x starts {list(suite.starts)}"
-              + (f" ({suite.random_starts} random per seed)" if "random" in suite.starts else ""))
-        print(f"{len(runs)} runs, {len(runs) - len(pending)} with a record in {out}, {len(pending)} to run; "
-              f"at most {sum(r.budget for r in pending)} forward evaluations")
+        print(
+            f"suite {suite.name!r}: {len(suite.cases)} cases x {len(suite.methods)} methods x "
+            f"{len(suite.budgets)} budgets x {len(suite.seeds)} seeds x starts {list(suite.starts)}"
+            + (f" ({suite.random_starts} random per seed)" if "random" in suite.starts else "")
+        )
+        print(
+            f"{len(runs)} runs, {len(runs) - len(pending)} with a record in {out}, {len(pending)} "
+            f"to run; at most {sum(r.budget for r in pending)} forward evaluations"
+        )
         return 0
 
     from bench.runner import run_suite
 
     try:
-        summary = run_suite(suite, out, workers=args.workers, scheduler=args.scheduler, force=args.force,
-                            retry_failed=args.retry_failed, progress=enabled(args.quiet), fan_out=args.fan_out)
+        summary = run_suite(
+            suite,
+            out,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            force=args.force,
+            retry_failed=args.retry_failed,
+            progress=enabled(args.quiet),
+            fan_out=args.fan_out,
+        )
     except KeyboardInterrupt:
-        print("interrupted; finished runs are kept, rerun the same command to resume", file=sys.stderr)
+        print(
+            "interrupted; finished runs are kept, rerun the same command to resume", file=sys.stderr
+        )
         return 130
     print(summary)
     if summary.crashed:
-        print(f"{summary.crashed} run(s) crashed (see {summary.log_file}): "
-              + ", ".join(summary.failures[:5]) + (" ..." if summary.crashed > 5 else ""), file=sys.stderr)
+        print(
+            f"{summary.crashed} run(s) crashed (see {summary.log_file}): "
+            + ", ".join(summary.failures[:5])
+            + (" ..." if summary.crashed > 5 else ""),
+            file=sys.stderr,
+        )
     return 0

@@ -1,4 +1,6 @@
-"""``femubench solvers``: every registered optimisation method with its library, family and options."""
+"""``femubench solvers``: every registered optimisation method with its library, family and
+options."""
+
 from __future__ import annotations
 
 NAME = "solvers"
@@ -16,7 +18,10 @@ def format_table(infos, describe: bool = False) -> str:
     lines = [f"{'method':18} {'library':15} {'family':9} {'random':6}  options (default)"]
     for info in infos:
         opts = ", ".join(f"{k}={d!r}" for k, (d, _) in info.options.items())
-        lines.append(f"{info.name:18} {info.library:15} {info.family:9} {'yes' if info.stochastic else 'no':6}  {opts}")
+        lines.append(
+            f"{info.name:18} {info.library:15} {info.family:9} "
+            f"{'yes' if info.stochastic else 'no':6}  {opts}"
+        )
         if describe:
             lines.append(f"    {info.description}")
             lines += [f"    {k:20} {d!r:>14}  {text}" for k, (d, text) in info.options.items()]

@@ -1,13 +1,19 @@
-"""``femubench surrogate CASE``: build, validate and store a POD + RBF/GP surrogate of the FE forward model."""
+"""``femubench surrogate CASE``: build, validate and store a POD + RBF/GP surrogate of the FE
+forward model."""
+
 from __future__ import annotations
 
 NAME = "surrogate"
-HELP = ("build a surrogate of a case's FE forward model (POD of sigma-scaled snapshots + RBF or Gaussian-process "
-        "regression), validate it on fresh hold-out FE runs and store it (npz + JSON with a content hash)")
+HELP = (
+    "build a surrogate of a case's FE forward model (POD of sigma-scaled snapshots + RBF or "
+    "Gaussian-process regression), validate it on fresh hold-out FE runs and store it (npz + JSON "
+    "with a content hash)"
+)
 
 
 def surrogate_root():
-    """Root folder of named surrogates: ``$FEMUBENCH_SURROGATE_DIR``, else ``<results root>/surrogates``."""
+    """Root folder of named surrogates: ``$FEMUBENCH_SURROGATE_DIR``, else
+    ``<results root>/surrogates``."""
     from bench.paths import results_root
     from problems.surrogate.store import default_root
 
@@ -16,30 +22,84 @@ def surrogate_root():
 
 def add_arguments(p) -> None:
     p.add_argument("case", metavar="CASE", help="FE case name (see `femubench cases`)")
-    p.add_argument("--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)")
-    p.add_argument("--data", metavar="FILE", help="data set whose loading, points and sigma are used "
-                                                   "(default: the case's shipped data set)")
-    p.add_argument("--samples", type=int, default=200, metavar="N", help="training design points (default 200)")
-    p.add_argument("--holdout", type=int, default=50, metavar="K",
-                   help="fresh hold-out FE points for the validation (default 50; 0: no validation)")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the designs and the selection (default 0)")
-    p.add_argument("--design", choices=["lhs", "sobol"], default="lhs", help="training design (default lhs)")
-    p.add_argument("--local", type=int, default=0, metavar="N",
-                   help="extra design points near the data set's parameters (default 0)")
-    p.add_argument("--local-scale", type=float, default=0.1, metavar="F",
-                   help="half-width of the local design, fraction of the box width (default 0.1)")
-    p.add_argument("--regression", choices=["auto", "rbf", "gp"], default="auto",
-                   help="regression of the POD coefficients; auto chooses by error on set-aside training points")
-    p.add_argument("--tol-sigma", type=float, default=0.1, metavar="T",
-                   help="POD truncation: RMS projection error per block <= T sigma (default 0.1)")
-    p.add_argument("--batch", type=int, default=16, metavar="B", help="FE runs per mapper call (default 16)")
+    p.add_argument(
+        "--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)"
+    )
+    p.add_argument(
+        "--data",
+        metavar="FILE",
+        help="data set whose loading, points and sigma are used "
+        "(default: the case's shipped data set)",
+    )
+    p.add_argument(
+        "--samples", type=int, default=200, metavar="N", help="training design points (default 200)"
+    )
+    p.add_argument(
+        "--holdout",
+        type=int,
+        default=50,
+        metavar="K",
+        help="fresh hold-out FE points for the validation (default 50; 0: no validation)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="seed of the designs and the selection (default 0)",
+    )
+    p.add_argument(
+        "--design", choices=["lhs", "sobol"], default="lhs", help="training design (default lhs)"
+    )
+    p.add_argument(
+        "--local",
+        type=int,
+        default=0,
+        metavar="N",
+        help="extra design points near the data set's parameters (default 0)",
+    )
+    p.add_argument(
+        "--local-scale",
+        type=float,
+        default=0.1,
+        metavar="F",
+        help="half-width of the local design, fraction of the box width (default 0.1)",
+    )
+    p.add_argument(
+        "--regression",
+        choices=["auto", "rbf", "gp"],
+        default="auto",
+        help="regression of the POD coefficients; auto chooses by error on set-aside training "
+        "points",
+    )
+    p.add_argument(
+        "--tol-sigma",
+        type=float,
+        default=0.1,
+        metavar="T",
+        help="POD truncation: RMS projection error per block <= T sigma (default 0.1)",
+    )
+    p.add_argument(
+        "--batch", type=int, default=16, metavar="B", help="FE runs per mapper call (default 16)"
+    )
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="local Dask worker processes (default: one per core); 1 runs in-process")
+    where.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="local Dask worker processes (default: one per core); 1 runs in-process",
+    )
     where.add_argument("--scheduler", metavar="ADDRESS", help="submit to an existing Dask cluster")
-    p.add_argument("--out", metavar="DIR",
-                   help="output folder (default <results root>/surrogates/<case>__<mesh>, or $FEMUBENCH_SURROGATE_DIR)")
-    p.add_argument("--json", metavar="FILE", help="write the summary (hold-out errors, cost, hash) as JSON")
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        help="output folder (default <results root>/surrogates/<case>__<mesh>, or "
+        "$FEMUBENCH_SURROGATE_DIR)",
+    )
+    p.add_argument(
+        "--json", metavar="FILE", help="write the summary (hold-out errors, cost, hash) as JSON"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -49,16 +109,31 @@ def summary(sur, folder, size_bytes: int) -> dict:
     val = info.get("validation") or {}
     train = info["training"]
     return {
-        "case": info["description"].get("case"), "mesh": info["description"].get("mesh"),
-        "path": str(folder), "size_bytes": size_bytes, "hash": sur.hash, "training_hash": info["training_hash"],
-        "n_train": train["n_runs"], "n_train_ok": train["n_ok"], "n_failed": train["n_failed"],
-        "n_infeasible": train["n_infeasible"], "training_fe_wall_s": train["fe_wall_s"],
-        "n_modes": sur.n_modes, "regression": sur.kind, "regression_settings": sur.regression.settings()
-        if sur.kind == "rbf" else {"kind": "gp", "n_components": len(sur.regression.components)},
-        "pod": info["pod"], "selection_scores": info["selection"].get("scores"),
-        "holdout": val.get("blocks", {}), "n_holdout": val.get("n_points", 0),
-        "surrogate_eval_s": val.get("surrogate_eval_s"), "surrogate_jacobian_s": val.get("surrogate_jacobian_s"),
-        "fe_eval_s": val.get("fe_eval_s"), "speed_ratio": val.get("speed_ratio"), "cost": info["cost"],
+        "case": info["description"].get("case"),
+        "mesh": info["description"].get("mesh"),
+        "path": str(folder),
+        "size_bytes": size_bytes,
+        "hash": sur.hash,
+        "training_hash": info["training_hash"],
+        "n_train": train["n_runs"],
+        "n_train_ok": train["n_ok"],
+        "n_failed": train["n_failed"],
+        "n_infeasible": train["n_infeasible"],
+        "training_fe_wall_s": train["fe_wall_s"],
+        "n_modes": sur.n_modes,
+        "regression": sur.kind,
+        "regression_settings": sur.regression.settings()
+        if sur.kind == "rbf"
+        else {"kind": "gp", "n_components": len(sur.regression.components)},
+        "pod": info["pod"],
+        "selection_scores": info["selection"].get("scores"),
+        "holdout": val.get("blocks", {}),
+        "n_holdout": val.get("n_points", 0),
+        "surrogate_eval_s": val.get("surrogate_eval_s"),
+        "surrogate_jacobian_s": val.get("surrogate_jacobian_s"),
+        "fe_eval_s": val.get("fe_eval_s"),
+        "speed_ratio": val.get("speed_ratio"),
+        "cost": info["cost"],
     }
 
 
@@ -89,30 +164,58 @@ def main(args) -> int:
         raise ValueError(f"--batch {args.batch} is out of range: must be >= 1")
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    settings = SurrogateSettings(n_train=args.samples, n_holdout=args.holdout, seed=args.seed, design=args.design,
-                                 n_local=args.local, local_scale=args.local_scale, tol_sigma=args.tol_sigma,
-                                 regression=args.regression, batch=args.batch)
+    settings = SurrogateSettings(
+        n_train=args.samples,
+        n_holdout=args.holdout,
+        seed=args.seed,
+        design=args.design,
+        n_local=args.local,
+        local_scale=args.local_scale,
+        tol_sigma=args.tol_sigma,
+        regression=args.regression,
+        batch=args.batch,
+    )
     folder = Path(args.out) if args.out else surrogate_root() / default_name(case.name, args.mesh)
-    print(f"surrogate of {case.name} on mesh {args.mesh}: {args.samples} training + {args.local} local + "
-          f"{args.holdout} hold-out FE runs planned", flush=True)
+    print(
+        f"surrogate of {case.name} on mesh {args.mesh}: {args.samples} training + {args.local} "
+        f"local + {args.holdout} hold-out FE runs planned",
+        flush=True,
+    )
     with mapper(args.workers, args.scheduler) as m:
-        sur = build_case_surrogate(case, mesh=args.mesh, data=args.data, settings=settings, mapper=m,
-                                   progress=not args.quiet)
+        sur = build_case_surrogate(
+            case,
+            mesh=args.mesh,
+            data=args.data,
+            settings=settings,
+            mapper=m,
+            progress=not args.quiet,
+        )
     save(sur, folder)
     size = sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
     info = sur.info
     t = info["training"]
-    print(f"training: {t['n_runs']} FE runs ({t['n_failed']} failed, {t['n_infeasible']} infeasible points skipped), "
-          f"{t['fe_wall_s']:.1f} s FE time, {t['elapsed_s']:.1f} s elapsed")
+    print(
+        f"training: {t['n_runs']} FE runs ({t['n_failed']} failed, {t['n_infeasible']} infeasible "
+        f"points skipped), {t['fe_wall_s']:.1f} s FE time, {t['elapsed_s']:.1f} s elapsed"
+    )
     pod = info["pod"]
     rms = ", ".join(f"{k} {v:.3g}" for k, v in pod["projection_rms_sigma"].items())
-    print(f"POD: {sur.n_modes} modes of {pod['n_snapshots']} snapshots (tol {pod['tol_sigma']:g} sigma; "
-          f"training projection RMS/sigma: {rms})")
+    print(
+        f"POD: {sur.n_modes} modes of {pod['n_snapshots']} snapshots (tol {pod['tol_sigma']:g} "
+        f"sigma; training projection RMS/sigma: {rms})"
+    )
     scores = info["selection"].get("scores")
     if scores:
-        print("selection on set-aside training points (RMS/sigma per block): " + "; ".join(
-            f"{k}: " + ", ".join(f"{b} {v:.3g}" for b, v in s["rms_sigma"].items()) for k, s in scores.items()))
-    print(f"regression: {sur.kind} {sur.regression.settings() if sur.kind == 'rbf' else ''}".rstrip())
+        print(
+            "selection on set-aside training points (RMS/sigma per block): "
+            + "; ".join(
+                f"{k}: " + ", ".join(f"{b} {v:.3g}" for b, v in s["rms_sigma"].items())
+                for k, s in scores.items()
+            )
+        )
+    print(
+        f"regression: {sur.kind} {sur.regression.settings() if sur.kind == 'rbf' else ''}".rstrip()
+    )
     if "validation" in info:
         print(format_summary(info["validation"]))
     print(f"total build time {info['cost']['build_wall_s']:.1f} s")

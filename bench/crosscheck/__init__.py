@@ -3,8 +3,10 @@
 
 Modules, one job each:
 
-* :mod:`~bench.crosscheck.mapping` — the parameter mapping and OpenSees's model re-derived in numpy (pure);
-* :mod:`~bench.crosscheck.reference` — femubench's answers, the uniaxial closed form, difference measures;
+* :mod:`~bench.crosscheck.mapping` — the parameter mapping and OpenSees's model re-derived in numpy
+  (pure);
+* :mod:`~bench.crosscheck.reference` — femubench's answers, the uniaxial closed form, difference
+  measures;
 * :mod:`~bench.crosscheck.loader` — importing openseespy (the optional ``crosscheck`` extra);
 * :mod:`~bench.crosscheck.opensees_box` — the plate test in OpenSees and its solution strategies;
 * :mod:`~bench.crosscheck.single_element`, :mod:`~bench.crosscheck.cube`,

@@ -1,11 +1,13 @@
 """Figures of the OpenSees cross-check, drawn from ``opensees_dp.json`` alone (style:
-:mod:`bench.plotting`; one colour per dilatancy angle, and each model also differs by line or marker).
+:mod:`bench.plotting`; one colour per dilatancy angle, and each model also differs by line or
+marker).
 
 * ``single_element.png``: axial stress (MPa) and lateral strain (1e-3) against the axial shortening
   (1e-3) of the single element: closed form, femubench FE, femubench material point, OpenSees.
 * ``cube.png`` (when the cube ran): plate force (kN) against plate displacement (mm); u_h (mm)
   along the front face at y = 70 mm; Newton residuals of the hardest step against the iteration.
 """
+
 from __future__ import annotations
 
 import json
@@ -44,14 +46,37 @@ def single_element_figure(single: list[dict], path) -> Path:
         lab = rf"$\psi$ = {se['psi']:g}°"
         for ax, key in zip(axes, ("stress", "lateral")):
             scale = 1.0 if key == "stress" else 1e3
-            ax.plot(e0, scale * np.r_[0.0, _arr(se["closed_form"][key])], "-", color=c, lw=3, alpha=0.3,
-                    label=f"closed form, {lab}")
-            ax.plot(e0, scale * np.r_[0.0, _arr(se["femubench"][key])], "-", color=c, lw=1.2,
-                    label=f"femubench FE 1x1x1, {lab}")
-            ax.plot(e0, scale * np.r_[0.0, _arr(se["material_point"][key])], ":", color="black", lw=1)
+            ax.plot(
+                e0,
+                scale * np.r_[0.0, _arr(se["closed_form"][key])],
+                "-",
+                color=c,
+                lw=3,
+                alpha=0.3,
+                label=f"closed form, {lab}",
+            )
+            ax.plot(
+                e0,
+                scale * np.r_[0.0, _arr(se["femubench"][key])],
+                "-",
+                color=c,
+                lw=1.2,
+                label=f"femubench FE 1x1x1, {lab}",
+            )
+            ax.plot(
+                e0, scale * np.r_[0.0, _arr(se["material_point"][key])], ":", color="black", lw=1
+            )
             for mk, (el, o) in zip(("o", "x"), se["opensees"].items()):
                 y = _arr(o[key])
-                ax.plot(e[:y.size][::3], scale * y[::3], mk, color=c, ms=5, mfc="none", label=f"OpenSees {el}, {lab}")
+                ax.plot(
+                    e[: y.size][::3],
+                    scale * y[::3],
+                    mk,
+                    color=c,
+                    ms=5,
+                    mfc="none",
+                    label=f"OpenSees {el}, {lab}",
+                )
     for ax in axes:
         ax.set_xlabel("axial shortening (1e-3)")
     axes[0].set_ylabel("axial stress, compression (MPa)")
@@ -70,27 +95,62 @@ def cube_figure(cubes: list[dict], path) -> Path:
     for c, cb in zip(COLOURS, cubes):
         lab = rf"$\psi$ = {cb['psi']:g}°"
         ours = cb["femubench"]
-        axes[0].plot(np.r_[0, _arr(ours["snapshots_mm"])], np.r_[0, _arr(ours["reaction_kN"])], "-", color=c,
-                     label=f"femubench, {lab}")
+        axes[0].plot(
+            np.r_[0, _arr(ours["snapshots_mm"])],
+            np.r_[0, _arr(ours["reaction_kN"])],
+            "-",
+            color=c,
+            label=f"femubench, {lab}",
+        )
         for a in cb["opensees"]:
             if len(a["snapshots_mm"]):
-                axes[0].plot(_arr(a["snapshots_mm"]), _arr(a["reaction_kN"]), "o" if a["converged"] else "D",
-                             color=c, mfc="none", ms=7 if a["converged"] else 5,
-                             label=f"OpenSees [{a['strategy']}]{'' if a['converged'] else ' (failed after)'}, {lab}")
+                axes[0].plot(
+                    _arr(a["snapshots_mm"]),
+                    _arr(a["reaction_kN"]),
+                    "o" if a["converged"] else "D",
+                    color=c,
+                    mfc="none",
+                    ms=7 if a["converged"] else 5,
+                    label="OpenSees "
+                    f"[{a['strategy']}]{'' if a['converged'] else ' (failed after)'}, {lab}",
+                )
         pd = cb.get("plot") or {}
         if not pd:
             continue
-        axes[1].plot(_arr(pd["u_h_femubench"]), _arr(pd["z_mm"]), "-", color=c, label=f"femubench, {lab}")
-        axes[1].plot(_arr(pd["u_h_opensees"]), _arr(pd["z_mm"]), "o", color=c, mfc="none", label=f"OpenSees, {lab}")
-        axes[1].set_title(f"front face y = 70 mm at {pd['at_mm']:.3g} mm (both at OpenSees's converged step size)",
-                          fontsize=8)
+        axes[1].plot(
+            _arr(pd["u_h_femubench"]), _arr(pd["z_mm"]), "-", color=c, label=f"femubench, {lab}"
+        )
+        axes[1].plot(
+            _arr(pd["u_h_opensees"]),
+            _arr(pd["z_mm"]),
+            "o",
+            color=c,
+            mfc="none",
+            label=f"OpenSees, {lab}",
+        )
+        axes[1].set_title(
+            f"front face y = 70 mm at {pd['at_mm']:.3g} mm (both at OpenSees's converged step "
+            "size)",
+            fontsize=8,
+        )
         nrm, hist = _arr(pd["residuals_opensees"]), _arr(pd["residuals_femubench"])
         if nrm.size:
-            axes[2].plot(np.arange(1, nrm.size + 1), nrm, "o-", color=c, mfc="none",
-                         label=f"OpenSees [{pd['strategy']}], step {pd['step']}, {lab}")
+            axes[2].plot(
+                np.arange(1, nrm.size + 1),
+                nrm,
+                "o-",
+                color=c,
+                mfc="none",
+                label=f"OpenSees [{pd['strategy']}], step {pd['step']}, {lab}",
+            )
         if hist.size:
-            axes[2].plot(np.arange(1, hist.size + 1), hist, "s-", color=c,
-                         label=f"femubench, step {pd['step']}, {lab}")
+            axes[2].plot(
+                np.arange(1, hist.size + 1),
+                hist,
+                "s-",
+                color=c,
+                label=f"femubench, step {pd['step']}, {lab}",
+            )
     axes[0].set_xlabel("plate displacement (mm)")
     axes[0].set_ylabel("plate force, whole cube (kN)")
     axes[0].set_title("quarter cube, friction plates")

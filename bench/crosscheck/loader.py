@@ -4,6 +4,7 @@ The Linux wheel of openseespy 3.7.1.2 does not import as installed: its bundled 
 needs the bundled ``libblas.so.3`` and ``libgfortran.so.4``, which the dynamic loader does not find
 by itself (RUNPATH is not transitive). :func:`load_opensees` preloads them globally first.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -28,7 +29,8 @@ def installed() -> bool:
 
 
 def load_opensees():
-    """``openseespy.opensees``, imported once (bundled libraries preloaded, see the module docstring).
+    """``openseespy.opensees``, imported once (bundled libraries preloaded, see the module
+    docstring).
 
     Raises :class:`OpenSeesUnavailable` with a one-line reason and the install command."""
     global _OPS
@@ -39,7 +41,13 @@ def load_opensees():
     spec = importlib.util.find_spec("openseespylinux")
     if spec is not None and spec.origin:
         libdir = Path(spec.origin).parent / "lib"
-        for name in ("libquadmath.so.0", "libgfortran.so.4", "libgomp.so.1", "libblas.so.3", "liblapack.so.3"):
+        for name in (
+            "libquadmath.so.0",
+            "libgfortran.so.4",
+            "libgomp.so.1",
+            "libblas.so.3",
+            "liblapack.so.3",
+        ):
             if (libdir / name).exists():
                 with contextlib.suppress(OSError):
                     ctypes.CDLL(str(libdir / name), mode=ctypes.RTLD_GLOBAL)
@@ -47,8 +55,10 @@ def load_opensees():
         import openseespy.opensees as ops
     except Exception as exc:  # noqa: BLE001 - any import failure is reported the same way
         reason = " ".join(str(exc).split())
-        raise OpenSeesUnavailable(f"openseespy is installed but does not import ({reason}); "
-                                  f"reinstall it with {INSTALL_HINT}") from exc
+        raise OpenSeesUnavailable(
+            f"openseespy is installed but does not import ({reason}); "
+            f"reinstall it with {INSTALL_HINT}"
+        ) from exc
     _OPS = ops
     return ops
 
@@ -65,7 +75,8 @@ def openseespy_version() -> str:
 
 @contextlib.contextmanager
 def captured_output(path: Path):
-    """Redirect the process's stdout and stderr (file descriptors, so C++ output too) to ``path``."""
+    """Redirect the process's stdout and stderr (file descriptors, so C++ output too) to
+    ``path``."""
     sys.stdout.flush()
     sys.stderr.flush()
     saved = os.dup(1), os.dup(2)

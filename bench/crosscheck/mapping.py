@@ -14,14 +14,17 @@ q = sqrt(3 J2) = sqrt(3/2) ||s||, angles in degrees)::
 (the last from plastic-work equivalence, :func:`problems.materials.hardening.linear_eqps_constant`;
 in uniaxial compression it makes ``eqps = |eps_pl_11|``).
 
-OpenSees ``nDMaterial DruckerPrager tag K G sigmaY rho rhoBar Kinf Ko delta1 delta2 H theta density``
+OpenSees
+``nDMaterial DruckerPrager tag K G sigmaY rho rhoBar Kinf Ko delta1 delta2 H theta density``
 (``SRC/material/nD/DruckerPrager.cpp``, I1 = tr(sigma) tension positive, ||.|| the Frobenius norm
 of the *tensor*)::
 
     f1 = ||s - beta_kin|| + rho I1 - sqrt(2/3) Kiso(alpha1),
-    Kiso(a) = sigmaY + theta H a + (Kinf - Ko)(1 - exp(-delta1 a)),   kinematic modulus (1 - theta) H
+    Kiso(a) = sigmaY + theta H a + (Kinf - Ko)(1 - exp(-delta1 a)),
+        kinematic modulus (1 - theta) H
     f2 = I1 - T(alpha2),  T = To exp(-delta2 alpha2),  To = sqrt(2/3) sigmaY / rho  (tension cutoff)
-    d eps_pl = gamma (n + rhoBar 1),  n = s/||s||,  d alpha1 = sqrt(2/3) gamma,  d alpha2 = rhoBar gamma
+    d eps_pl = gamma (n + rhoBar 1),  n = s/||s||,
+        d alpha1 = sqrt(2/3) gamma,  d alpha2 = rhoBar gamma
 
 1. Yield surface. With I1 = -3p and q = sqrt(3/2) ||s||, ``F / sqrt(3/2) = ||s|| + sqrt(2/3)
    tan(beta)/3 I1 - sqrt(2/3) d``: the same cone as f1 (beta_kin = 0) iff
@@ -53,6 +56,7 @@ of the *tensor*)::
 Reference values: E = 30 000 MPa, nu = 0.2, beta = 35 deg, psi = 35 deg (associated) and
 15 deg (non-associated), sigma0 = 20 MPa, H = 1 500 MPa (:data:`REFERENCE`).
 """
+
 from __future__ import annotations
 
 import math
@@ -64,7 +68,20 @@ REFERENCE = {"E": 30_000.0, "nu": 0.2, "beta": 35.0, "psi": 35.0, "sigma0": 20.0
 #: femubench parameters the mapping takes, in :func:`opensees_parameters` order
 MAPPED = ("E", "nu", "beta", "psi", "sigma0", "H")
 #: OpenSees ``nDMaterial DruckerPrager`` arguments after the tag, in command order
-OPENSEES_ARGS = ("K", "G", "sigmaY", "rho", "rhoBar", "Kinf", "Ko", "delta1", "delta2", "H", "theta", "density")
+OPENSEES_ARGS = (
+    "K",
+    "G",
+    "sigmaY",
+    "rho",
+    "rhoBar",
+    "Kinf",
+    "Ko",
+    "delta1",
+    "delta2",
+    "H",
+    "theta",
+    "density",
+)
 _SQ23 = math.sqrt(2.0 / 3.0)
 
 
@@ -72,7 +89,9 @@ def _tan(deg: float) -> float:
     return math.tan(math.radians(deg))
 
 
-def opensees_parameters(E: float, nu: float, beta: float, psi: float, sigma0: float, H: float) -> dict:
+def opensees_parameters(
+    E: float, nu: float, beta: float, psi: float, sigma0: float, H: float
+) -> dict:
     """OpenSees ``nDMaterial DruckerPrager`` arguments equivalent to femubench's linear form with
     K = 1 and compression hardening (see the module docstring). Angles in degrees, MPa.
 
@@ -84,8 +103,10 @@ def opensees_parameters(E: float, nu: float, beta: float, psi: float, sigma0: fl
     if not (0.0 < beta < math.degrees(math.atan(3.0))):
         raise ValueError(f"beta = {beta!r} deg: need 0 < beta < atan(3) = 71.57 deg")
     if not (0.0 <= psi <= beta):
-        raise ValueError(f"psi = {psi!r} deg: OpenSees's DruckerPrager needs 0 <= rhoBar <= rho, i.e. "
-                         f"0 <= psi <= beta = {beta!r} deg")
+        raise ValueError(
+            f"psi = {psi!r} deg: OpenSees's DruckerPrager needs 0 <= rhoBar <= rho, i.e. "
+            f"0 <= psi <= beta = {beta!r} deg"
+        )
     if not (sigma0 > 0 and H >= 0):
         raise ValueError(f"sigma0 = {sigma0!r}, H = {H!r}: need sigma0 > 0 and H >= 0 MPa")
     tb, tp = _tan(beta), _tan(psi)
@@ -106,12 +127,14 @@ def opensees_parameters(E: float, nu: float, beta: float, psi: float, sigma0: fl
 
 
 def eqps_from_alpha(alpha, psi: float):
-    """femubench's eqps from OpenSees's alpha1 (= our plastic multiplier): (1 - tan(psi)/3) alpha1."""
+    """femubench's eqps from OpenSees's alpha1 (= our plastic multiplier): (1 - tan(psi)/3)
+    alpha1."""
     return (1.0 - _tan(psi) / 3.0) * np.asarray(alpha, float)
 
 
 def tension_cutoff_I1(osp: dict) -> float:
-    """I1 (MPa, tension positive) of OpenSees's fixed tension cutoff plane, sqrt(2/3) sigmaY / rho."""
+    """I1 (MPa, tension positive) of OpenSees's fixed tension cutoff plane, sqrt(2/3)
+    sigmaY / rho."""
     return _SQ23 * osp["sigmaY"] / osp["rho"] if osp["rho"] > 0 else 1e10
 
 
@@ -123,8 +146,11 @@ def opensees_yield_value(stress, alpha, osp: dict) -> np.ndarray:
     dev = s[:, :3] - I1[:, None] / 3.0
     norm = np.sqrt((dev**2).sum(axis=1) + 2.0 * (s[:, 3:] ** 2).sum(axis=1))
     a = np.asarray(alpha, float)
-    kiso = (osp["sigmaY"] + osp["theta"] * osp["H"] * a
-            + (osp["Kinf"] - osp["Ko"]) * (1.0 - np.exp(-osp["delta1"] * a)))
+    kiso = (
+        osp["sigmaY"]
+        + osp["theta"] * osp["H"] * a
+        + (osp["Kinf"] - osp["Ko"]) * (1.0 - np.exp(-osp["delta1"] * a))
+    )
     return norm + osp["rho"] * I1 - _SQ23 * kiso
 
 
@@ -152,7 +178,8 @@ def dp_return(eps, osp: dict, tangent_norm: str = "trial"):
         C = Ce - (2G n + 3K rhoBar 1)(2G n + 3K rho 1)/den - 4 G^2 gamma / ||eta|| (IIdev - n n).
 
     ``tangent_norm = "trial"`` uses ||eta|| = ||s_tr|| (the consistent tangent);
-    ``"returned"`` uses ||s_n+1|| = ||s_tr|| - 2 G gamma, as OpenSees does (docs/crosscheck_opensees.md).
+    ``"returned"`` uses ||s_n+1|| = ||s_tr|| - 2 G gamma, as OpenSees does
+    (docs/crosscheck_opensees.md).
     Returns (stress, tangent) in femubench's Voigt order."""
     K, G, rho, rb = osp["K"], osp["G"], osp["rho"], osp["rhoBar"]
     one = np.array([1.0, 1, 1, 0, 0, 0])
@@ -172,6 +199,9 @@ def dp_return(eps, osp: dict, tangent_norm: str = "trial"):
     gamma = f / den
     sig = sig - 3.0 * K * rb * gamma * one - 2.0 * G * gamma * n
     eta = norm if tangent_norm == "trial" else norm - 2.0 * G * gamma
-    C = (Ce - np.outer(2.0 * G * n + 3.0 * K * rb * one, 2.0 * G * n + 3.0 * K * rho * one) / den
-         - 4.0 * G * G * gamma / eta * (IIdev - np.outer(n, n)))
+    C = (
+        Ce
+        - np.outer(2.0 * G * n + 3.0 * K * rb * one, 2.0 * G * n + 3.0 * K * rho * one) / den
+        - 4.0 * G * G * gamma / eta * (IIdev - np.outer(n, n))
+    )
     return sig, C

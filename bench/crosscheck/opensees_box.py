@@ -3,6 +3,7 @@ femubench mesh, with the solution strategies tried in turn, and a digest of Open
 
 Units: mm, N (OpenSees side), kN (whole-specimen force), MPa.
 """
+
 from __future__ import annotations
 
 import tempfile
@@ -21,8 +22,8 @@ class Strategy:
     """OpenSees solution settings for one attempt."""
 
     name: str
-    substeps: int = 1                                   # analysis steps per snapshot
-    test: tuple = ("NormUnbalance", 1e-4, 25)           # N: ~1e-9 of the plate force
+    substeps: int = 1  # analysis steps per snapshot
+    test: tuple = ("NormUnbalance", 1e-4, 25)  # N: ~1e-9 of the plate force
     algorithm: tuple = ("Newton",)
     system: str = "UmfPack"
     constraints: tuple = ("Transformation",)
@@ -34,7 +35,11 @@ BASELINE = Strategy("Newton, 10 steps, NormUnbalance 1e-4 N")
 CURES = (
     Strategy("Newton, NormDispIncr 1e-10 mm", test=("NormDispIncr", 1e-10, 50)),
     Strategy("KrylovNewton", algorithm=("KrylovNewton",), test=("NormUnbalance", 1e-4, 100)),
-    Strategy("NewtonLineSearch", algorithm=("NewtonLineSearch", "-type", "Bisection"), test=("NormUnbalance", 1e-4, 100)),
+    Strategy(
+        "NewtonLineSearch",
+        algorithm=("NewtonLineSearch", "-type", "Bisection"),
+        test=("NormUnbalance", 1e-4, 100),
+    ),
     Strategy("ModifiedNewton", algorithm=("ModifiedNewton",), test=("NormUnbalance", 1e-4, 200)),
     Strategy("Newton, Penalty constraint handler", constraints=("Penalty", 1e12, 1e12)),
     Strategy("Newton, 2x smaller steps", substeps=2),
@@ -45,29 +50,42 @@ CURES = (
 
 @dataclass
 class OpenSeesRun:
-    """One OpenSees attempt at the plate test: the converged snapshots and how the iteration went."""
+    """One OpenSees attempt at the plate test: the converged snapshots and how the iteration
+    went."""
 
     strategy: str
     element: str
     converged: bool
     snapshots_mm: np.ndarray
-    reaction_kN: np.ndarray          # whole-specimen force for the quarter cube (x4), kN, compression > 0
-    force_N: np.ndarray              # force on the modelled body, N
-    displacements: np.ndarray        # (N, n_nodes, 3) mm
-    stress: np.ndarray               # (N, n_elements, 6) element mean, femubench Voigt order
+    # whole-specimen force for the quarter cube (x4), kN, compression > 0
+    reaction_kN: np.ndarray
+    force_N: np.ndarray  # force on the modelled body, N
+    displacements: np.ndarray  # (N, n_nodes, 3) mm
+    stress: np.ndarray  # (N, n_elements, 6) element mean, femubench Voigt order
     wall_s: float
     failure: dict = field(default_factory=dict)
     log: str = ""
-    step_iterations: list = field(default_factory=list)   # Newton iterations of each analysis step
-    step_norms: list = field(default_factory=list)        # test norms of each step's iterations
+    step_iterations: list = field(default_factory=list)  # Newton iterations of each analysis step
+    step_norms: list = field(default_factory=list)  # test norms of each step's iterations
 
 
-# OpenSees brick stress output sigma11, sigma22, sigma33, sigma12, sigma23, sigma13 -> [xx, yy, zz, yz, xz, xy]
+# OpenSees brick stress output sigma11, sigma22, sigma33, sigma12, sigma23,
+# sigma13 -> [xx, yy, zz, yz, xz, xy]
 OS_TO_VOIGT = [0, 1, 2, 4, 5, 3]
 
 
-def opensees_box(mesh, osp: dict, delta: float, steps: int, plates: str, *, element: str = "bbarBrick",
-                 strategy: Strategy = BASELINE, quarter: bool = True, log_dir: Path | None = None) -> OpenSeesRun:
+def opensees_box(
+    mesh,
+    osp: dict,
+    delta: float,
+    steps: int,
+    plates: str,
+    *,
+    element: str = "bbarBrick",
+    strategy: Strategy = BASELINE,
+    quarter: bool = True,
+    log_dir: Path | None = None,
+) -> OpenSeesRun:
     """The plate test of ``mesh`` in OpenSees with the same boundary conditions as
     :class:`problems.fe.BoundaryConditions`: u_x = 0 on x = 0, u_y = 0 on y = 0, u_z = 0 at the
     bottom, u_z = -delta (sp constraint, linear in the load factor) at the top, and with friction
@@ -113,21 +131,35 @@ def opensees_box(mesh, osp: dict, delta: float, steps: int, plates: str, *, elem
             for j in range(strategy.substeps):
                 ok = ops.analyze(1)
                 step_iterations.append(int(ops.testIter()))
-                step_norms.append([float(v) for v in ops.testNorm()[:step_iterations[-1]]])
+                step_norms.append([float(v) for v in ops.testNorm()[: step_iterations[-1]]])
                 if ok < 0:
                     norms = list(ops.testNorm())
-                    failure = {"snapshot": k, "substep": j + 1,
-                               "top_mm_from": float(delta * ((k - 1) * strategy.substeps + j) / (steps * strategy.substeps)),
-                               "top_mm_to": float(delta * ((k - 1) * strategy.substeps + j + 1) / (steps * strategy.substeps)),
-                               "iterations": int(ops.testIter()), "last_norms": [float(v) for v in norms[-6:]],
-                               "first_norms": [float(v) for v in norms[:6]]}
+                    failure = {
+                        "snapshot": k,
+                        "substep": j + 1,
+                        "top_mm_from": float(
+                            delta * ((k - 1) * strategy.substeps + j) / (steps * strategy.substeps)
+                        ),
+                        "top_mm_to": float(
+                            delta
+                            * ((k - 1) * strategy.substeps + j + 1)
+                            / (steps * strategy.substeps)
+                        ),
+                        "iterations": int(ops.testIter()),
+                        "last_norms": [float(v) for v in norms[-6:]],
+                        "first_norms": [float(v) for v in norms[:6]],
+                    }
                     break
             if failure:
                 break
             ops.reactions()
             u = np.array([ops.nodeDisp(i + 1) for i in range(nn)])
-            stress = np.array([np.reshape(ops.eleResponse(e + 1, "stresses"), (8, 6)).mean(axis=0)
-                               for e in range(mesh.n_elements)])[:, OS_TO_VOIGT]
+            stress = np.array(
+                [
+                    np.reshape(ops.eleResponse(e + 1, "stresses"), (8, 6)).mean(axis=0)
+                    for e in range(mesh.n_elements)
+                ]
+            )[:, OS_TO_VOIGT]
             out_u.append(u)
             out_s.append(stress)
             out_f.append(-sum(ops.nodeReaction(int(n) + 1, 3) for n in top))
@@ -137,9 +169,21 @@ def opensees_box(mesh, osp: dict, delta: float, steps: int, plates: str, *, elem
     log = log_path.read_text(errors="replace")
     log_path.unlink()
     f = np.array(out_f)
-    return OpenSeesRun(strategy.name, element, not failure, np.array(out_d), (4.0 if quarter else 1.0) * f / 1000.0,
-                       f, np.array(out_u).reshape(-1, nn, 3), np.array(out_s).reshape(-1, mesh.n_elements, 6),
-                       wall, failure, log, step_iterations, step_norms)
+    return OpenSeesRun(
+        strategy.name,
+        element,
+        not failure,
+        np.array(out_d),
+        (4.0 if quarter else 1.0) * f / 1000.0,
+        f,
+        np.array(out_u).reshape(-1, nn, 3),
+        np.array(out_s).reshape(-1, mesh.n_elements, 6),
+        wall,
+        failure,
+        log,
+        step_iterations,
+        step_norms,
+    )
 
 
 def summarise_log(log: str, limit: int = 6) -> dict:
@@ -152,7 +196,10 @@ def summarise_log(log: str, limit: int = 6) -> dict:
         key = ln[:80]
         if key not in distinct and len(distinct) < limit:
             distinct.append(key)
-    return {"lines": len(lines), "first": distinct,
-            "jact_messages": sum("Jact" in ln for ln in lines),
-            "normcep_messages": sum("NormCep" in ln for ln in lines),
-            "failed_messages": sum("failed" in ln.lower() for ln in lines)}
+    return {
+        "lines": len(lines),
+        "first": distinct,
+        "jact_messages": sum("Jact" in ln for ln in lines),
+        "normcep_messages": sum("NormCep" in ln for ln in lines),
+        "failed_messages": sum("failed" in ln.lower() for ln in lines),
+    }

@@ -3,6 +3,7 @@ driver, FE run of the plate test), the exact uniaxial solution, and the two diff
 
 Units: MPa, mm, kN; strains dimensionless; angles in degrees.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,8 +27,19 @@ def femubench_material(p: dict):
     """femubench's linear Drucker-Prager form with K = 1 and compression hardening."""
     from problems.materials.drucker_prager import make_material
 
-    return make_material("linear", "compression", {"E": p["E"], "nu": p["nu"], "beta": p["beta"], "K": 1.0,
-                                                   "psi": p["psi"], "sigma0": p["sigma0"], "H": p["H"]})
+    return make_material(
+        "linear",
+        "compression",
+        {
+            "E": p["E"],
+            "nu": p["nu"],
+            "beta": p["beta"],
+            "K": 1.0,
+            "psi": p["psi"],
+            "sigma0": p["sigma0"],
+            "H": p["H"],
+        },
+    )
 
 
 def material_point_uniaxial(material, axial_strain, tol: float = 1e-11):
@@ -68,7 +80,9 @@ def femubench_box(mesh, material, delta: float, steps: int, plates: str, substep
     from problems.fe.newton import Loading, NewtonSettings, discretise, run
 
     t0 = time.perf_counter()
-    resp = run(discretise(mesh), material, Loading(delta, steps, plates), NewtonSettings(substeps=substeps))
+    resp = run(
+        discretise(mesh), material, Loading(delta, steps, plates), NewtonSettings(substeps=substeps)
+    )
     return resp, time.perf_counter() - t0
 
 

@@ -2,6 +2,7 @@
 (first angle only) and the quarter cube; writes ``opensees_dp.json`` into the output folder.
 Figures: :func:`bench.crosscheck.figures.render_crosscheck` (from that file alone).
 """
+
 from __future__ import annotations
 
 import json
@@ -19,13 +20,22 @@ from bench.crosscheck.report import REPORT_FILE, jsonable, slim
 class CrosscheckRun:
     """What :func:`run_crosscheck` computed and wrote."""
 
-    report: dict                 # everything, including the per-point grids (for the printed tables)
+    # everything, including the per-point grids (for the printed tables)
+    report: dict
     dir: Path
     paths: list[Path] = field(default_factory=list)
 
 
-def run_crosscheck(out, *, mesh: str = "coarse", psis=(35.0, 15.0), steps: int = 10, element_steps: int = 60,
-                   skip_cube: bool = False, all_strategies: bool = False) -> CrosscheckRun:
+def run_crosscheck(
+    out,
+    *,
+    mesh: str = "coarse",
+    psis=(35.0, 15.0),
+    steps: int = 10,
+    element_steps: int = 60,
+    skip_cube: bool = False,
+    all_strategies: bool = False,
+) -> CrosscheckRun:
     """Run the comparisons (needs openseespy: :class:`~bench.crosscheck.loader.OpenSeesUnavailable`
     otherwise) and write ``out/opensees_dp.json``. ``psis`` in degrees (<= beta = 35), ``steps``
     cube snapshots, ``element_steps`` single-element steps."""
@@ -37,13 +47,21 @@ def run_crosscheck(out, *, mesh: str = "coarse", psis=(35.0, 15.0), steps: int =
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    report = {"openseespy": openseespy_version(), "reference": REFERENCE, "mappings": [], "single_element": [],
-              "cube": [], "tangent_audit": []}
+    report = {
+        "openseespy": openseespy_version(),
+        "reference": REFERENCE,
+        "mappings": [],
+        "single_element": [],
+        "cube": [],
+        "tangent_audit": [],
+    }
     with tempfile.TemporaryDirectory() as tmp:
         for psi in psis:
             p = {**REFERENCE, "psi": float(psi)}
             osp = opensees_parameters(**p)
-            report["mappings"].append({"psi": p["psi"], "opensees": osp, "tension_cutoff_I1": tension_cutoff_I1(osp)})
+            report["mappings"].append(
+                {"psi": p["psi"], "opensees": osp, "tension_cutoff_I1": tension_cutoff_I1(osp)}
+            )
             report["single_element"].append(single_element(p, element_steps, Path(tmp)))
             if psi == psis[0]:
                 report["tangent_audit"] = tangent_audit(osp, Path(tmp))

@@ -3,6 +3,7 @@ recovered from a one-element model and compared with the derivative of its own s
 the two tangent formulas of :func:`bench.crosscheck.mapping.dp_return`. Strains dimensionless,
 stresses and moduli in MPa.
 """
+
 from __future__ import annotations
 
 import tempfile
@@ -79,26 +80,45 @@ def tangent_audit(osp: dict, log_dir: Path) -> list[dict]:
     log_path = Path(tempfile.mkstemp(prefix="opensees_audit_", suffix=".log", dir=log_dir)[1])
     with captured_output(log_path):
         for name, eps in AUDIT_STRAINS.items():
-            E = np.array([[eps[0], eps[5] / 2, eps[4] / 2], [eps[5] / 2, eps[1], eps[3] / 2],
-                          [eps[4] / 2, eps[3] / 2, eps[2]]])
+            E = np.array(
+                [
+                    [eps[0], eps[5] / 2, eps[4] / 2],
+                    [eps[5] / 2, eps[1], eps[3] / 2],
+                    [eps[4] / 2, eps[3] / 2, eps[2]],
+                ]
+            )
             u = X @ E.T
             _, A, stress = _one_element_prescribed(ops, u, osp, want_matrix=True)
             h = 1e-9
-            Kfd = np.column_stack([
-                (_one_element_prescribed(ops, (u.ravel() + h * e).reshape(8, 3), osp)[0]
-                 - _one_element_prescribed(ops, (u.ravel() - h * e).reshape(8, 3), osp)[0]) / (2 * h)
-                for e in np.eye(24)])
+            Kfd = np.column_stack(
+                [
+                    (
+                        _one_element_prescribed(ops, (u.ravel() + h * e).reshape(8, 3), osp)[0]
+                        - _one_element_prescribed(ops, (u.ravel() - h * e).reshape(8, 3), osp)[0]
+                    )
+                    / (2 * h)
+                    for e in np.eye(24)
+                ]
+            )
             C_os = np.linalg.lstsq(M[off], A.ravel()[off], rcond=None)[0].reshape(6, 6)
             C_fd = np.linalg.lstsq(M, Kfd.ravel(), rcond=None)[0].reshape(6, 6)
             s_ref, C_trial = dp_return(eps, osp, "trial")
             _, C_ret = dp_return(eps, osp, "returned")
             scale = np.abs(C_fd).max()
-            out.append({"state": name, "strain": eps, "stress_opensees": stress, "stress_rederived": s_ref,
-                        "stress_difference": float(np.abs(stress - s_ref).max() / np.abs(s_ref).max()),
-                        "C_opensees": C_os, "C_finite_difference": C_fd,
-                        "opensees_vs_fd": float(np.abs(C_os - C_fd).max() / scale),
-                        "consistent_formula_vs_fd": float(np.abs(C_trial - C_fd).max() / scale),
-                        "returned_norm_formula_vs_opensees": float(np.abs(C_ret - C_os).max() / scale)})
+            out.append(
+                {
+                    "state": name,
+                    "strain": eps,
+                    "stress_opensees": stress,
+                    "stress_rederived": s_ref,
+                    "stress_difference": float(np.abs(stress - s_ref).max() / np.abs(s_ref).max()),
+                    "C_opensees": C_os,
+                    "C_finite_difference": C_fd,
+                    "opensees_vs_fd": float(np.abs(C_os - C_fd).max() / scale),
+                    "consistent_formula_vs_fd": float(np.abs(C_trial - C_fd).max() / scale),
+                    "returned_norm_formula_vs_opensees": float(np.abs(C_ret - C_os).max() / scale),
+                }
+            )
         ops.wipe()
     log_path.unlink()
     return out

@@ -10,6 +10,7 @@ Prints
   0.1 px steps: float images without noise, 8-bit without noise, 8-bit with sigma = 2;
 * the time to render a 1000 x 1000 px reference and deformed image.
 """
+
 from __future__ import annotations
 
 import os
@@ -30,7 +31,12 @@ import numpy as np  # noqa: E402
 from problems.dic import _kernels  # noqa: E402
 from problems.dic.correlate import Correlator, DICConfig, grid_points  # noqa: E402
 from problems.dic.pipeline import pixel_displacement  # noqa: E402
-from problems.dic.speckle import CameraConfig, SpeckleConfig, face_pattern, render_face  # noqa: E402
+from problems.dic.speckle import (  # noqa: E402
+    CameraConfig,
+    SpeckleConfig,
+    face_pattern,
+    render_face,
+)
 from problems.dic.synthetic import translation_study  # noqa: E402
 
 
@@ -57,8 +63,11 @@ def main() -> int:
     d1 = render_face(cam, sp, pat, pixel_displacement(bulge(0.3), cam), 2)
     t_def = time.perf_counter() - t
     d2 = render_face(cam, sp, pat, pixel_displacement(bulge(0.6), cam), 3)
-    print(f"rendering {cam.shape[1]} x {cam.shape[0]} px (1000 x 1000 px face, {len(pat.sigma)} speckles, "
-          f"{cam.supersample}x{cam.supersample} supersampling, back-end {_kernels.DEFAULT_BACKEND}):")
+    print(
+        f"rendering {cam.shape[1]} x {cam.shape[0]} px (1000 x 1000 px face, {len(pat.sigma)} "
+        f"speckles, {cam.supersample}x{cam.supersample} supersampling, back-end "
+        f"{_kernels.DEFAULT_BACKEND}):"
+    )
     print(f"  reference {t_ref:.2f} s, deformed {t_def:.2f} s")
 
     x0, x1, y0, y1 = (int(round(v)) for v in cam.face_box_px)
@@ -79,21 +88,35 @@ def main() -> int:
         t = time.perf_counter()
         Correlator(ref, pts, cfg)
         t_setup = time.perf_counter() - t
-        print(f"  {backend:6s} first image (seeds + propagation): {len(pts) / best1:8.0f} subsets/s "
-              f"({r1.iterations.mean():.1f} iterations, {r1.converged.mean():.1%} converged)")
-        print(f"  {backend:6s} next snapshot from previous:       {len(pts) / best2:8.0f} subsets/s "
-              f"({r2.iterations.mean():.1f} iterations, {r2.converged.mean():.1%} converged); "
-              f"reference set-up {t_setup:.2f} s")
+        print(
+            f"  {backend:6s} first image (seeds + propagation): {len(pts) / best1:8.0f} subsets/s "
+            f"({r1.iterations.mean():.1f} iterations, {r1.converged.mean():.1%} converged)"
+        )
+        print(
+            f"  {backend:6s} next snapshot from previous:       {len(pts) / best2:8.0f} subsets/s "
+            f"({r2.iterations.mean():.1f} iterations, {r2.converged.mean():.1%} converged); "
+            f"reference set-up {t_setup:.2f} s"
+        )
 
-    print("\nrigid translation (Fourier shift 0..1 px step 0.1 in x and y), 256 x 256 px, subset 21, step 10:")
-    cases = [("float, no noise", 0.0, None), ("8-bit, no noise", 0.0, 8), ("8-bit, sigma = 2", 2.0, 8)]
+    print(
+        "\nrigid translation (Fourier shift 0..1 px step 0.1 in x and y), 256 x 256 px, subset 21, "
+        "step 10:"
+    )
+    cases = [
+        ("float, no noise", 0.0, None),
+        ("8-bit, no noise", 0.0, 8),
+        ("8-bit, sigma = 2", 2.0, 8),
+    ]
     for order in (3, 5):
         for name, sigma, bits in cases:
             st = translation_study(noise_sigma=sigma, bit_depth=bits, config=DICConfig(order=order))
             w = st.worst
-            print(f"  order {order}, {name:17s}: max|bias| u {w['max |bias u|']:.5f} v {w['max |bias v|']:.5f} px; "
-                  f"max std u {w['max std u']:.5f} v {w['max std v']:.5f} px; "
-                  f"predicted std {np.mean(st.est_std_u):.5f} px ({st.n_points} points)")
+            print(
+                f"  order {order}, {name:17s}: max|bias| u {w['max |bias u|']:.5f} v "
+                f"{w['max |bias v|']:.5f} px; max std u {w['max std u']:.5f} v "
+                f"{w['max std v']:.5f} px; predicted std {np.mean(st.est_std_u):.5f} px "
+                f"({st.n_points} points)"
+            )
     return 0
 
 

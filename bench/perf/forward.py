@@ -1,7 +1,8 @@
 """Benchmark of one complete forward run (not a test): DOFs, wall time, where the time goes, and
 the speed-up over the old code path measured in the same run.
 
-    OMP_NUM_THREADS=1 python -m bench.perf.forward [--meshes coarse,paper] [--cases linear-compression|all|elastic|NAME,...]
+    OMP_NUM_THREADS=1 python -m bench.perf.forward [--meshes coarse,paper] [--cases
+    linear-compression|all|elastic|NAME,...]
                                                    [--repeat 3] [--no-baseline]
 
 Per mesh spec (``MESH[:eighth|quarter]``: ``coarse`` solves the eighth model, ``coarse:quarter``
@@ -15,37 +16,44 @@ the speed-up old / new and the largest relative difference of the plate forces. 
 two paths alternate, so both see the same machine load. Run it with ``OMP_NUM_THREADS=1`` for
 one-core figures.
 """
+
 from __future__ import annotations
 
 import argparse
-import re
 import dataclasses
+import re
 import time
 
 import numpy as np
 
-from problems.inverse.cases import CASES
+from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Loading, discretise, run
+from problems.inverse.cases import CASES
 from problems.inverse.forward import FORWARD_SETTINGS, case_material
 from problems.materials import LinearElastic
-from problems.fe.mesh import parse_mesh_spec
 
 
 def split_specs(text: str) -> list[str]:
-    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay whole."""
+    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay
+    whole."""
     specs = re.findall(r"\d+\s*,\s*\d+\s*,\s*\d+(?::\w+)?|[A-Za-z]\w*(?::\w+)?", text)
     if not specs:
         raise SystemExit(f"no mesh spec in {text!r}")
     return specs
+
 
 #: the code path before the fused assembly and the CHOLMOD-preconditioned Krylov solver
 BASELINE = dict(linear_solver="superlu", assembly="numpy")
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--meshes", default="coarse,paper")
-    ap.add_argument("--cases", default="linear-compression", help="all | elastic | comma-separated case names")
+    ap.add_argument(
+        "--cases", default="linear-compression", help="all | elastic | comma-separated case names"
+    )
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-baseline", action="store_true", help="skip the old code path")
     args = ap.parse_args(argv)
@@ -55,8 +63,11 @@ def main(argv=None) -> None:
             raise SystemExit(f"case {name!r} is unknown; allowed: elastic, all, {', '.join(CASES)}")
     new_settings = FORWARD_SETTINGS
     old_settings = dataclasses.replace(FORWARD_SETTINGS, **BASELINE)
-    head = (f"{'mesh':14} {'dofs':>6} {'material':20} {'ok':>3} {'incr':>4} {'iter':>4} {'kryl':>5} {'fact':>4} "
-            f"{'wall s':>7} {'assem':>6} {'mater':>6} {'factor':>6} {'solve':>6} {'F kN':>8}")
+    head = (
+        f"{'mesh':14} {'dofs':>6} {'material':20} {'ok':>3} {'incr':>4} {'iter':>4} {'kryl':>5} "
+        f"{'fact':>4} {'wall s':>7} {'assem':>6} {'mater':>6} {'factor':>6} {'solve':>6} "
+        f"{'F kN':>8}"
+    )
     if not args.no_baseline:
         head += f" | {'old s':>7} {'speed-up':>8} {'max dF/F':>8}"
     print(head)
@@ -66,7 +77,11 @@ def main(argv=None) -> None:
         disc = discretise(ms.mesh, symmetry=ms.symmetry)
         setup = time.perf_counter() - t
         for name in names:
-            mat = LinearElastic() if name == "elastic" else case_material(CASES[name], CASES[name].reference)
+            mat = (
+                LinearElastic()
+                if name == "elastic"
+                else case_material(CASES[name], CASES[name].reference)
+            )
             best = {}
             for _ in range(args.repeat):
                 for key, settings in (("new", new_settings), ("old", old_settings)):
@@ -77,10 +92,13 @@ def main(argv=None) -> None:
                         best[key] = r
             r = best["new"]
             tm = r.timing
-            line = (f"{spec:14} {disc.mesh.n_dofs:6d} {name:20} {'yes' if r.converged else 'NO':>3} {r.increments:4d} "
-                    f"{r.iterations:4d} {tm['krylov_iterations']:5d} {tm['factorisations']:4d} {r.wall_s:7.3f} "
-                    f"{tm['assembly_s']:6.3f} {tm['material_s']:6.3f} {tm['factor_s']:6.3f} {tm['solve_s']:6.3f} "
-                    f"{r.reaction_kN[-1] if len(r.reaction_kN) else float('nan'):8.2f}")
+            line = (
+                f"{spec:14} {disc.mesh.n_dofs:6d} {name:20} {'yes' if r.converged else 'NO':>3} "
+                f"{r.increments:4d} {r.iterations:4d} {tm['krylov_iterations']:5d} "
+                f"{tm['factorisations']:4d} {r.wall_s:7.3f} {tm['assembly_s']:6.3f} "
+                f"{tm['material_s']:6.3f} {tm['factor_s']:6.3f} {tm['solve_s']:6.3f} "
+                f"{r.reaction_kN[-1] if len(r.reaction_kN) else float('nan'):8.2f}"
+            )
             if "old" in best:
                 o = best["old"]
                 same = len(o.reaction_kN) == len(r.reaction_kN) and len(r.reaction_kN) > 0

@@ -1,6 +1,7 @@
 """Benchmark of the linear solvers on real Newton tangents (not a test).
 
-    OMP_NUM_THREADS=1 python -m bench.perf.linear_solvers [--meshes paper,paper:quarter,fine] [--case linear-compression] [--repeat 3]
+    OMP_NUM_THREADS=1 python -m bench.perf.linear_solvers [--meshes paper,paper:quarter,fine]
+    [--case linear-compression] [--repeat 3]
 
 For each mesh spec (``MESH[:eighth|quarter]``, see ``problems.fe.mesh.parse_mesh_spec``) the
 forward model runs the default test (10 snapshots to 1.5 mm, friction plates) with the case at its
@@ -15,7 +16,8 @@ the free-free block of the last correction tangent, in nested-dissection order, 
                 GMRES on the exact non-symmetric tangent ("fresh": factor of this tangent;
                 "reused": factor of the predictor tangent, i.e. of the previous converged state;
                 "elastic": factor of the elastic stiffness);
-* ``pyamg``     smoothed-aggregation AMG of the symmetric part (pyamg, when installed) as GMRES preconditioner;
+* ``pyamg``     smoothed-aggregation AMG of the symmetric part (pyamg, when installed) as GMRES
+                preconditioner;
 * ``pardiso``   MKL PARDISO, structurally symmetric LU (pypardiso, when installed).
 
 Columns: ``setup`` (once per pattern), ``factor`` (per matrix), ``solve`` of one right-hand side to
@@ -25,6 +27,7 @@ sensitivity use), and the ratios of SuperLU's factor + solve to the method's, fo
 seven right-hand sides, measured in the same run. Times in seconds, one core when run with
 ``OMP_NUM_THREADS=1``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,7 +45,8 @@ from problems.inverse.forward import FORWARD_SETTINGS, case_material
 
 
 def split_specs(text: str) -> list[str]:
-    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay whole."""
+    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay
+    whole."""
     specs = re.findall(r"\d+\s*,\s*\d+\s*,\s*\d+(?::\w+)?|[A-Za-z]\w*(?::\w+)?", text)
     if not specs:
         raise SystemExit(f"no mesh spec in {text!r}")
@@ -95,8 +99,8 @@ def measure(spec: str, case: str, repeat: int) -> list[tuple]:
     if not r.converged:
         raise SystemExit(f"{spec}: the forward run failed: {r.message}")
     bc = kept["bc"]
-    A = kept["solves"][-1][0]          # last correction: the most plastic tangent
-    A_pred = kept["solves"][0][0]      # predictor: converged state of the previous snapshot
+    A = kept["solves"][-1][0]  # last correction: the most plastic tangent
+    A_pred = kept["solves"][0][0]  # predictor: converged state of the previous snapshot
     A.sort_indices()
     A_pred.sort_indices()
     n = A.shape[0]
@@ -106,8 +110,10 @@ def measure(spec: str, case: str, repeat: int) -> list[tuple]:
     b = kept["solves"][-2][1][pos[perm]] if len(kept["solves"]) > 1 else np.ones(n)
     B7 = np.random.default_rng(0).standard_normal((n, 7))
     asym = abs(A - A.T).max() / abs(A).max()
-    print(f"\n{spec}: {n} free dofs, nnz {A.nnz}, max|K - K^T| / max|K| = {asym:.2g}, "
-          f"{r.iterations} Newton solves in the run")
+    print(
+        f"\n{spec}: {n} free dofs, nnz {A.nnz}, max|K - K^T| / max|K| = {asym:.2g}, "
+        f"{r.iterations} Newton solves in the run"
+    )
     rows = []
 
     # --- SuperLU (today)
@@ -138,9 +144,13 @@ def measure(spec: str, case: str, repeat: int) -> list[tuple]:
 
         # --- CHOLMOD of the symmetric part + GMRES
         solver = CholmodGmresSolver()
-        t_s, _ = best(lambda: solver.factorise(A), 1)   # first call: symbolic analysis + numeric
-        for label, M in (("chol-sym fresh", A), ("chol-sym reused", A_pred), ("chol-sym elastic", None)):
-            if M is None:   # the virgin (elastic) tangent
+        t_s, _ = best(lambda: solver.factorise(A), 1)  # first call: symbolic analysis + numeric
+        for label, M in (
+            ("chol-sym fresh", A),
+            ("chol-sym reused", A_pred),
+            ("chol-sym elastic", None),
+        ):
+            if M is None:  # the virgin (elastic) tangent
                 D0 = mat.update(np.zeros((1, 6)), np.zeros((1, 6)), mat.initial_state(1)).tangent[0]
                 M = bc.free_block(nw.FusedAssembler(disc.B, disc.dV, disc.pattern).matrix(D0))
                 M.sort_indices()
@@ -149,7 +159,9 @@ def measure(spec: str, case: str, repeat: int) -> list[tuple]:
             t_1, (its1, _) = best(lambda: _krylov(A, F._psolve, b, 1e-12), repeat)
             t_6, (its6, _) = best(lambda: _krylov(A, F._psolve, b, 1e-6), repeat)
             t_7, _ = best(lambda: F.solve(B7, 1e-12), repeat)
-            rows.append((label, t_s if label.endswith("fresh") else 0.0, t_f, t_1, its1, t_6, its6, t_7))
+            rows.append(
+                (label, t_s if label.endswith("fresh") else 0.0, t_f, t_1, its1, t_6, its6, t_7)
+            )
 
     # --- pyamg (optional)
     try:
@@ -185,16 +197,22 @@ def measure(spec: str, case: str, repeat: int) -> list[tuple]:
         t_7, _ = best(lambda: ps._call_pardiso(Ar, np.array(B7)), repeat)
         rows.append(("pardiso (MKL)", t_s, t_f, t_1, 0, t_1, 0, t_7))
 
-    print(f"{'method':18} {'setup s':>8} {'factor s':>9} {'solve s':>8} {'its':>4} {'@1e-6 s':>8} {'its':>4} "
-          f"{'7 rhs s':>8} {'x SLU 1rhs':>10} {'x SLU 7rhs':>10}")
+    print(
+        f"{'method':18} {'setup s':>8} {'factor s':>9} {'solve s':>8} {'its':>4} {'@1e-6 s':>8} "
+        f"{'its':>4} {'7 rhs s':>8} {'x SLU 1rhs':>10} {'x SLU 7rhs':>10}"
+    )
     for name, t_s, t_f, t_1, its1, t_6, its6, t_7 in rows:
-        print(f"{name:18} {t_s:8.3f} {t_f:9.3f} {t_1:8.4f} {its1:4d} {t_6:8.4f} {its6:4d} {t_7:8.4f} "
-              f"{ref1 / (t_f + t_1):10.2f} {ref7 / (t_f + t_7):10.2f}")
+        print(
+            f"{name:18} {t_s:8.3f} {t_f:9.3f} {t_1:8.4f} {its1:4d} {t_6:8.4f} {its6:4d} {t_7:8.4f} "
+            f"{ref1 / (t_f + t_1):10.2f} {ref7 / (t_f + t_7):10.2f}"
+        )
     return rows
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--meshes", default="paper,paper:quarter,fine")
     ap.add_argument("--case", default="linear-compression")
     ap.add_argument("--repeat", type=int, default=3)

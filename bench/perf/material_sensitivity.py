@@ -14,6 +14,7 @@ The elastic ratio is large because the elastic update is almost free, and at 10^
 dominated by first touching the fresh output arrays (n, P, 6) and (n, P, 7): above glibc's 32 MB
 mmap threshold every call page-faults them in (compare ``--points 80000``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -66,26 +67,47 @@ def main(argv=None) -> None:
         de = np.array([[-1e-2, 0, 0, 0, 0, 0]])
         sig, st = np.zeros((1, 6)), mat.initial_state(1)
         P = len(mat.parameter_names)
-        mat.sensitivity(de, sig, st, mat.update(de, sig, st), np.zeros((1, P, 6)), np.zeros((1, P, 7)),
-                        np.zeros((1, P, 6)))
+        mat.sensitivity(
+            de,
+            sig,
+            st,
+            mat.update(de, sig, st),
+            np.zeros((1, P, 6)),
+            np.zeros((1, P, 7)),
+            np.zeros((1, P, 6)),
+        )
     print(f"first calls (numba compile or cache load): {time.perf_counter() - t0:.2f} s")
-    print(f"times in s (best of {args.repeat}); points: on the surface, of {n} requested; P parameters")
-    print(f"{'variant':24} {'points':>7} {'P':>2} {'plastic':>8} {'update':>8} {'sens.':>8} {'ratio':>6}   "
-          f"{'elastic: update':>15} {'sens.':>8} {'ratio':>6}")
+    print(
+        f"times in s (best of {args.repeat}); points: on the surface, of {n} requested; P "
+        "parameters"
+    )
+    print(
+        f"{'variant':24} {'points':>7} {'P':>2} {'plastic':>8} {'update':>8} {'sens.':>8} "
+        f"{'ratio':>6}   {'elastic: update':>15} {'sens.':>8} {'ratio':>6}"
+    )
     for form in FORMS:
         for hardening in HARDENINGS:
             mat = make_material(form, hardening, typical_parameters(form, hardening))
             P = len(mat.parameter_names)
             sig, st = _surface_states(mat, n, rng)
             m = len(sig)
-            history = (rng.normal(size=(m, P, 6)), rng.normal(size=(m, P, 7)) * 1e-4,
-                       rng.normal(size=(m, P, 6)) * 1e-5)
+            history = (
+                rng.normal(size=(m, P, 6)),
+                rng.normal(size=(m, P, 7)) * 1e-4,
+                rng.normal(size=(m, P, 6)) * 1e-5,
+            )
             # continued loading: 5 % more of the current stress plus noise keeps points plastic
-            de = np.linalg.solve(mat.stiffness, 0.05 * sig.T).T + rng.normal(size=(m, 6)) * 1e-3 * mat.law.sigma0 / mat.E
+            de = (
+                np.linalg.solve(mat.stiffness, 0.05 * sig.T).T
+                + rng.normal(size=(m, 6)) * 1e-3 * mat.law.sigma0 / mat.E
+            )
             t_up, t_se, plastic = _ratio(mat, de, sig, st, history, args.repeat)
-            e_up, e_se, _ = _ratio(mat, -0.2 * de, sig, st, history, args.repeat)  # 1 % elastic unloading
-            print(f"{form + '-' + hardening:24} {m:7d} {P:2d} {plastic:8.1%} {t_up:8.3f} {t_se:8.3f} {t_se / t_up:6.2f}   "
-                  f"{e_up:15.3f} {e_se:8.3f} {e_se / e_up:6.2f}")
+            # 1 % elastic unloading
+            e_up, e_se, _ = _ratio(mat, -0.2 * de, sig, st, history, args.repeat)
+            print(
+                f"{form + '-' + hardening:24} {m:7d} {P:2d} {plastic:8.1%} {t_up:8.3f} {t_se:8.3f} "
+                f"{t_se / t_up:6.2f}   {e_up:15.3f} {e_se:8.3f} {e_se / e_up:6.2f}"
+            )
 
 
 if __name__ == "__main__":

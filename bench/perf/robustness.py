@@ -1,6 +1,7 @@
 """Robustness of the forward model over the whole box (a benchmark, not a test).
 
-    python -m bench.perf.robustness [--mesh coarse] [--points 200] [--cases all] [--seed 0] [--out FILE]
+    python -m bench.perf.robustness [--mesh coarse] [--points 200] [--cases all] [--seed 0]
+    [--out FILE]
 
 For each case, ``--points`` seeded Latin-hypercube points in the bounds; the infeasible ones (not a
 well-posed material) are skipped and counted; every feasible point runs the FE model (10 snapshots
@@ -8,6 +9,7 @@ to 1.5 mm). Prints per case: feasible points, failures (with their messages), cu
 iterations and wall time; appends one JSON line per point to ``--out`` (resumable: points already
 in the file are not rerun).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -22,12 +24,16 @@ def main(argv=None) -> None:
     from problems.inverse.cases import CASES
     from problems.inverse.forward import FEForwardModel
 
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--mesh", default="coarse")
     ap.add_argument("--points", type=int, default=200)
     ap.add_argument("--cases", default="all")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=None, help="JSON-lines file of the points (resumable)")
+    ap.add_argument(
+        "--out", type=Path, default=None, help="JSON-lines file of the points (resumable)"
+    )
     args = ap.parse_args(argv)
     names = list(CASES) if args.cases == "all" else args.cases.split(",")
     done = {}
@@ -53,8 +59,13 @@ def main(argv=None) -> None:
                 if why is None:
                     t = time.perf_counter()
                     r = model.response(x)
-                    rec |= {"converged": bool(r.converged), "message": r.message, "cuts": r.cuts,
-                            "iterations": r.iterations, "wall_s": time.perf_counter() - t}
+                    rec |= {
+                        "converged": bool(r.converged),
+                        "message": r.message,
+                        "cuts": r.cuts,
+                        "iterations": r.iterations,
+                        "wall_s": time.perf_counter() - t,
+                    }
                 if args.out:
                     with args.out.open("a") as fh:
                         fh.write(json.dumps(rec) + "\n")
@@ -62,8 +73,12 @@ def main(argv=None) -> None:
         feas = [r for r in recs if r["feasible"]]
         failed = [r for r in feas if not r["converged"]]
         total_failed += len(failed)
-        print(f"{name:24} {len(feas):8d} {len(failed):6d} {sum(r['cuts'] for r in feas):5d} "
-              f"{np.mean([r['iterations'] for r in feas]):9.1f} {np.mean([r['wall_s'] for r in feas]):7.2f}", flush=True)
+        print(
+            f"{name:24} {len(feas):8d} {len(failed):6d} {sum(r['cuts'] for r in feas):5d} "
+            f"{np.mean([r['iterations'] for r in feas]):9.1f} "
+            f"{np.mean([r['wall_s'] for r in feas]):7.2f}",
+            flush=True,
+        )
         for r in failed:
             print(f"    failed at x = {np.round(r['x'], 5).tolist()}: {r['message']}")
     print(f"mesh {args.mesh}: {total_failed} failures in all")

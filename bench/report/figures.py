@@ -17,6 +17,7 @@
 Every line differs by line style *and* marker (greys only), so the figures survive printing; style,
 labels and saving: :mod:`bench.plotting`.
 """
+
 from __future__ import annotations
 
 import math
@@ -27,7 +28,15 @@ import numpy as np
 import pandas as pd
 
 from bench.plotting import (
-    DOUBLE, REFERENCE_LINE, SINGLE, integer_axis, line_style, log_axis, normalised_label, pyplot, save,
+    DOUBLE,
+    REFERENCE_LINE,
+    SINGLE,
+    integer_axis,
+    line_style,
+    log_axis,
+    normalised_label,
+    pyplot,
+    save,
 )
 from bench.report.tables import bound_side, case_order, identified, method_order, normalised_box
 
@@ -43,7 +52,9 @@ def _save(fig, path: Path, pdf: bool) -> list[Path]:
 
 def safe(name: str) -> str:
     """A file-name-safe version of a case or method name (``nlopt:BOBYQA`` -> ``nlopt-BOBYQA``)."""
-    return "".join(c if c.isalnum() or c in "-_." else ("plus" if c == "+" else "-") for c in str(name))
+    return "".join(
+        c if c.isalnum() or c in "-_." else ("plus" if c == "+" else "-") for c in str(name)
+    )
 
 
 def _markevery(n: int) -> int:
@@ -55,12 +66,22 @@ def representative(runs: pd.DataFrame) -> pd.Series | None:
     ok = identified(runs)
     if not len(ok):
         return None
-    ok = ok.assign(_c=ok["cost"].fillna(np.inf)).sort_values(["_c", "seed", "start", "start_index"], kind="stable")
+    ok = ok.assign(_c=ok["cost"].fillna(np.inf)).sort_values(
+        ["_c", "seed", "start", "start_index"], kind="stable"
+    )
     return ok.iloc[(len(ok) - 1) // 2]
 
 
-def history_figure(run: pd.Series, hist: pd.DataFrame, params: list[str], path: Path, *,
-                   n_runs: int = 1, pdf: bool = False, bounds: dict | None = None) -> list[Path]:
+def history_figure(
+    run: pd.Series,
+    hist: pd.DataFrame,
+    params: list[str],
+    path: Path,
+    *,
+    n_runs: int = 1,
+    pdf: bool = False,
+    bounds: dict | None = None,
+) -> list[Path]:
     """(a) x_i/x_i^REF and (b) cost against iteration for one run.
 
     ``bounds``: ``{parameter: (lower, upper)}`` divided by the reference (default: the box of the
@@ -83,21 +104,54 @@ def history_figure(run: pd.Series, hist: pd.DataFrame, params: list[str], path: 
             continue
         lo, hi = bounds[p]
         xb = x_end + (i + 1) * dx  # the box of parameter i: a bracket in its own line style
-        ax1.plot([xb, xb], [lo, hi], color=style["color"], linestyle=style["linestyle"], linewidth=0.8)
-        ax1.plot([xb, xb], [lo, hi], color=style["color"], linestyle="none", marker=style["marker"], markersize=3)
-        ax1.plot([xb - 0.4 * dx, xb + 0.4 * dx] * 2, [lo, lo, hi, hi], color=style["color"], linestyle="none",
-                 marker="_", markersize=6)
+        ax1.plot(
+            [xb, xb], [lo, hi], color=style["color"], linestyle=style["linestyle"], linewidth=0.8
+        )
+        ax1.plot(
+            [xb, xb],
+            [lo, hi],
+            color=style["color"],
+            linestyle="none",
+            marker=style["marker"],
+            markersize=3,
+        )
+        ax1.plot(
+            [xb - 0.4 * dx, xb + 0.4 * dx] * 2,
+            [lo, lo, hi, hi],
+            color=style["color"],
+            linestyle="none",
+            marker="_",
+            markersize=6,
+        )
         finite = np.flatnonzero(np.isfinite(y))
         if len(finite) and bound_side(float(y[finite[-1]]), lo, hi):
             ringed.append((it[finite[-1]], y[finite[-1]]))
     if ringed:
-        ax1.plot(*zip(*ringed), linestyle="none", marker="o", markersize=10, markerfacecolor="none",
-                 markeredgecolor="0.0", markeredgewidth=0.8, label="on a bound")
+        ax1.plot(
+            *zip(*ringed),
+            linestyle="none",
+            marker="o",
+            markersize=10,
+            markerfacecolor="none",
+            markeredgecolor="0.0",
+            markeredgewidth=0.8,
+            label="on a bound",
+        )
     if bounds and active:
         from matplotlib.lines import Line2D
 
-        ax1.add_line(Line2D([], [], color="0.0", linestyle="-", marker="_", markersize=6, linewidth=0.8,
-                            label="box [lower, upper]"))  # legend proxy of the brackets
+        ax1.add_line(
+            Line2D(
+                [],
+                [],
+                color="0.0",
+                linestyle="-",
+                marker="_",
+                markersize=6,
+                linewidth=0.8,
+                label="box [lower, upper]",
+            )
+        )  # legend proxy of the brackets
     ax1.axhline(1.0, **REFERENCE_LINE)
     ax1.set_xlabel("iteration (-)")
     integer_axis(ax1, "x")
@@ -112,20 +166,38 @@ def history_figure(run: pd.Series, hist: pd.DataFrame, params: list[str], path: 
     cost = hist["cost"].to_numpy(float)
     best = hist["best_cost"].to_numpy(float)
     if np.any(np.isfinite(cost) & (cost > 0)):
-        ax2.plot(it, np.where(cost > 0, cost, np.nan), color="0.55", linestyle="none", marker="o",
-                 markersize=3, label="cost of iterate")
+        ax2.plot(
+            it,
+            np.where(cost > 0, cost, np.nan),
+            color="0.55",
+            linestyle="none",
+            marker="o",
+            markersize=3,
+            label="cost of iterate",
+        )
     if np.any(np.isfinite(best) & (best > 0)):
-        ax2.plot(it, np.where(best > 0, best, np.nan), color="0.0", linestyle="-", label="best cost so far")
+        ax2.plot(
+            it,
+            np.where(best > 0, best, np.nan),
+            color="0.0",
+            linestyle="-",
+            label="best cost so far",
+        )
         log_axis(ax2, "y")
     ax2.set_xlabel("iteration (-)")
     integer_axis(ax2, "x")
     ax2.set_ylabel(COST_LABEL)
     ax2.set_title("(b) cost", loc="left")
     ax2.legend()
-    start = "default start" if run["start"] == "default" else f"random start {int(run['start_index'])}"
+    start = (
+        "default start" if run["start"] == "default" else f"random start {int(run['start_index'])}"
+    )
     what = f"median-cost run of {n_runs}" if n_runs > 1 else "single run"
-    fig.suptitle(f"{run['case']} — {run['method']} (budget {int(run['budget'])}, seed {int(run['seed'])}, "
-                 f"{start}; {what}; {int(run['n_evals'])} evaluations, status {run['status']})", fontsize=8)
+    fig.suptitle(
+        f"{run['case']} — {run['method']} (budget {int(run['budget'])}, seed {int(run['seed'])}, "
+        f"{start}; {what}; {int(run['n_evals'])} evaluations, status {run['status']})",
+        fontsize=8,
+    )
     return _save(fig, path, pdf)
 
 
@@ -141,13 +213,22 @@ def _best_curve(h: pd.DataFrame, final: pd.Series | None = None) -> tuple[np.nda
     return ev, bc
 
 
-def convergence_figure(case: str, runs: pd.DataFrame, history: pd.DataFrame, path: Path, *,
-                       methods: list[str], pdf: bool = False) -> list[Path]:
+def convergence_figure(
+    case: str,
+    runs: pd.DataFrame,
+    history: pd.DataFrame,
+    path: Path,
+    *,
+    methods: list[str],
+    pdf: bool = False,
+) -> list[Path]:
     """Best cost so far against forward evaluations, median over the runs of each method."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=SINGLE, constrained_layout=True)
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
-    emax = max(2.0, float(runs["n_evals"].max()), float(history["n_evals"].max()) if len(history) else 0.0)
+    emax = max(
+        2.0, float(runs["n_evals"].max()), float(history["n_evals"].max()) if len(history) else 0.0
+    )
     grid = np.unique(np.round(np.geomspace(1.0, emax, 80)))
     for i, m in enumerate(methods):
         rm = identified(runs[runs["method"] == m])
@@ -166,7 +247,13 @@ def convergence_figure(case: str, runs: pd.DataFrame, history: pd.DataFrame, pat
             med = np.nanmedian(arr, axis=0)
         med = np.where(med > 0, med, np.nan)
         if np.isfinite(med).any():
-            ax.plot(grid, med, label=f"{m} ({len(curves)})", markevery=_markevery(len(grid)), **line_style(i))
+            ax.plot(
+                grid,
+                med,
+                label=f"{m} ({len(curves)})",
+                markevery=_markevery(len(grid)),
+                **line_style(i),
+            )
     log_axis(ax, "x")
     if any(line.get_ydata().size for line in ax.get_lines()):
         log_axis(ax, "y")
@@ -186,7 +273,9 @@ def cost_targets(runs_case: pd.DataFrame, hist_case: pd.DataFrame) -> np.ndarray
     allc = allc[np.isfinite(allc)]
     if not len(allc) or not len(hist_case):
         return np.array([])
-    first = hist_case.sort_values("iteration").groupby("config_hash")["cost"].first().to_numpy(float)
+    first = (
+        hist_case.sort_values("iteration").groupby("config_hash")["cost"].first().to_numpy(float)
+    )
     first = first[np.isfinite(first)]
     if not len(first):
         return np.array([])
@@ -232,12 +321,21 @@ def _ecdf(ax, hits: list[float], xmax: float, **kw) -> None:
         return
     finite = np.sort(hits[np.isfinite(hits)])
     x = np.concatenate([[1.0], np.maximum(finite, 1.0), [xmax]])
-    y = np.concatenate([[0.0], np.arange(1, len(finite) + 1) / len(hits), [len(finite) / len(hits)]])
+    y = np.concatenate(
+        [[0.0], np.arange(1, len(finite) + 1) / len(hits), [len(finite) / len(hits)]]
+    )
     ax.step(x, y, where="post", markevery=_markevery(len(x)), **kw)
 
 
-def ecdf_figure(title: str, runs: pd.DataFrame, history: pd.DataFrame, path: Path, *, methods: list[str],
-                pdf: bool = False) -> list[Path]:
+def ecdf_figure(
+    title: str,
+    runs: pd.DataFrame,
+    history: pd.DataFrame,
+    path: Path,
+    *,
+    methods: list[str],
+    pdf: bool = False,
+) -> list[Path]:
     """Runtime ECDFs: (a) cost targets, (b) parameter-error targets, one line per method."""
     plt = pyplot()
     rt = runtimes(runs, history)
@@ -249,10 +347,19 @@ def ecdf_figure(title: str, runs: pd.DataFrame, history: pd.DataFrame, path: Pat
         _ecdf(ax1, rt[m]["cost"], xmax, label=m, **line_style(i))
         _ecdf(ax2, rt[m]["err"], xmax, label=m, **line_style(i))
     ks = ", ".join(str(k) for k in COST_KS)
-    ax1.set_title(rf"(a) $J - J_\mathrm{{best}} \leq 10^{{-k}}(J_\mathrm{{init}} - J_\mathrm{{best}})$, k = {ks}",
-                  loc="left", fontsize=8)
-    ax2.set_title("(b) max$_i$ |x$_i$/x$_i^\\mathrm{REF}$ − 1| ≤ " + ", ".join(f"{t:g}" for t in ERR_TARGETS) + " %",
-                  loc="left", fontsize=8)
+    ax1.set_title(
+        rf"(a) $J - J_\mathrm{{best}} \leq 10^{{-k}}(J_\mathrm{{init}} - J_\mathrm{{best}})$, k = "
+        rf"{ks}",
+        loc="left",
+        fontsize=8,
+    )
+    ax2.set_title(
+        "(b) max$_i$ |x$_i$/x$_i^\\mathrm{REF}$ − 1| ≤ "
+        + ", ".join(f"{t:g}" for t in ERR_TARGETS)
+        + " %",
+        loc="left",
+        fontsize=8,
+    )
     for ax in (ax1, ax2):
         log_axis(ax, "x")
         ax.set_xlim(1.0, xmax * 1.05)
@@ -264,10 +371,17 @@ def ecdf_figure(title: str, runs: pd.DataFrame, history: pd.DataFrame, path: Pat
     return _save(fig, path, pdf)
 
 
-def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, pdf: bool = False,
-                  progress: bool = False) -> dict:
-    """All figures; returns ``{"history": {(case, method, budget): path}, "convergence": {case: path},
-    "ecdf": {case: path}, "ecdf_all": path}`` (PNG paths). ``progress``: a tqdm bar on stderr."""
+def write_figures(
+    runs: pd.DataFrame,
+    history: pd.DataFrame,
+    fig_dir: Path,
+    *,
+    pdf: bool = False,
+    progress: bool = False,
+) -> dict:
+    """All figures; returns ``{"history": {(case, method, budget): path}, "convergence":
+    {case: path}, "ecdf": {case: path}, "ecdf_all": path}`` (PNG paths). ``progress``: a tqdm bar on
+    stderr."""
     import sys
 
     from tqdm import tqdm
@@ -277,8 +391,14 @@ def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, p
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
     out: dict = {"history": {}, "convergence": {}, "ecdf": {}, "ecdf_all": None}
     groups = list(runs.groupby(["case", "method", "budget"], sort=False))
-    bar = tqdm(total=len(groups) + 2 * len(cases) + (len(cases) > 1), desc="report figures", unit="fig",
-               file=sys.stderr, disable=not progress, leave=False)
+    bar = tqdm(
+        total=len(groups) + 2 * len(cases) + (len(cases) > 1),
+        desc="report figures",
+        unit="fig",
+        file=sys.stderr,
+        disable=not progress,
+        leave=False,
+    )
     for (case, method, budget), g in groups:
         bar.update()
         rep = representative(g)
@@ -296,13 +416,26 @@ def write_figures(runs: pd.DataFrame, history: pd.DataFrame, fig_dir: Path, *, p
         rc = runs[runs["case"] == case]
         hc = history[history["case"] == case] if len(history) else history
         ms = [m for m in methods if m in set(rc["method"])]
-        out["convergence"][case] = convergence_figure(case, rc, hc, fig_dir / f"{safe(case)}__convergence",
-                                                      methods=ms, pdf=pdf)[0]
-        out["ecdf"][case] = ecdf_figure(f"{case}: runtime ECDF over {len(rc)} runs", rc, hc,
-                                        fig_dir / f"{safe(case)}__ecdf", methods=ms, pdf=pdf)[0]
+        out["convergence"][case] = convergence_figure(
+            case, rc, hc, fig_dir / f"{safe(case)}__convergence", methods=ms, pdf=pdf
+        )[0]
+        out["ecdf"][case] = ecdf_figure(
+            f"{case}: runtime ECDF over {len(rc)} runs",
+            rc,
+            hc,
+            fig_dir / f"{safe(case)}__ecdf",
+            methods=ms,
+            pdf=pdf,
+        )[0]
     if len(cases) > 1:
         bar.update()
-        out["ecdf_all"] = ecdf_figure(f"all {len(cases)} cases: runtime ECDF over {len(runs)} runs", runs, history,
-                                      fig_dir / "all__ecdf", methods=methods, pdf=pdf)[0]
+        out["ecdf_all"] = ecdf_figure(
+            f"all {len(cases)} cases: runtime ECDF over {len(runs)} runs",
+            runs,
+            history,
+            fig_dir / "all__ecdf",
+            methods=methods,
+            pdf=pdf,
+        )[0]
     bar.close()
     return out

@@ -13,6 +13,7 @@
 Writers render a DataFrame as Markdown, CSV (full precision, ``–`` for inactive) or LaTeX
 (booktabs) without extra dependencies.
 """
+
 from __future__ import annotations
 
 import math
@@ -30,11 +31,16 @@ BOUND_TOL = 1e-6  # "on a bound": within this fraction of the box width (upper -
 
 
 def case_box(case: str) -> dict[str, tuple[float, float, float]]:
-    """``{parameter: (lower, upper, reference)}`` of a case (physical units); empty for an unknown case."""
+    """``{parameter: (lower, upper, reference)}`` of a case (physical units); empty for an unknown
+    case."""
     from problems.inverse.cases import all_cases
 
     c = all_cases().get(case)
-    return {} if c is None else {p.name: (float(p.lower), float(p.upper), float(p.reference)) for p in c.parameters}
+    return (
+        {}
+        if c is None
+        else {p.name: (float(p.lower), float(p.upper), float(p.reference)) for p in c.parameters}
+    )
 
 
 def normalised_box(case: str) -> dict[str, tuple[float, float]]:
@@ -48,7 +54,8 @@ def normalised_box(case: str) -> dict[str, tuple[float, float]]:
 
 
 def bound_side(x: float, lower: float, upper: float, tol: float = BOUND_TOL) -> int:
-    """-1 when ``x`` lies on the lower bound, +1 on the upper (within ``tol`` of the box width), else 0
+    """-1 when ``x`` lies on the lower bound, +1 on the upper (within ``tol`` of the box width),
+    else 0
     (also for NaN or a degenerate box)."""
     width = upper - lower
     if not (math.isfinite(x) and width > 0):
@@ -63,7 +70,9 @@ def bound_side(x: float, lower: float, upper: float, tol: float = BOUND_TOL) -> 
 def bound_hits(runs: pd.DataFrame) -> pd.DataFrame:
     """Per run (rows as ``runs``) and parameter (columns): -1 final value on the lower bound of the
     case's box, +1 on the upper, 0 inside, NaN where inactive or the case is unknown."""
-    params = runs.attrs.get("parameters") or parameter_order(c[2:] for c in runs.columns if c.startswith("x."))
+    params = runs.attrs.get("parameters") or parameter_order(
+        c[2:] for c in runs.columns if c.startswith("x.")
+    )
     out = pd.DataFrame(np.nan, index=runs.index, columns=list(params))
     boxes: dict[str, dict] = {}
     for idx, r in runs.iterrows():
@@ -73,7 +82,6 @@ def bound_hits(runs: pd.DataFrame) -> pd.DataFrame:
             if p in box and isinstance(x, (int, float)) and math.isfinite(x):
                 out.loc[idx, p] = bound_side(float(x), box[p][0], box[p][1])
     return out
-
 
 
 def case_order(cases) -> list[str]:
@@ -111,7 +119,8 @@ def identified(runs: pd.DataFrame) -> pd.DataFrame:
 def success(runs: pd.DataFrame, tol: float) -> pd.Series:
     """True where every active parameter is within ``tol`` percent of its reference."""
     params = runs.attrs.get("parameters") or parameter_order(
-        c[4:] for c in runs.columns if c.startswith("err."))
+        c[4:] for c in runs.columns if c.startswith("err.")
+    )
     err = runs[[f"err.{p}" for p in params]].abs()
     active = err.notna()
     ok = ((err <= tol) | ~active).all(axis=1) & (active.sum(axis=1) > 0)
@@ -131,9 +140,13 @@ def table1(runs: pd.DataFrame, method: str, *, budget: int | None = None) -> pd.
     if budget is not None:
         sel = sel[sel["budget"] == budget]
     cases = case_order(runs["case"].unique())
-    params = runs.attrs.get("parameters") or parameter_order(c[4:] for c in runs.columns if c.startswith("err."))
+    params = runs.attrs.get("parameters") or parameter_order(
+        c[4:] for c in runs.columns if c.startswith("err.")
+    )
     # canonical study parameters always appear (the paper's rows), others only when used
-    rows = [p for p in PARAMETER_ORDER if p in params] + [p for p in params if p not in PARAMETER_ORDER]
+    rows = [p for p in PARAMETER_ORDER if p in params] + [
+        p for p in params if p not in PARAMETER_ORDER
+    ]
     ok = identified(sel)
     hits = bound_hits(ok) if len(ok) else pd.DataFrame()
     out = pd.DataFrame(index=pd.Index(rows, name="parameter"), columns=cases, dtype=float)
@@ -163,15 +176,22 @@ def comparison(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
         gi = identified(g)
         row = {"case": case, "method": method}
         row.update(dict(zip(extra, rest)))
-        row.update({
-            "runs": len(g), "success_pct": 100.0 * float(ok.loc[g.index].mean()),
-            "evals_median": float(ev.median()), "evals_q25": float(ev.quantile(0.25)),
-            "evals_q75": float(ev.quantile(0.75)),
-            "fe_median": float(g["total_equivalents"].median()) if "total_equivalents" in g else math.nan,
-            "cost_median": float(gi["cost"].median()) if len(gi) else math.nan,
-            "max_err_median_pct": float(gi["max_abs_err"].median()) if len(gi) else math.nan,
-            "wall_median_s": float(g["wall_s"].median()), "crashed": int(g["crashed"].sum()),
-        })
+        row.update(
+            {
+                "runs": len(g),
+                "success_pct": 100.0 * float(ok.loc[g.index].mean()),
+                "evals_median": float(ev.median()),
+                "evals_q25": float(ev.quantile(0.25)),
+                "evals_q75": float(ev.quantile(0.75)),
+                "fe_median": float(g["total_equivalents"].median())
+                if "total_equivalents" in g
+                else math.nan,
+                "cost_median": float(gi["cost"].median()) if len(gi) else math.nan,
+                "max_err_median_pct": float(gi["max_abs_err"].median()) if len(gi) else math.nan,
+                "wall_median_s": float(g["wall_s"].median()),
+                "crashed": int(g["crashed"].sum()),
+            }
+        )
         rows.append(row)
     df = pd.DataFrame(rows)
     if len(df):
@@ -186,14 +206,19 @@ def comparison(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
 def success_matrix(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
     """Success rate in percent, rows = methods, columns = cases (all budgets pooled)."""
     ok = success(runs, tol)
-    tab = (pd.DataFrame({"method": runs["method"], "case": runs["case"], "ok": ok.astype(float)})
-           .pivot_table(index="method", columns="case", values="ok", aggfunc="mean") * 100.0)
+    tab = (
+        pd.DataFrame(
+            {"method": runs["method"], "case": runs["case"], "ok": ok.astype(float)}
+        ).pivot_table(index="method", columns="case", values="ok", aggfunc="mean")
+        * 100.0
+    )
     tab = tab.reindex(index=method_order(tab.index), columns=case_order(tab.columns))
     tab.index.name, tab.columns.name = "method", None
     return tab
 
 
 # --- formatting ------------------------------------------------------------------------------
+
 
 def fmt_pct(v: float) -> str:
     """A percentage for Table 1: ``–`` if inactive, 3 significant digits, scientific if tiny."""
@@ -234,9 +259,11 @@ def bound_note(t: pd.DataFrame) -> str:
     """The footnote of the bound marks of a Table 1 (empty when no cell is marked)."""
     if not t.attrs.get("on_bound"):
         return ""
-    return (f"{BOUND_MARK} the identified parameter ended on a bound of the case's box (within {BOUND_TOL:g} of the "
-            f"box width; {BOUND_MARK}k/n: in k of the n runs): the error then measures the box, not the "
-            "identification.")
+    return (
+        f"{BOUND_MARK} the identified parameter ended on a bound of the case's box (within "
+        f"{BOUND_TOL:g} of the box width; {BOUND_MARK}k/n: in k of the n runs): the error then "
+        "measures the box, not the identification."
+    )
 
 
 def comparison_display(df: pd.DataFrame) -> pd.DataFrame:
@@ -268,23 +295,45 @@ def to_markdown(df: pd.DataFrame, *, index: bool = True, index_label: str | None
         cols = [index_label or str(df.index.name or "")] + cols
         body = [[str(i)] + r for i, r in zip(df.index, body)]
     esc = lambda s: s.replace("|", "\\|")  # noqa: E731
-    lines = ["| " + " | ".join(map(esc, cols)) + " |",
-             "|" + "|".join([":---"] + ["---:"] * (len(cols) - 1)) + "|"]
+    lines = [
+        "| " + " | ".join(map(esc, cols)) + " |",
+        "|" + "|".join([":---"] + ["---:"] * (len(cols) - 1)) + "|",
+    ]
     lines += ["| " + " | ".join(map(esc, r)) + " |" for r in body]
     return "\n".join(lines) + "\n"
 
 
-_TEX_ESC = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}",
-            "~": r"\textasciitilde{}", "^": r"\textasciicircum{}", "\\": r"\textbackslash{}",
-            "–": "--", "≤": r"$\leq$", "|": r"$|$", BOUND_MARK: r"\textsuperscript{\dag}"}
+_TEX_ESC = {
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+    "\\": r"\textbackslash{}",
+    "–": "--",
+    "≤": r"$\leq$",
+    "|": r"$|$",
+    BOUND_MARK: r"\textsuperscript{\dag}",
+}
 
 
 def tex_escape(s: str) -> str:
     return "".join(_TEX_ESC.get(ch, ch) for ch in str(s))
 
 
-def to_latex(df: pd.DataFrame, *, caption: str, label: str, index: bool = True,
-             index_label: str | None = None, raw_index: bool = False) -> str:
+def to_latex(
+    df: pd.DataFrame,
+    *,
+    caption: str,
+    label: str,
+    index: bool = True,
+    index_label: str | None = None,
+    raw_index: bool = False,
+) -> str:
     """A booktabs ``table`` environment; cells are escaped, ``–`` becomes ``--``."""
     cols = [tex_escape(c) for c in df.columns]
     body = [[tex_escape(v) for v in row] for row in df.itertuples(index=False)]
@@ -293,22 +342,44 @@ def to_latex(df: pd.DataFrame, *, caption: str, label: str, index: bool = True,
         idx = [str(i) if raw_index else tex_escape(i) for i in df.index]
         body = [[i] + r for i, r in zip(idx, body)]
     spec = "l" + "r" * (len(cols) - 1)
-    lines = [r"\begin{table}[htbp]", r"\centering", rf"\caption{{{tex_escape(caption)}}}", rf"\label{{{label}}}",
-             r"\small", rf"\begin{{tabular}}{{{spec}}}", r"\toprule", " & ".join(cols) + r" \\", r"\midrule"]
+    lines = [
+        r"\begin{table}[htbp]",
+        r"\centering",
+        rf"\caption{{{tex_escape(caption)}}}",
+        rf"\label{{{label}}}",
+        r"\small",
+        rf"\begin{{tabular}}{{{spec}}}",
+        r"\toprule",
+        " & ".join(cols) + r" \\",
+        r"\midrule",
+    ]
     lines += [" & ".join(r) + r" \\" for r in body]
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}"]
     return "\n".join(lines) + "\n"
 
 
-def write_table(stem: Path, formats, *, display: pd.DataFrame, raw: pd.DataFrame, caption: str,
-                label: str, index: bool = True, index_label: str | None = None,
-                tex_display: pd.DataFrame | None = None, raw_index_tex: bool = False) -> list[Path]:
+def write_table(
+    stem: Path,
+    formats,
+    *,
+    display: pd.DataFrame,
+    raw: pd.DataFrame,
+    caption: str,
+    label: str,
+    index: bool = True,
+    index_label: str | None = None,
+    tex_display: pd.DataFrame | None = None,
+    raw_index_tex: bool = False,
+) -> list[Path]:
     """Write ``stem.{md,csv,tex}`` for the requested formats; return the paths written."""
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     if "md" in formats:
         p = stem.with_suffix(".md")
-        p.write_text(f"{caption}\n\n" + to_markdown(display, index=index, index_label=index_label), encoding="utf-8")
+        p.write_text(
+            f"{caption}\n\n" + to_markdown(display, index=index, index_label=index_label),
+            encoding="utf-8",
+        )
         paths.append(p)
     if "csv" in formats:
         p = stem.with_suffix(".csv")
@@ -316,8 +387,17 @@ def write_table(stem: Path, formats, *, display: pd.DataFrame, raw: pd.DataFrame
         paths.append(p)
     if "tex" in formats:
         p = stem.with_suffix(".tex")
-        p.write_text(to_latex(tex_display if tex_display is not None else display, caption=caption, label=label,
-                              index=index, index_label=index_label, raw_index=raw_index_tex), encoding="utf-8")
+        p.write_text(
+            to_latex(
+                tex_display if tex_display is not None else display,
+                caption=caption,
+                label=label,
+                index=index,
+                index_label=index_label,
+                raw_index=raw_index_tex,
+            ),
+            encoding="utf-8",
+        )
         paths.append(p)
     return paths
 

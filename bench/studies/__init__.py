@@ -1,7 +1,9 @@
 """Sensitivity, identifiability, global-sensitivity and uncertainty studies (orchestration and I/O).
 
-The mathematics lives in :mod:`problems.analysis.sensitivity`, :mod:`problems.analysis.identifiability` and
-:mod:`problems.analysis.global_sensitivity`. Each study is two steps, as the suites and their reports:
+The mathematics lives in :mod:`problems.analysis.sensitivity`,
+:mod:`problems.analysis.identifiability` and
+:mod:`problems.analysis.global_sensitivity`. Each study is two steps, as the suites and their
+reports:
 
 * ``run_<study>(...)`` builds the objective, runs the forward evaluations through
   :func:`bench.parallel.mapper` (the suites' evaluator), writes the raw results (CSV, JSON,
@@ -12,6 +14,7 @@ The mathematics lives in :mod:`problems.analysis.sensitivity`, :mod:`problems.an
 Output folder: ``--out DIR``, else ``<results root>/studies/<study>/<case>/`` with the results
 root of :mod:`bench.paths` (the checkout's ``results/`` or ``$FEMUBENCH_RESULTS_DIR``).
 """
+
 from __future__ import annotations
 
 import csv
@@ -22,12 +25,13 @@ from typing import Iterable
 
 import numpy as np
 
-
 DATA_CHOICES = "auto | shipped | synthetic | PATH"
-DATA_HELP = ("data the objective is compared with: shipped (the case's pseudo-experimental data from the "
-             "fine mesh, computed and cached if missing), synthetic (this mesh's own response at the "
-             "reference, unrounded: no model error, cost 0 at the reference), a data-file PATH, or auto "
-             "(shipped if already on disk, else synthetic). Default: auto")
+DATA_HELP = (
+    "data the objective is compared with: shipped (the case's pseudo-experimental data from the "
+    "fine mesh, computed and cached if missing), synthetic (this mesh's own response at the "
+    "reference, unrounded: no model error, cost 0 at the reference), a data-file PATH, or auto "
+    "(shipped if already on disk, else synthetic). Default: auto"
+)
 
 
 def default_output_dir(command: str, case: str) -> Path:
@@ -45,10 +49,13 @@ def output_dir(command: str, case: str, out: str | Path | None = None) -> Path:
 
 
 def existing_dir(command: str, case: str, out: str | Path | None = None) -> Path:
-    """The output folder a previous run wrote (``out`` or the default); FileNotFoundError if absent."""
+    """The output folder a previous run wrote (``out`` or the default); FileNotFoundError if
+    absent."""
     path = Path(out) if out else default_output_dir(command, case)
     if not path.is_dir():
-        raise FileNotFoundError(f"no results of `femubench {command}` in {path}: run the study first")
+        raise FileNotFoundError(
+            f"no results of `femubench {command}` in {path}: run the study first"
+        )
     return path
 
 
@@ -71,12 +78,14 @@ def case_names(items: Iterable[str]) -> list[str]:
 
 def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto", mapper=None):
     """``(objective, description of the data)`` for the studies (see :data:`DATA_HELP`)."""
-    from problems.inverse.cases import get_case
     from problems.inverse.build import build_objective
+    from problems.inverse.cases import get_case
 
     case = get_case(case_name)
     if case.is_analytic:
-        return build_objective(case, mapper=mapper), "analytic synthetic data (noise-free, at the reference)"
+        return build_objective(
+            case, mapper=mapper
+        ), "analytic synthetic data (noise-free, at the reference)"
     from problems.inverse.data import default_path, get_data, make_data
 
     if data == "auto":
@@ -85,9 +94,13 @@ def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto",
         ds = get_data(case.name, progress=True)
         text = f"shipped data {default_path(case.name)} (mesh {ds.settings.mesh})"
     elif data == "synthetic":
-        ds = make_data(case, mesh=mesh, resolution_um=0.0, force_resolution_kN=0.0, tier="consistent")
-        text = (f"synthetic data: the {mesh} mesh's own response at the reference, unrounded "
-                f"(weights as for 1 um rounding; no model error)")
+        ds = make_data(
+            case, mesh=mesh, resolution_um=0.0, force_resolution_kN=0.0, tier="consistent"
+        )
+        text = (
+            f"synthetic data: the {mesh} mesh's own response at the reference, unrounded "
+            f"(weights as for 1 um rounding; no model error)"
+        )
     else:
         path = Path(data)
         if not path.exists():
@@ -109,8 +122,10 @@ def outside_bounds(what: str, case_name: str, obj, z) -> str | None:
     units = {p.name: p.unit for p in get_case(case_name).parameters if p.unit not in ("", "-")}
     x = obj.to_physical(z)
     return f"{what} outside the case's bounds: " + "; ".join(
-        f"{obj.names[i]} = {x[i]:g} is outside [{obj.lower[i]:g}, {obj.upper[i]:g}] {units.get(obj.names[i], '')}".rstrip()
-        for i in bad)
+        f"{obj.names[i]} = {x[i]:g} is outside [{obj.lower[i]:g}, {obj.upper[i]:g}] "
+        f"{units.get(obj.names[i], '')}".rstrip()
+        for i in bad
+    )
 
 
 def parse_assignments(items: list[str] | None, names: tuple[str, ...]) -> dict[str, float]:
@@ -183,8 +198,10 @@ def render_from(render, folder, *args) -> list:
     try:
         return render(folder, *args)
     except (KeyError, IndexError, TypeError, AttributeError, EOFError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"{folder}: the files of an earlier run are incomplete or malformed "
-                         f"({type(exc).__name__}: {exc}); run the study again") from None
+        raise ValueError(
+            f"{folder}: the files of an earlier run are incomplete or malformed "
+            f"({type(exc).__name__}: {exc}); run the study again"
+        ) from None
     except ValueError as exc:
         if str(folder) in str(exc):
             raise
@@ -192,7 +209,8 @@ def render_from(render, folder, *args) -> list:
 
 
 def as_float(value) -> float:
-    """A number read back from :func:`write_json` (``"nan"``, ``"inf"`` strings included); None -> nan."""
+    """A number read back from :func:`write_json` (``"nan"``, ``"inf"`` strings included);
+    None -> nan."""
     return math.nan if value is None else float(value)
 
 

@@ -1,8 +1,10 @@
 """Global sensitivity study of one case: Sobol (Saltelli) or Morris over the (scaled) parameter box.
 
 :func:`run_gsa` samples, evaluates, analyses and writes ``gsa_<method>.csv/md/json`` and
-``samples_<method>.csv``; :func:`render_gsa` draws ``gsa_<method>.png`` from ``gsa_<method>.json`` alone.
+``samples_<method>.csv``; :func:`render_gsa` draws ``gsa_<method>.png`` from ``gsa_<method>.json``
+alone.
 """
+
 from __future__ import annotations
 
 import math
@@ -12,7 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.studies import as_float, markdown_table, output_dir, read_json, study_objective, write_csv, write_json
+from bench.studies import (
+    as_float,
+    markdown_table,
+    output_dir,
+    read_json,
+    study_objective,
+    write_csv,
+    write_json,
+)
 
 METHODS = ("sobol", "morris")
 
@@ -21,12 +31,12 @@ METHODS = ("sobol", "morris")
 class GSARun:
     """What :func:`run_gsa` computed and wrote."""
 
-    result: object           # problems.analysis.global_sensitivity.SobolResult or MorrisResult
-    cost: dict               # evaluations, failures, wall times (s), workers
-    box_scale: float         # scale of the case's box about the reference (-)
-    data: str                # description of the data of the cost
-    X: np.ndarray            # sample points (physical units), (evaluations, parameters)
-    Y: np.ndarray            # outputs at the sample points, (evaluations, outputs)
+    result: object  # problems.analysis.global_sensitivity.SobolResult or MorrisResult
+    cost: dict  # evaluations, failures, wall times (s), workers
+    box_scale: float  # scale of the case's box about the reference (-)
+    data: str  # description of the data of the cost
+    X: np.ndarray  # sample points (physical units), (evaluations, parameters)
+    Y: np.ndarray  # outputs at the sample points, (evaluations, outputs)
     dir: Path
     paths: list[Path] = field(default_factory=list)
 
@@ -41,7 +51,8 @@ def planned_evaluations(method: str, samples: int, n_params: int) -> int:
 
 
 class CostOnly:
-    """Vectorised ``X -> cost`` of an objective (cases without the FE layout, e.g. analytic ones)."""
+    """Vectorised ``X -> cost`` of an objective (cases without the FE layout, e.g. analytic
+    ones)."""
 
     outputs = ("cost",)
 
@@ -64,22 +75,40 @@ def _chunked(f, X, chunk: int, progress: bool, desc: str) -> np.ndarray:
     out = []
     with tqdm(total=len(X), desc=desc, unit="run", disable=not progress) as bar:
         for i in range(0, len(X), chunk):
-            out.append(np.asarray(f(X[i:i + chunk]), float))
+            out.append(np.asarray(f(X[i : i + chunk]), float))
             bar.update(min(chunk, len(X) - i))
     return np.concatenate(out)
 
 
-def run_gsa(case_name: str, *, method: str = "sobol", samples: int = 32, mesh: str = "coarse", data: str = "auto",
-            box_scale: str | float = "auto", seed: int = 0, mapper=None, workers: int = 1, out=None,
-            progress: bool = True, confirm=None) -> GSARun | None:
+def run_gsa(
+    case_name: str,
+    *,
+    method: str = "sobol",
+    samples: int = 32,
+    mesh: str = "coarse",
+    data: str = "auto",
+    box_scale: str | float = "auto",
+    seed: int = 0,
+    mapper=None,
+    workers: int = 1,
+    out=None,
+    progress: bool = True,
+    confirm=None,
+) -> GSARun | None:
     """Sample, evaluate (through ``mapper``), analyse and write ``gsa_<method>.csv/md/json`` and the
-    samples (``samples_<method>.csv``). ``confirm(planned_evals, box, scale, n_infeasible)`` may veto
-    (return False): then nothing is evaluated or written and the result is None."""
-    from problems.inverse.cases import get_case
+    samples (``samples_<method>.csv``). ``confirm(planned_evals, box, scale, n_infeasible)`` may
+    veto (return False): then nothing is evaluated or written and the result is None."""
     from problems.analysis.global_sensitivity import (
-        FE_OUTPUT_LABELS, FESummaries, feasible_scale, morris_analyze, morris_sample, scaled_box, sobol_analyze,
+        FE_OUTPUT_LABELS,
+        FESummaries,
+        feasible_scale,
+        morris_analyze,
+        morris_sample,
+        scaled_box,
+        sobol_analyze,
         sobol_sample,
     )
+    from problems.inverse.cases import get_case
 
     case = get_case(case_name)
     if method not in ("sobol", "morris"):
@@ -118,44 +147,106 @@ def run_gsa(case_name: str, *, method: str = "sobol", samples: int = 32, mesh: s
     if method == "sobol":
         res = sobol_analyze(names, lower, upper, Y, outputs=f.outputs, seed=seed, n_evals=f.n_evals)
     else:
-        res = morris_analyze(names, lower, upper, X, Y, outputs=f.outputs, seed=seed, n_evals=f.n_evals)
+        res = morris_analyze(
+            names, lower, upper, X, Y, outputs=f.outputs, seed=seed, n_evals=f.n_evals
+        )
     res.wall_s = time.perf_counter() - t0
     if scale < 1:
-        res.warnings.insert(0, f"box scaled by {scale:g} about the reference: {n_infeasible_full} of {planned} sample "
-                               f"points of the full box are infeasible (check() rejects them)")
+        res.warnings.insert(
+            0,
+            f"box scaled by {scale:g} about the reference: {n_infeasible_full} of {planned} sample "
+            f"points of the full box are infeasible (check() rejects them)",
+        )
     out_dir = output_dir("gsa", case.name, out)
     stem = f"gsa_{method}"
     paths = [write_csv(out_dir / f"{stem}.csv", res.rows())]
-    paths.append(write_csv(out_dir / f"samples_{method}.csv",
-                           [{**dict(zip(names, map(float, x))), **dict(zip(f.outputs, map(float, y)))}
-                            for x, y in zip(X, Y)]))
-    cost = {"planned_evaluations": planned, "fe_evaluations": f.n_evals, "failed": f.n_failed,
-            "infeasible": f.n_infeasible, "evaluation_wall_s": eval_wall, "total_wall_s": res.wall_s,
-            "workers": workers, "mean_run_s": getattr(f, "fe_wall_s", 0.0) / max(f.n_evals, 1)}
-    settings = ({"n_base": samples, "evaluations": f"N (d + 2) = {samples} x {d + 2}", "sampler": "Saltelli/Sobol' "
-                 "(SALib.sample.sobol, scrambled, no second order)", "bootstrap_resamples": 200, "conf_level": 0.95}
-                if method == "sobol" else
-                {"trajectories": samples, "num_levels": 4, "evaluations": f"r (d + 1) = {samples} x {d + 1}",
-                 "sampler": "SALib.sample.morris"})
-    box_rows = [{"parameter": n, "reference": float(r), "lower": float(lo), "upper": float(hi)}
-                for n, r, lo, hi in zip(names, ref, lower, upper)]
-    fmt = {"S1": ".3f", "S1_conf": ".3f", "ST": ".3f", "ST_conf": ".3f", "mu": ".4g", "mu_star": ".4g",
-           "mu_star_conf": ".3g", "sigma": ".4g"}
-    md = [f"# {method.capitalize()} global sensitivity of {case.name} (mesh {mesh})", "",
-          f"Data for the cost: {text}.", "", "Settings: " + "; ".join(f"{k} {v}" for k, v in settings.items()) + ".", "",
-          f"Box (scale {scale:g} of the case bounds about the reference):", "", markdown_table(box_rows, {"reference": ".6g",
-                                                                                                   "lower": ".6g", "upper": ".6g"}),
-          markdown_table(res.rows(), fmt),
-          f"Cost: {f.n_evals} forward evaluations ({f.n_failed} failed, {f.n_infeasible} infeasible), "
-          f"{eval_wall:.1f} s of evaluation with {workers} worker(s), {res.wall_s:.1f} s in total."]
+    paths.append(
+        write_csv(
+            out_dir / f"samples_{method}.csv",
+            [
+                {**dict(zip(names, map(float, x))), **dict(zip(f.outputs, map(float, y)))}
+                for x, y in zip(X, Y)
+            ],
+        )
+    )
+    cost = {
+        "planned_evaluations": planned,
+        "fe_evaluations": f.n_evals,
+        "failed": f.n_failed,
+        "infeasible": f.n_infeasible,
+        "evaluation_wall_s": eval_wall,
+        "total_wall_s": res.wall_s,
+        "workers": workers,
+        "mean_run_s": getattr(f, "fe_wall_s", 0.0) / max(f.n_evals, 1),
+    }
+    settings = (
+        {
+            "n_base": samples,
+            "evaluations": f"N (d + 2) = {samples} x {d + 2}",
+            "sampler": "Saltelli/Sobol' (SALib.sample.sobol, scrambled, no second order)",
+            "bootstrap_resamples": 200,
+            "conf_level": 0.95,
+        }
+        if method == "sobol"
+        else {
+            "trajectories": samples,
+            "num_levels": 4,
+            "evaluations": f"r (d + 1) = {samples} x {d + 1}",
+            "sampler": "SALib.sample.morris",
+        }
+    )
+    box_rows = [
+        {"parameter": n, "reference": float(r), "lower": float(lo), "upper": float(hi)}
+        for n, r, lo, hi in zip(names, ref, lower, upper)
+    ]
+    fmt = {
+        "S1": ".3f",
+        "S1_conf": ".3f",
+        "ST": ".3f",
+        "ST_conf": ".3f",
+        "mu": ".4g",
+        "mu_star": ".4g",
+        "mu_star_conf": ".3g",
+        "sigma": ".4g",
+    }
+    md = [
+        f"# {method.capitalize()} global sensitivity of {case.name} (mesh {mesh})",
+        "",
+        f"Data for the cost: {text}.",
+        "",
+        "Settings: " + "; ".join(f"{k} {v}" for k, v in settings.items()) + ".",
+        "",
+        f"Box (scale {scale:g} of the case bounds about the reference):",
+        "",
+        markdown_table(box_rows, {"reference": ".6g", "lower": ".6g", "upper": ".6g"}),
+        markdown_table(res.rows(), fmt),
+        f"Cost: {f.n_evals} forward evaluations ({f.n_failed} failed, {f.n_infeasible} "
+        f"infeasible), {eval_wall:.1f} s of evaluation with {workers} worker(s), {res.wall_s:.1f} "
+        "s in total.",
+    ]
     md += [f"- warning: {w}" for w in res.warnings]
     (out_dir / f"{stem}.md").write_text("\n".join(md) + "\n")
     paths.append(out_dir / f"{stem}.md")
-    paths.append(write_json(out_dir / f"{stem}.json", {"case": case.name, "mesh": mesh, "method": method, "data": text,
-                                                       "settings": settings, "box_scale": scale, "box": box_rows,
-                                                       "names": list(names), "outputs": list(f.outputs),
-                                                       "output_labels": {o: labels.get(o, o) for o in f.outputs},
-                                                       "indices": res.rows(), "cost": cost, "warnings": res.warnings}))
+    paths.append(
+        write_json(
+            out_dir / f"{stem}.json",
+            {
+                "case": case.name,
+                "mesh": mesh,
+                "method": method,
+                "data": text,
+                "settings": settings,
+                "box_scale": scale,
+                "box": box_rows,
+                "names": list(names),
+                "outputs": list(f.outputs),
+                "output_labels": {o: labels.get(o, o) for o in f.outputs},
+                "indices": res.rows(),
+                "cost": cost,
+                "warnings": res.warnings,
+            },
+        )
+    )
     return GSARun(res, cost, scale, text, X, Y, Path(out_dir), paths)
 
 
@@ -187,9 +278,31 @@ def render_gsa(folder, methods=METHODS) -> list[Path]:
         path = d / f"gsa_{method}.png"
         if method == "sobol":
             conf = float(doc["settings"].get("conf_level", 0.95))
-            paths.append(sobol_bars(names, outputs, table("S1"), table("S1_conf"), table("ST"), table("ST_conf"), conf,
-                                    path, labels, title))
+            paths.append(
+                sobol_bars(
+                    names,
+                    outputs,
+                    table("S1"),
+                    table("S1_conf"),
+                    table("ST"),
+                    table("ST_conf"),
+                    conf,
+                    path,
+                    labels,
+                    title,
+                )
+            )
         else:
-            paths.append(morris_plot(names, outputs, table("mu_star"), table("mu_star_conf"), table("sigma"), path,
-                                     labels, title))
+            paths.append(
+                morris_plot(
+                    names,
+                    outputs,
+                    table("mu_star"),
+                    table("mu_star_conf"),
+                    table("sigma"),
+                    path,
+                    labels,
+                    title,
+                )
+            )
     return paths
