@@ -4,6 +4,7 @@ Every column is checked against central differences of plain runs with a step in
 range (the columns of two steps a decade apart agree, so neither truncation nor the noise of the
 Newton tolerance shows); small meshes keep the file well under a minute.
 """
+
 from __future__ import annotations
 
 import json
@@ -22,7 +23,7 @@ from problems.materials import LinearElastic
 
 #: one case per yield surface; the exponent case identifies pt0 in place of a (chain rule)
 CASES = ("linear-compression", "hyperbolic-shear", "exponent-tension")
-STEP, STEP_SMALL = 1e-4, 1e-5     # relative central-difference steps, both in the clean range
+STEP, STEP_SMALL = 1e-4, 1e-5  # relative central-difference steps, both in the clean range
 
 
 def central(model, x, j, step):
@@ -45,7 +46,7 @@ def check_columns(model, x, J, tol=1e-5, steps=(STEP,)):
         cols = [central(model, x, j, s) for s in steps]
         for g in cols:
             assert rel(J[:, j], g) < tol, (model.names[j], rel(J[:, j], g))
-        if len(cols) == 2:   # the step is in the clean range: a decade smaller changes nothing
+        if len(cols) == 2:  # the step is in the clean range: a decade smaller changes nothing
             assert rel(cols[0], cols[1]) < 1e-6, model.names[j]
 
 
@@ -111,8 +112,9 @@ def test_increments_that_were_cut_carry_the_sensitivities():
     """Two snapshots with at most 4 Newton iterations: the increments are bisected many times;
     the perturbed runs are cut the same way, so central differences see the same discrete path."""
     case = get_case("hyperbolic-shear")
-    settings = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10, max_iterations=4,
-                              max_cuts=20)
+    settings = NewtonSettings(
+        rtol_force=1e-10, rtol_displacement=1e-10, max_iterations=4, max_cuts=20
+    )
     model = FEForwardModel(case, "2,2,4", Loading(snapshots=2), settings=settings)
     x = case.reference
     resp = model.response(x)
@@ -146,13 +148,18 @@ def test_the_run_is_unchanged_when_sensitivities_are_asked():
 def test_elastic_plate_force_is_proportional_to_E():
     """Prescribed displacements: u does not depend on E and F = E f(nu), so dF/dE = F/E."""
     disc = discretise(parse_mesh_spec("2,2,4").mesh, symmetry="eighth")
-    r = run(disc, LinearElastic(30_000.0, 0.2), Loading(snapshots=3), FORWARD_SETTINGS,
-            sensitivities=True)
+    r = run(
+        disc,
+        LinearElastic(30_000.0, 0.2),
+        Loading(snapshots=3),
+        FORWARD_SETTINGS,
+        sensitivities=True,
+    )
     s = r.sensitivities
     np.testing.assert_allclose(s.reaction_kN[:, 0], r.reaction_kN / 30_000.0, rtol=1e-10)
     scale = np.max(np.abs(r.displacements)) / 30_000.0
     assert np.max(np.abs(s.displacements[..., 0])) < 1e-12 * scale
-    assert np.max(np.abs(s.displacements[..., 1])) > 0.0          # nu moves the free faces
+    assert np.max(np.abs(s.displacements[..., 1])) > 0.0  # nu moves the free faces
 
 
 def test_forward_model_declares_exact_jacobians_and_fails_like_a_plain_run():

@@ -6,12 +6,15 @@ being the response) are finite differences of plain runs for comparison, with re
 FORWARD_STEP and CENTRAL_STEP (h_j = step * |x_j|). Every method's wall time (response included)
 is reported against one plain forward run of the same point timed in the same command.
 """
+
 from __future__ import annotations
 
 NAME = "jacobian"
-HELP = ("Jacobian dU/dx of the measurement vector (front-face u_h, u_v, plate force) of a case: "
-        "exact sensitivities from one FE run (DDM) or finite differences, and its cost in forward "
-        "runs.")
+HELP = (
+    "Jacobian dU/dx of the measurement vector (front-face u_h, u_v, plate force) of a case: "
+    "exact sensitivities from one FE run (DDM) or finite differences, and its cost in forward "
+    "runs."
+)
 
 METHODS = ("analytic", "forward", "central")
 
@@ -32,16 +35,29 @@ def add_arguments(p) -> None:
 
     p.add_argument("case", help="FE case name (see `femubench cases`)")
     add_mesh_argument(p, "coarse", help=f"{MESH_HELP} (default: coarse)")
-    p.add_argument("--param", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
-                   help="identified parameters (MPa, degrees, -) to change from the case's "
-                        "reference")
-    p.add_argument("--method", choices=METHODS, default="analytic",
-                   help=f"analytic: one run with exact sensitivities (DDM); forward: n + 1 runs, "
-                        f"relative step {FORWARD_STEP:g}; central: 2 n + 1 runs, relative step "
-                        f"{CENTRAL_STEP:g} (default: analytic)")
-    p.add_argument("--json", metavar="FILE", type=output_file,
-                   help="write names, x, jacobian (rows: u_h snapshot-major, u_v, reaction_kN; "
-                        "columns: names), wall_s, forward_wall_s")
+    p.add_argument(
+        "--param",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="NAME=VALUE",
+        help="identified parameters (MPa, degrees, -) to change from the case's reference",
+    )
+    p.add_argument(
+        "--method",
+        choices=METHODS,
+        default="analytic",
+        help=f"analytic: one run with exact sensitivities (DDM); forward: n + 1 runs, "
+        f"relative step {FORWARD_STEP:g}; central: 2 n + 1 runs, relative step "
+        f"{CENTRAL_STEP:g} (default: analytic)",
+    )
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        type=output_file,
+        help="write names, x, jacobian (rows: u_h snapshot-major, u_v, reaction_kN; "
+        "columns: names), wall_s, forward_wall_s",
+    )
 
 
 def point(case, overrides: dict[str, float]):
@@ -50,8 +66,9 @@ def point(case, overrides: dict[str, float]):
 
     unknown = sorted(set(overrides) - set(case.names))
     if unknown:
-        raise ValueError(f"--param {unknown} unknown for case {case.name}; "
-                         f"allowed: {', '.join(case.names)}")
+        raise ValueError(
+            f"--param {unknown} unknown for case {case.name}; allowed: {', '.join(case.names)}"
+        )
     return np.array([overrides.get(n, r) for n, r in zip(case.names, case.reference)], float)
 
 
@@ -65,14 +82,15 @@ def finite_difference(model, x, base, scheme: str):
     for j, name in enumerate(model.names):
         h = step * max(abs(x[j]), 1e-8)
         values = []
-        for sign in ((1.0,) if scheme == "forward" else (1.0, -1.0)):
+        for sign in (1.0,) if scheme == "forward" else (1.0, -1.0):
             xs = x.copy()
             xs[j] += sign * h
             res = model(xs)
             runs += 1
             if not res.ok:
-                raise ValueError(f"the run at {name} {'+' if sign > 0 else '-'} {h:.3g} failed: "
-                                 f"{res.message}")
+                raise ValueError(
+                    f"the run at {name} {'+' if sign > 0 else '-'} {h:.3g} failed: {res.message}"
+                )
             values.append(res.values)
         if scheme == "forward":
             cols.append((values[0] - base) / h)
@@ -94,15 +112,17 @@ def main(args) -> int:
 
     case = get_case(args.case)
     if case.is_analytic:
-        raise ValueError(f"case {case.name} is analytic; femubench jacobian needs an FE case "
-                         "(see `femubench cases`)")
+        raise ValueError(
+            f"case {case.name} is analytic; femubench jacobian needs an FE case "
+            "(see `femubench cases`)"
+        )
     spec = parse_mesh_spec(args.mesh)
     x = point(case, assignments(args.param, "--param"))
     model = FEForwardModel(case, args.mesh)
     why = model.check(x)
     if why:
         raise ValueError(f"x is not a well-posed material: {why}")
-    discretisation(args.mesh)   # built once, outside the timings, like the compiled kernels:
+    discretisation(args.mesh)  # built once, outside the timings, like the compiled kernels:
     FEForwardModel(case, WARM_UP_MESH)(x, jacobian=args.method == "analytic")
     t = time.perf_counter()
     plain = model(x)
@@ -124,22 +144,35 @@ def main(args) -> int:
     wall = time.perf_counter() - t
     n_s, n_p = model.loading.snapshots, len(model.points)
     disp = slice(0, 2 * n_s * n_p)
-    print(f"case {case.name}, mesh {args.mesh} ({spec.symmetry}), method {args.method}: "
-          f"J is {J.shape[0]} x {J.shape[1]} (u_h, u_v: {n_s} snapshots x {n_p} points, then "
-          f"{n_s} forces)")
+    print(
+        f"case {case.name}, mesh {args.mesh} ({spec.symmetry}), method {args.method}: "
+        f"J is {J.shape[0]} x {J.shape[1]} (u_h, u_v: {n_s} snapshots x {n_p} points, then "
+        f"{n_s} forces)"
+    )
     print(f"{'parameter':10} {'x':>12} {'|dU_disp/dx| mm':>16} {'dF_end/dx kN':>14}")
     for j, name in enumerate(case.names):
         print(f"{name:10} {x[j]:12.6g} {np.linalg.norm(J[disp, j]):16.6g} {J[-1, j]:14.6g}")
     ratio = wall / forward_wall
-    print(f"cost: {wall:.3f} s ({runs} run{'s' if runs > 1 else ''}, response included) = "
-          f"{ratio:.2f} x one forward run ({forward_wall:.3f} s)")
+    print(
+        f"cost: {wall:.3f} s ({runs} run{'s' if runs > 1 else ''}, response included) = "
+        f"{ratio:.2f} x one forward run ({forward_wall:.3f} s)"
+    )
     if args.json:
-        doc = {"case": case.name, "mesh": args.mesh, "symmetry": spec.symmetry,
-               "method": args.method, "names": list(case.names), "x": x.tolist(),
-               "jacobian": J.tolist(),
-               "rows": {"u_h": [n_s, n_p], "u_v": [n_s, n_p], "reaction_kN": n_s},
-               "rel_step": {"forward": FORWARD_STEP, "central": CENTRAL_STEP}.get(args.method),
-               "runs": runs, "wall_s": wall, "forward_wall_s": forward_wall, "cost_ratio": ratio}
+        doc = {
+            "case": case.name,
+            "mesh": args.mesh,
+            "symmetry": spec.symmetry,
+            "method": args.method,
+            "names": list(case.names),
+            "x": x.tolist(),
+            "jacobian": J.tolist(),
+            "rows": {"u_h": [n_s, n_p], "u_v": [n_s, n_p], "reaction_kN": n_s},
+            "rel_step": {"forward": FORWARD_STEP, "central": CENTRAL_STEP}.get(args.method),
+            "runs": runs,
+            "wall_s": wall,
+            "forward_wall_s": forward_wall,
+            "cost_ratio": ratio,
+        }
         with open(args.json, "w") as fh:
             json.dump(doc, fh, indent=1)
         print(f"wrote {args.json}")

@@ -19,6 +19,7 @@ range again.
 ``--modes direct,krylov`` times each sensitivity solve mode of problems/fe/sensitivity.py (the
 measured choice behind ``auto``). ``coarse`` runs all nine cases, ``paper`` only ``--paper-cases``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,7 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
     case = CASES[name]
     model = FEForwardModel(case, mesh)
     x = case.reference
-    FEForwardModel(case, "1,1,2")(x, jacobian=True)   # compiled kernels loaded outside the timings
+    FEForwardModel(case, "1,1,2")(x, jacobian=True)  # compiled kernels loaded outside the timings
     best_plain, best = np.inf, {m: np.inf for m in modes}
     out = {}
     for _ in range(repeat):
@@ -71,29 +72,35 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
                 errs[s].append(np.linalg.norm(J[:, j] - g) / np.linalg.norm(g))
         err, err_small = max(errs[step]), max(errs[step / 100.0])
         worst = case.names[int(np.argmax(errs[step]))]
-    rows = []   # the split of the sensitivity time: one more run per mode
+    rows = []  # the split of the sensitivity time: one more run per mode
     for mode in modes:
         sensitivity.DEFAULT_MODE = mode
         tm = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities.timing
         sensitivity.DEFAULT_MODE = "auto"
         solve = tm["factor_s"] + tm["solve_s"]
-        rows.append(f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {tm['mode']:7} "
-                    f"{best_plain:7.3f} {best[mode]:7.3f} {best[mode] / best_plain:5.2f} "
-                    f"{tm['material_s']:6.3f} {tm['assembly_s']:6.3f} {solve:6.3f} "
-                    f"{tm['krylov_iterations']:5d} {err:9.1e} {worst:>7} {err_small:9.1e}")
+        rows.append(
+            f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {tm['mode']:7} "
+            f"{best_plain:7.3f} {best[mode]:7.3f} {best[mode] / best_plain:5.2f} "
+            f"{tm['material_s']:6.3f} {tm['assembly_s']:6.3f} {solve:6.3f} "
+            f"{tm['krylov_iterations']:5d} {err:9.1e} {worst:>7} {err_small:9.1e}"
+        )
     return rows
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--meshes", default="coarse,paper")
-    ap.add_argument("--cases", default="all",
-                    help="cases on every mesh but paper: all | comma-separated names")
-    ap.add_argument("--paper-cases", default=PAPER_CASES,
-                    help="cases on paper (comma-separated, or all)")
-    ap.add_argument("--modes", default="auto",
-                    help="sensitivity solve modes to time: auto | direct,krylov")
+    ap.add_argument(
+        "--cases", default="all", help="cases on every mesh but paper: all | comma-separated names"
+    )
+    ap.add_argument(
+        "--paper-cases", default=PAPER_CASES, help="cases on paper (comma-separated, or all)"
+    )
+    ap.add_argument(
+        "--modes", default="auto", help="sensitivity solve modes to time: auto | direct,krylov"
+    )
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--step", type=float, default=1e-5, help="relative central-difference step")
     ap.add_argument("--no-fd", action="store_true", help="skip the central differences")
@@ -103,9 +110,12 @@ def main(argv=None) -> None:
         if m not in sensitivity.SOLVE_MODES:
             allowed = ", ".join(sensitivity.SOLVE_MODES)
             raise SystemExit(f"mode {m!r} is unknown; allowed: {allowed}")
-    print(f"{'mesh':8} {'dofs':>6} {'case':22} {'mode':7} {'plain s':>7} {'jac s':>7} {'cost':>5} "
-          f"{'mater':>6} {'assem':>6} {'solve':>6} {'its':>5} {'max err':>9} {'worst':>7} "
-          f"{'err/100':>9}", flush=True)
+    print(
+        f"{'mesh':8} {'dofs':>6} {'case':22} {'mode':7} {'plain s':>7} {'jac s':>7} {'cost':>5} "
+        f"{'mater':>6} {'assem':>6} {'solve':>6} {'its':>5} {'max err':>9} {'worst':>7} "
+        f"{'err/100':>9}",
+        flush=True,
+    )
     for mesh in args.meshes.split(","):
         spec = args.paper_cases if mesh.split(":")[0] == "paper" else args.cases
         names = list(CASES) if spec == "all" else spec.split(",")

@@ -2,8 +2,8 @@
 
 The quarter (x, y in [0, 75], z in [0, 150] mm) is solved whole (``symmetry="quarter"``) or, using
 the mid-height symmetry of identical plates, as its lower half (``symmetry="eighth"``: z in [0, 75]
-mm, mid-plane u_z = -delta/2 prescribed, u_x and u_y free there) whose answer :func:`run` unfolds onto
-the quarter mesh, so a :class:`Response` is the same whichever model solved it.
+mm, mid-plane u_z = -delta/2 prescribed, u_x and u_y free there) whose answer :func:`run` unfolds
+onto the quarter mesh, so a :class:`Response` is the same whichever model solved it.
 
 Full Newton-Raphson with the material's consistent tangent (possibly non-symmetric), assembled by
 compiled kernels straight into the free-free block; each correction solved by GMRES on the exact
@@ -12,13 +12,14 @@ Newton forcing term that keeps the convergence quadratic (or by SuperLU per iter
 ``NewtonSettings.linear_solver``; see problems/fe/linear_solver.py); convergence on the relative
 residual force *and* the relative displacement correction, fixed sub-increments between snapshots
 and automatic bisection of an increment that fails (material return mapping failure, divergence,
-too many iterations, singular tangent), with a bounded number of cuts. A run that still fails returns a :class:`Response` flagged
-``converged=False`` with the snapshots completed so far and a message saying where and why; it
-never raises into the caller.
+too many iterations, singular tangent), with a bounded number of cuts. A run that still fails
+returns a :class:`Response` flagged ``converged=False`` with the snapshots completed so far and a
+message saying where and why; it never raises into the caller.
 
 Units: mm, N, MPa. Compression of the specimen is reported positive (``snapshots_mm``,
 ``reaction_kN``); displacement fields keep their sign (the top moves by ``-delta`` in z).
 """
+
 from __future__ import annotations
 
 import math
@@ -31,12 +32,30 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from problems.fe.assembly import FusedAssembler, Pattern, build_pattern, element_forces, element_matrices
-from problems.fe.linear_solver import (LINEAR_SOLVERS, Factor, LinearSolver, SingularMatrixError,
-                                       make_linear_solver, superlu_factor)
+from problems.fe.assembly import (
+    FusedAssembler,
+    Pattern,
+    build_pattern,
+    element_forces,
+    element_matrices,
+)
 from problems.fe.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
+from problems.fe.linear_solver import (
+    LINEAR_SOLVERS,
+    Factor,
+    LinearSolver,
+    SingularMatrixError,
+    make_linear_solver,
+    superlu_factor,
+)
+from problems.fe.mesh import (
+    Mesh,
+    check_symmetry,
+    lower_half,
+    nested_dissection_order,
+    unfold_mid_height,
+)
 from problems.materials.base import Material
-from problems.fe.mesh import Mesh, check_symmetry, lower_half, nested_dissection_order, unfold_mid_height
 
 if TYPE_CHECKING:
     from problems.fe.sensitivity import Sensitivities
@@ -60,7 +79,9 @@ class Loading:
 
     def __post_init__(self):
         if not (np.isfinite(self.displacement_mm) and self.displacement_mm > 0):
-            raise ValueError(f"displacement_mm = {self.displacement_mm!r} is out of range: must be > 0 mm")
+            raise ValueError(
+                f"displacement_mm = {self.displacement_mm!r} is out of range: must be > 0 mm"
+            )
         if int(self.snapshots) != self.snapshots or self.snapshots < 1:
             raise ValueError(f"snapshots = {self.snapshots!r} is out of range: a whole number >= 1")
         if self.plates not in PLATES:
@@ -101,9 +122,14 @@ class NewtonSettings:
 
     def __post_init__(self):
         if self.linear_solver not in LINEAR_SOLVERS:
-            raise ValueError(f"linear_solver = {self.linear_solver!r} is unknown; allowed: {', '.join(LINEAR_SOLVERS)}")
+            raise ValueError(
+                f"linear_solver = {self.linear_solver!r} is unknown; allowed: "
+                f"{', '.join(LINEAR_SOLVERS)}"
+            )
         if self.assembly not in ASSEMBLIES:
-            raise ValueError(f"assembly = {self.assembly!r} is unknown; allowed: {', '.join(ASSEMBLIES)}")
+            raise ValueError(
+                f"assembly = {self.assembly!r} is unknown; allowed: {', '.join(ASSEMBLIES)}"
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,12 +137,13 @@ class Discretisation:
     """Everything about a mesh that does not change between runs: B-bar, volumes, sparsity.
 
     ``mesh`` is the mesh that is solved; ``full_mesh`` the quarter mesh of the whole height that
-    responses are reported on (the same mesh for ``symmetry="quarter"``, twice as tall for ``eighth``).
+    responses are reported on (the same mesh for ``symmetry="quarter"``, twice as tall for
+    ``eighth``).
     """
 
     mesh: Mesh
-    B: np.ndarray        # (ne, 8, 6, 24)
-    dV: np.ndarray       # (ne, 8) mm^3
+    B: np.ndarray  # (ne, 8, 6, 24)
+    dV: np.ndarray  # (ne, 8) mm^3
     pattern: Pattern
     symmetry: str = "quarter"
     full_mesh: Mesh | None = None
@@ -146,8 +173,9 @@ def discretise(mesh: Mesh, *, use_b_bar: bool = True, symmetry: str = "quarter")
         mesh = lower_half(mesh)
     dNdx, detJ = gradients(mesh.nodes[mesh.elements])
     B = b_bar(dNdx, detJ) if use_b_bar else strain_operator(dNdx)
-    return Discretisation(mesh, B, detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes),
-                          symmetry, full)
+    return Discretisation(
+        mesh, B, detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes), symmetry, full
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,7 +202,8 @@ class BoundaryConditions:
 
     @cached_property
     def top_z(self) -> np.ndarray:
-        """The prescribed moving dofs: u_z of the top plate (quarter) or of the mid-height plane (eighth)."""
+        """The prescribed moving dofs: u_z of the top plate (quarter) or of the mid-height plane
+        (eighth)."""
         return 3 * self.disc.mesh.face("z1") + 2
 
     @property
@@ -205,13 +234,13 @@ class BoundaryConditions:
         nd = (3 * nested_dissection_order(self.disc.mesh)[:, None] + np.arange(3)).ravel()
         is_free = np.zeros(p.n_dofs, bool)
         is_free[self.free] = True
-        perm = nd[is_free[nd]]                     # free dofs in elimination order
+        perm = nd[is_free[nd]]  # free dofs in elimination order
         new = np.full(p.n_dofs, -1)
         new[perm] = np.arange(len(perm))
         rows = np.repeat(np.arange(p.n_dofs), np.diff(p.indptr))
         keep = np.nonzero((new[rows] >= 0) & (new[p.indices] >= 0))[0]
         r, c = new[rows[keep]], new[p.indices[keep]]
-        order = np.lexsort((r, c))                 # CSC: by column, then row
+        order = np.lexsort((r, c))  # CSC: by column, then row
         indptr = np.concatenate([[0], np.cumsum(np.bincount(c, minlength=len(perm)))])
         return keep[order], r[order], indptr, perm
 
@@ -233,7 +262,8 @@ class Response:
 
     mesh          : the quarter mesh of the whole height (also when the eighth model solved it)
     snapshots_mm  : (N,) top-plate displacement at each snapshot, mm (compression positive)
-    reaction_kN   : (N,) vertical plate force on the whole specimen (4 x quarter), kN, compression positive
+    reaction_kN   : (N,) vertical plate force on the whole specimen (4 x quarter), kN, compression
+                    positive
     displacements : (N, n_nodes, 3) nodal displacement field, mm
     stress        : (N, n_elements, 6) element-mean stress, MPa
     state         : (N, n_elements, n_state) element-mean history variables (e.g. eqps)
@@ -272,10 +302,17 @@ class Response:
         return self.displacements[:, :, 1] @ W.T, self.displacements[:, :, 2] @ W.T
 
 
-def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
-        settings: NewtonSettings = NewtonSettings(), *, progress: bool = False,
-        sensitivities=False) -> Response:
-    """Run the plate-compression test on ``disc`` with ``material``; never raises on non-convergence.
+def run(
+    disc: Discretisation,
+    material: Material,
+    loading: Loading = Loading(),
+    settings: NewtonSettings = NewtonSettings(),
+    *,
+    progress: bool = False,
+    sensitivities=False,
+) -> Response:
+    """Run the plate-compression test on ``disc`` with ``material``; never raises on
+    non-convergence.
 
     ``progress`` shows a progress bar over the snapshots (for long runs on fine meshes).
     ``sensitivities`` (True: all of ``material.parameter_names``; or a sequence of some of those
@@ -309,7 +346,9 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
         target = k / loading.snapshots
         while lam < target - 1e-12:
             dlam = min(step, target - lam)
-            inc = solver.increment(u, stress, state, D, -dlam * loading.displacement_mm * bc.top_fraction)
+            inc = solver.increment(
+                u, stress, state, D, -dlam * loading.displacement_mm * bc.top_fraction
+            )
             if inc.ok:
                 if ddm is not None:
                     ddm.advance(inc, stress, state)
@@ -321,9 +360,12 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
             cuts += 1
             if cuts > settings.max_cuts:
                 converged = False
-                message = (f"failed at snapshot {k}/{loading.snapshots} (top displacement "
-                           f"{lam * loading.displacement_mm:.4g} -> {(lam + dlam) * loading.displacement_mm:.4g} mm): "
-                           f"{inc.reason}; gave up after {settings.max_cuts} cuts")
+                message = (
+                    f"failed at snapshot {k}/{loading.snapshots} (top displacement "
+                    f"{lam * loading.displacement_mm:.4g} -> "
+                    f"{(lam + dlam) * loading.displacement_mm:.4g} mm): {inc.reason}; gave up "
+                    f"after {settings.max_cuts} cuts"
+                )
                 break
             step = dlam / 2.0
         if not converged:
@@ -340,8 +382,11 @@ def run(disc: Discretisation, material: Material, loading: Loading = Loading(),
     if bar is not None:
         bar.close()
     n_state = len(material.state_names)
-    fields = (np.array(out_u).reshape(len(out_u), nn, 3), np.array(out_s).reshape(len(out_s), ne, 6),
-              np.array(out_h).reshape(len(out_h), ne, n_state))
+    fields = (
+        np.array(out_u).reshape(len(out_u), nn, 3),
+        np.array(out_s).reshape(len(out_s), ne, 6),
+        np.array(out_h).reshape(len(out_h), ne, n_state),
+    )
     if disc.symmetry == "eighth":
         fields = unfold_mid_height(disc.full_mesh, np.array(out_d), *fields, material.state_names)
     return Response(
@@ -381,18 +426,18 @@ class _Increment:
     f_int: np.ndarray | None = None
     factor: Factor | None = None
     factor_at_converged: bool = False
-    strain_increment: np.ndarray | None = None   # (n_points, 6) of the converged update
+    strain_increment: np.ndarray | None = None  # (n_points, 6) of the converged update
 
 
 #: Newton forcing terms of the Krylov solves (relative linear residual asked of GMRES). Predictor:
-#: ETA_PREDICTOR. Correction at relative residual r: ``FORCING * r`` -- the linear residual then adds
-#: FORCING * r^2 to the next r, so convergence stays quadratic -- but never tighter than needed to
-#: land below the final acceptance level a = rtol_force * linear_rtol (``FORCING * a / r``),
+#: ETA_PREDICTOR. Correction at relative residual r: ``FORCING * r`` -- the linear residual then
+#: adds FORCING * r^2 to the next r, so convergence stays quadratic -- but never tighter than needed
+#: to land below the final acceptance level a = rtol_force * linear_rtol (``FORCING * a / r``),
 #: clipped to [ETA_MIN, ETA_MAX]. Measured on coarse, nine cases, 5 and 10 snapshots: with
 #: ETA_MAX = 1e-3 an early correction near the onset of plasticity can land on a different set of
 #: yielding points and cost an extra iteration (r: 1.9e-4 -> 6.5e-7 instead of 4.3e-8); 1e-4 gives
-#: the exact solves' residual histories (largest r_next / r^2 = 13 in both); ETA_PREDICTOR = 1e-4
-#: or FORCING = 1 cost extra iterations, tighter values only Krylov iterations.
+#: the exact solves' residual histories (largest r_next / r^2 = 13 in both); ETA_PREDICTOR = 1e-4 or
+#: FORCING = 1 cost extra iterations, tighter values only Krylov iterations.
 ETA_PREDICTOR, FORCING, ETA_MIN, ETA_MAX = 1e-5, 0.3, 1e-12, 1e-4
 
 #: refactorise the preconditioner once its ageing has cost this many extra Krylov iterations: one
@@ -402,7 +447,8 @@ REFACTOR_ITERATIONS = 15
 
 
 def forcing_term(rel_r: float, settings: NewtonSettings) -> float:
-    """Relative tolerance of the linear solve of a Newton correction at relative residual ``rel_r``."""
+    """Relative tolerance of the linear solve of a Newton correction at relative residual
+    ``rel_r``."""
     final = settings.rtol_force * settings.linear_rtol
     return min(ETA_MAX, max(ETA_MIN, FORCING * rel_r, FORCING * final / max(rel_r, 1e-300)))
 
@@ -426,7 +472,8 @@ def _perm_position(bc: BoundaryConditions) -> np.ndarray:
 
 def _free_block_slot(bc: BoundaryConditions):
     """Slot map of element entries into the free-free block in elimination order (-1: constrained
-    row or column) and that block's CSC structure, as :meth:`BoundaryConditions.free_block` has it."""
+    row or column) and that block's CSC structure, as :meth:`BoundaryConditions.free_block` has
+    it."""
     take, indices, indptr, _ = bc._free_block
     position = np.full(len(bc.disc.pattern.indices), -1, dtype=np.int64)
     position[take] = np.arange(len(take))
@@ -442,31 +489,58 @@ class _Newton:
     counts.
     """
 
-    def __init__(self, disc: Discretisation, material: Material, bc: BoundaryConditions, settings: NewtonSettings):
+    def __init__(
+        self,
+        disc: Discretisation,
+        material: Material,
+        bc: BoundaryConditions,
+        settings: NewtonSettings,
+    ):
         self.disc, self.material, self.bc, self.settings = disc, material, bc, settings
         self.iterations = 0
-        self.timing = {"assembly_s": 0.0, "material_s": 0.0, "factor_s": 0.0, "solve_s": 0.0,
-                       "factorisations": 0, "krylov_iterations": 0}
+        self.timing = {
+            "assembly_s": 0.0,
+            "material_s": 0.0,
+            "factor_s": 0.0,
+            "solve_s": 0.0,
+            "factorisations": 0,
+            "krylov_iterations": 0,
+        }
         self.residual_history: list[list[float]] = []
-        # elimination order -> index in bc.free (cached: the ordering is computed once per mesh and plates)
-        self._perm_position = _shared(disc, ("perm position", bc.plates), lambda: _perm_position(bc))
-        self.linear: LinearSolver = _shared(disc, ("linear", bc.plates, settings.linear_solver),
-                                            lambda: make_linear_solver(settings.linear_solver))
-        self._fused = (_shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
-                       if settings.assembly == "fused" else None)
-        self._free_slot = (_shared(disc, ("free slot", bc.plates), lambda: _free_block_slot(bc))
-                           if self._fused is not None else None)
-        self._factor: Factor | None = None         # the current factorisation / preconditioner
-        self._factor_D = None                      # the material tangent it was formed from
-        self._fresh_rate = None                    # Krylov iterations per decade right after it
-        self._excess = 0.0                         # Krylov iterations its ageing has added since
+        # elimination order -> index in bc.free (cached: the ordering is computed once per mesh and
+        # plates)
+        self._perm_position = _shared(
+            disc, ("perm position", bc.plates), lambda: _perm_position(bc)
+        )
+        self.linear: LinearSolver = _shared(
+            disc,
+            ("linear", bc.plates, settings.linear_solver),
+            lambda: make_linear_solver(settings.linear_solver),
+        )
+        self._fused = (
+            _shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
+            if settings.assembly == "fused"
+            else None
+        )
+        self._free_slot = (
+            _shared(disc, ("free slot", bc.plates), lambda: _free_block_slot(bc))
+            if self._fused is not None
+            else None
+        )
+        self._factor: Factor | None = None  # the current factorisation / preconditioner
+        self._factor_D = None  # the material tangent it was formed from
+        self._fresh_rate = None  # Krylov iterations per decade right after it
+        self._excess = 0.0  # Krylov iterations its ageing has added since
 
     def _virgin_tangent(self):
         n = self.disc.n_points
-        return self.material.update(np.zeros((n, 6)), np.zeros((n, 6)), self.material.initial_state(n)).tangent
+        return self.material.update(
+            np.zeros((n, 6)), np.zeros((n, 6)), self.material.initial_state(n)
+        ).tangent
 
     def _tangent(self, D):
-        """Global tangent K (CSR, N/mm) for the material tangents D (n_points, 6, 6) MPa (None: virgin)."""
+        """Global tangent K (CSR, N/mm) for the material tangents D (n_points, 6, 6) MPa
+        (None: virgin)."""
         t = time.perf_counter()
         if D is None:  # virgin state: the material's response to a zero increment
             D = self._virgin_tangent()
@@ -474,7 +548,13 @@ class _Newton:
             K = self._fused.matrix(D)
         else:
             ne = self.disc.mesh.n_elements
-            K = self.disc.pattern.matrix(element_matrices(self.disc.B, np.broadcast_to(D, (self.disc.n_points, 6, 6)).reshape(ne, 8, 6, 6), self.disc.dV))
+            K = self.disc.pattern.matrix(
+                element_matrices(
+                    self.disc.B,
+                    np.broadcast_to(D, (self.disc.n_points, 6, 6)).reshape(ne, 8, 6, 6),
+                    self.disc.dV,
+                )
+            )
         self.timing["assembly_s"] += time.perf_counter() - t
         return K
 
@@ -494,7 +574,9 @@ class _Newton:
             D = self._virgin_tangent()
         slot, indices, indptr = self._free_slot
         n = len(indptr) - 1
-        Kff = sp.csc_matrix((self._fused.tangent(D, slot, len(indices)), indices, indptr), shape=(n, n))
+        Kff = sp.csc_matrix(
+            (self._fused.tangent(D, slot, len(indices)), indices, indptr), shape=(n, n)
+        )
         self.timing["assembly_s"] += time.perf_counter() - t
         return Kff
 
@@ -524,7 +606,9 @@ class _Newton:
         if self._fused is not None:
             return self._fused.internal_force(stress)
         ne = self.disc.mesh.n_elements
-        return self.disc.pattern.vector(element_forces(self.disc.B, stress.reshape(ne, 8, 6), self.disc.dV))
+        return self.disc.pattern.vector(
+            element_forces(self.disc.B, stress.reshape(ne, 8, 6), self.disc.dV)
+        )
 
     def _factorise(self, Kff, D) -> Factor:
         t = time.perf_counter()
@@ -574,10 +658,10 @@ class _Newton:
 
     def converged_factor(self, inc: _Increment, exact: bool = False) -> Factor:
         """A factor that solves with the free block of the tangent at the converged state of ``inc``
-        (elimination order), for sensitivity solves: ``inc.factor`` if it was formed there, else that
-        factor as the preconditioner of the converged tangent or, for direct solvers, a new
-        factorisation. ``exact=True`` insists on a direct factorisation (SuperLU unless the kept
-        one is exact): cheaper than GMRES for 6-7 right-hand sides at tight tolerances
+        (elimination order), for sensitivity solves: ``inc.factor`` if it was formed there, else
+        that factor as the preconditioner of the converged tangent or, for direct solvers, a new
+        factorisation. ``exact=True`` insists on a direct factorisation (SuperLU unless the kept one
+        is exact): cheaper than GMRES for 6-7 right-hand sides at tight tolerances
         (bench/perf/linear_solvers.py, column "7 rhs")."""
         if inc.factor is not None and inc.factor_at_converged and (inc.factor.exact or not exact):
             return inc.factor
@@ -596,8 +680,14 @@ class _Newton:
 
     def _converged(self, **kw) -> _Increment:
         D = kw["tangent"]
-        at = self._factor is not None and self._factor_D is not None and (
-            self._factor_D is D or (np.shape(self._factor_D) == np.shape(D) and np.array_equal(self._factor_D, D)))
+        at = (
+            self._factor is not None
+            and self._factor_D is not None
+            and (
+                self._factor_D is D
+                or (np.shape(self._factor_D) == np.shape(D) and np.array_equal(self._factor_D, D))
+            )
+        )
         return _Increment(True, factor=self._factor, factor_at_converged=bool(at), **kw)
 
     def increment(self, u_n, stress_n, state_n, D_n, dtop_mm) -> _Increment:
@@ -623,7 +713,9 @@ class _Newton:
             upd = self.material.update(deps, stress_n, state_n)
             self.timing["material_s"] += time.perf_counter() - t
             if not np.all(upd.ok):
-                return _Increment(False, f"material return mapping failed at {np.count_nonzero(~upd.ok)} points")
+                return _Increment(
+                    False, f"material return mapping failed at {np.count_nonzero(~upd.ok)} points"
+                )
             t = time.perf_counter()
             f_int = self._internal_force(upd.stress)
             self.timing["assembly_s"] += time.perf_counter() - t
@@ -636,13 +728,25 @@ class _Newton:
                 return _Increment(False, "residual is not finite")
             if rel_r <= s.rtol_force * (1.0 if rel_u <= s.rtol_displacement else s.linear_rtol):
                 self.residual_history.append(norms)
-                return self._converged(u=u_n + du, stress=upd.stress, state=upd.state, tangent=upd.tangent,
-                                       f_int=f_int, strain_increment=deps)
+                return self._converged(
+                    u=u_n + du,
+                    stress=upd.stress,
+                    state=upd.state,
+                    tangent=upd.tangent,
+                    f_int=f_int,
+                    strain_increment=deps,
+                )
             if it >= 3 and rel_r > 1e3 * norms[0]:
                 return _Increment(False, f"Newton diverged (relative residual {rel_r:.3g})")
-            corr, why = self._solve(self._tangent_free(upd.tangent), -r_free, upd.tangent, forcing_term(rel_r, s))
+            corr, why = self._solve(
+                self._tangent_free(upd.tangent), -r_free, upd.tangent, forcing_term(rel_r, s)
+            )
             self.iterations += 1
             if why or not np.all(np.isfinite(corr)):
                 return _Increment(False, why or "non-finite correction")
             du[bc.free] += corr
-        return _Increment(False, f"no convergence in {s.max_iterations} Newton iterations (relative residual {norms[-1]:.3g})")
+        return _Increment(
+            False,
+            f"no convergence in {s.max_iterations} Newton iterations (relative residual "
+            f"{norms[-1]:.3g})",
+        )

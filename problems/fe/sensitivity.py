@@ -28,6 +28,7 @@ keep U = 0 and are dropped.
 Units: displacement sensitivities in mm per parameter unit, plate-force sensitivities in kN per
 parameter unit (parameter units: MPa, degrees or -); pseudo-loads in N per parameter unit.
 """
+
 from __future__ import annotations
 
 import time
@@ -136,8 +137,9 @@ class GlobalDDM:
 
         mode = DEFAULT_MODE if mode is None else mode
         if mode not in SOLVE_MODES:
-            raise ValueError(f"sensitivity solve mode {mode!r} is unknown; "
-                             f"allowed: {', '.join(SOLVE_MODES)}")
+            raise ValueError(
+                f"sensitivity solve mode {mode!r} is unknown; allowed: {', '.join(SOLVE_MODES)}"
+            )
         self.newton, self.material = newton, material
         self.bc, self.disc = newton.bc, newton.disc
         disc = self.disc
@@ -145,8 +147,8 @@ class GlobalDDM:
         self.names = tuple(material.parameter_names)
         self.columns = np.asarray(columns, dtype=np.int64)
         P, n_pts, ns = len(self.names), disc.n_points, len(material.state_names)
-        self.U = np.zeros((disc.pattern.n_dofs, P))     # dU/dp, mm per unit
-        self.eps = np.zeros((n_pts, P, 6))                # B dU/dp
+        self.U = np.zeros((disc.pattern.n_dofs, P))  # dU/dp, mm per unit
+        self.eps = np.zeros((n_pts, P, 6))  # B dU/dp
         self.dstress = np.zeros((n_pts, P, 6))
         self.dstate = np.zeros((n_pts, P, ns))
         self.dforce = np.zeros(len(self.columns))
@@ -157,8 +159,14 @@ class GlobalDDM:
         self._gcr = None
         self.ok, self.message, self.residual = True, "", 0.0
         self.wall_s = 0.0
-        self.timing = {"material_s": 0.0, "assembly_s": 0.0, "factor_s": 0.0, "solve_s": 0.0,
-                       "factorisations": 0, "krylov_iterations": 0}
+        self.timing = {
+            "material_s": 0.0,
+            "assembly_s": 0.0,
+            "factor_s": 0.0,
+            "solve_s": 0.0,
+            "factorisations": 0,
+            "krylov_iterations": 0,
+        }
         self._snap_u: list[np.ndarray] = []
         self._snap_f: list[np.ndarray] = []
 
@@ -169,7 +177,7 @@ class GlobalDDM:
         if not self.ok:
             return
         t0 = time.perf_counter()
-        saved = dict(self.newton.timing)     # the Newton solver's counters stay those of the run
+        saved = dict(self.newton.timing)  # the Newton solver's counters stay those of the run
         try:
             self._advance(inc, stress_n, state_n)
         except SingularMatrixError as exc:
@@ -190,7 +198,7 @@ class GlobalDDM:
         c, _ = mat.sensitivity(deps, stress_n, state_n, upd, self.dstress, self.dstate, -self.eps)
         self.timing["material_s"] += time.perf_counter() - t
         t = time.perf_counter()
-        rhs = -self._forces(c)[bc.free]                            # (n_free, k) N per unit
+        rhs = -self._forces(c)[bc.free]  # (n_free, k) N per unit
         self.timing["assembly_s"] += time.perf_counter() - t
         X = self._solve(inc, rhs)
         t = time.perf_counter()
@@ -200,15 +208,16 @@ class GlobalDDM:
         _strains_kernel(self._fused.B, U, cols, self._fused.edofs, eps)
         self.timing["assembly_s"] += time.perf_counter() - t
         t = time.perf_counter()
-        dstress, dstate = mat.sensitivity(deps, stress_n, state_n, upd, self.dstress, self.dstate,
-                                          eps - self.eps)
+        dstress, dstate = mat.sensitivity(
+            deps, stress_n, state_n, upd, self.dstress, self.dstate, eps - self.eps
+        )
         self.timing["material_s"] += time.perf_counter() - t
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(dstress[:, cols]))):
             self._fail("sensitivity is not finite")
             return
         self.U, self.eps, self.dstress, self.dstate = U, eps, dstress, dstate
         t = time.perf_counter()
-        f = self._forces(dstress)                                  # (n_dofs, k)
+        f = self._forces(dstress)  # (n_dofs, k)
         self.timing["assembly_s"] += time.perf_counter() - t
         self.dforce = np.array([bc.plate_force_kN(f[:, j]) for j in range(f.shape[1])])
         scale = max(float(np.linalg.norm(f[bc.fixed])), 1e-300)
@@ -222,8 +231,14 @@ class GlobalDDM:
     def _forces(self, stress) -> np.ndarray:
         """sum B^T stress[:, j] dV for the solved columns j, (n_dofs, k) N per unit."""
         out = np.empty((self.disc.pattern.n_dofs, len(self.columns)))
-        _forces_kernel(self._fused.B, np.ascontiguousarray(stress), self.columns, self._fused.dV,
-                       self._fused.edofs, out)
+        _forces_kernel(
+            self._fused.B,
+            np.ascontiguousarray(stress),
+            self.columns,
+            self._fused.dV,
+            self._fused.edofs,
+            out,
+        )
         return out
 
     def _solve(self, inc, rhs) -> np.ndarray:
@@ -281,9 +296,16 @@ class GlobalDDM:
             U = U[:, node_src]
             U[:, node_up, 2] *= -1.0
         force = np.array(self._snap_f).reshape(len(self._snap_f), k)
-        return Sensitivities(tuple(self.names[j] for j in self.columns), U, force, self.ok,
-                             self.message, self.residual, self.wall_s,
-                             {**self.timing, "mode": self.mode})
+        return Sensitivities(
+            tuple(self.names[j] for j in self.columns),
+            U,
+            force,
+            self.ok,
+            self.message,
+            self.residual,
+            self.wall_s,
+            {**self.timing, "mode": self.mode},
+        )
 
 
 def _symmetric(D) -> bool:
@@ -330,21 +352,22 @@ class RecycledGCR:
                 continue
             x = np.zeros(n)
             res = b.copy()
-            for _sweep in range(4):   # a true-residual check ends each sweep
+            for _sweep in range(4):  # a true-residual check ends each sweep
                 if r:
                     a = self.C[:r] @ res
                     x += a @ self.U[:r]
                     res -= a @ self.C[:r]
                 while float(np.linalg.norm(res)) > target:
-                    if r == self.max:   # full: restart from the current iterate
+                    if r == self.max:  # full: restart from the current iterate
                         r = 0
                     z = np.asarray(psolve(res), dtype=float).reshape(n)
                     c = A @ z
                     its += 1
                     if its > max_iterations:
                         raise SingularMatrixError(
-                            f"GCR did not reach {rtol:g} in {max_iterations} iterations")
-                    if r:   # classical Gram-Schmidt, again when it cancelled much (twice is enough)
+                            f"GCR did not reach {rtol:g} in {max_iterations} iterations"
+                        )
+                    if r:  # classical Gram-Schmidt, again when it cancelled much (twice is enough)
                         Cr, Ur = self.C[:r], self.U[:r]
                         for _ in range(2):
                             before = float(np.linalg.norm(c))

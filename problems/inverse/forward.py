@@ -4,6 +4,7 @@ The measurement vector of one run is laid out by :mod:`problems.inverse.layout`.
 ``jacobian=True`` the same run also gives the exact Jacobian dU/dx by direct differentiation
 (problems/fe/sensitivity.py), chained from the material's parameters to the identified ones.
 """
+
 from __future__ import annotations
 
 import time
@@ -13,22 +14,23 @@ from typing import ClassVar
 
 import numpy as np
 
+from problems.fe.front_face import measurement_grid
+from problems.fe.mesh import parse_mesh_spec
+from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.inverse import layout
 from problems.inverse.case import Case
 from problems.inverse.cases import get_case
-from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.materials import LinearElastic
-from problems.fe.front_face import measurement_grid
-from problems.fe.mesh import parse_mesh_spec
 
 #: tighter than the solver defaults so that finite-difference Jacobians are clean
 FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
 
 
 def discretisation(mesh: str) -> Discretisation:
-    """Discretisation of a mesh spec (``coarse``, ``coarse:quarter``, ``NX,NY,NZ[:eighth|:quarter]``),
-    built once per process (workers reuse it across runs). Presets and even NZ solve the eighth model
-    by default (same answers as the quarter, see docs/fe_model.md)."""
+    """Discretisation of a mesh spec (``coarse``, ``coarse:quarter``,
+    ``NX,NY,NZ[:eighth|:quarter]``), built once per process (workers reuse it across runs). Presets
+    and even NZ solve the eighth model by default (same answers as the quarter, see
+    docs/fe_model.md)."""
     return _discretisation(str(parse_mesh_spec(mesh)))
 
 
@@ -46,17 +48,23 @@ def case_material(case: Case, x):
 
 
 def material_from(case_name: str | None, overrides: dict[str, float]):
-    """Material for the CLI: elastic (E, nu) without a case, else the case's at reference + overrides."""
+    """Material for the CLI: elastic (E, nu) without a case, else the case's at
+    reference + overrides."""
     if case_name is None:
         unknown = set(overrides) - {"E", "nu"}
         if unknown:
-            raise ValueError(f"--param {sorted(unknown)} unknown for the elastic material; allowed: E, nu")
+            raise ValueError(
+                f"--param {sorted(unknown)} unknown for the elastic material; allowed: E, nu"
+            )
         return LinearElastic(**overrides)
     case = get_case(case_name)
     allowed = set(case.names) | set(case.fixed)
     unknown = set(overrides) - allowed
     if unknown:
-        raise ValueError(f"--param {sorted(unknown)} unknown for case {case.name}; allowed: {', '.join(sorted(allowed))}")
+        raise ValueError(
+            f"--param {sorted(unknown)} unknown for case {case.name}; allowed: "
+            f"{', '.join(sorted(allowed))}"
+        )
     from problems.materials.drucker_prager import make_material
 
     x = np.array([overrides.get(n, r) for n, r in zip(case.names, case.reference)], float)
@@ -69,8 +77,8 @@ class FEForwardModel:
     """Forward model of the objective backed by the FE cube test (picklable for Dask workers).
 
     case     : the identification case (which parameters are active)
-    mesh     : mesh spec (``coarse``, ``paper``, ``fine`` or ``NX,NY,NZ``, optionally ``:eighth`` or ``:quarter``;
-               by default the eighth model where it is exact)
+    mesh     : mesh spec (``coarse``, ``paper``, ``fine`` or ``NX,NY,NZ``, optionally ``:eighth``
+               or ``:quarter``; by default the eighth model where it is exact)
     loading  : plate displacement, snapshots and plate condition
     points   : (m, 2) front-face measurement points (y, z), mm
 
@@ -96,7 +104,9 @@ class FEForwardModel:
         from problems.materials.drucker_prager import validate_parameters
 
         try:
-            validate_parameters(self.case.form, self.case.hardening, self.case.material_parameters(x))
+            validate_parameters(
+                self.case.form, self.case.hardening, self.case.material_parameters(x)
+            )
         except ValueError as exc:
             return str(exc)
         return None
@@ -104,8 +114,14 @@ class FEForwardModel:
     def response(self, x, *, progress: bool = False, sensitivities=False):
         """The full FE :class:`~problems.fe.Response` at ``x`` (with ``sensitivities``: see
         :func:`problems.fe.newton.run`; names are the material's parameters)."""
-        return run(discretisation(self.mesh), case_material(self.case, x), self.loading, self.settings,
-                   progress=progress, sensitivities=sensitivities)
+        return run(
+            discretisation(self.mesh),
+            case_material(self.case, x),
+            self.loading,
+            self.settings,
+            progress=progress,
+            sensitivities=sensitivities,
+        )
 
     def material_chain(self, x) -> tuple[tuple[str, ...], np.ndarray]:
         """The material parameters the identified ones move, and d(those)/dx (P', n): the rows of
