@@ -167,7 +167,9 @@ def test_make_data_hands_the_image_directory_to_the_dic_route(monkeypatch, tmp_p
         return u, u, np.ones((2,) + u.shape), {"dic": {"seed": seed}}
 
     monkeypatch.setattr(route, "measure_by_dic", fake_dic)
-    ds = D.make_data("linear-compression", mesh="2,2,4", snapshots=1, route="dic", image_dir=tmp_path)
+    ds = D.make_data(
+        "linear-compression", mesh="2,2,4", snapshots=1, route="dic", image_dir=tmp_path
+    )
     assert seen["image_dir"] == tmp_path and ds.meta["dic"] == {"seed": 0}
 
 

@@ -57,9 +57,23 @@ def test_study_rows_resume_and_render(tmp_path, data):
 def test_rows_made_with_other_data_are_recomputed(tmp_path, data):
     from problems.inverse.data import make_data
 
-    run_model_error("linear-compression", meshes=("1,1,2",), treatments=("none",), margins=(0.0,), budget=20,
-                    out=tmp_path, data=data)
+    run_model_error(
+        "linear-compression",
+        meshes=("1,1,2",),
+        treatments=("none",),
+        margins=(0.0,),
+        budget=20,
+        out=tmp_path,
+        data=data,
+    )
     other = make_data("linear-compression", mesh="2,2,4", snapshots=2, resolution_um=2.0)
-    run = run_model_error("linear-compression", meshes=("1,1,2",), treatments=("none",), margins=(0.0,),
-                          budget=20, out=tmp_path, data=other)
+    run = run_model_error(
+        "linear-compression",
+        meshes=("1,1,2",),
+        treatments=("none",),
+        margins=(0.0,),
+        budget=20,
+        out=tmp_path,
+        data=other,
+    )
     assert run.rows[0]["provenance"]["data_hash"] == other.hash != data.hash

@@ -14,6 +14,7 @@ the DIC data route) gives one row:
 it is done (an interrupted study resumes where it stopped; a torn file is recomputed) and a
 ``summary.csv``; :func:`render_model_error` draws ``bias_vs_cost.png`` from the files alone.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -54,7 +55,8 @@ class ModelErrorRun:
 
 
 def linearised_bias(objective) -> dict[str, float]:
-    """``-(J^T J)^-1 J^T r`` at the reference (z = 1) in % per parameter (one Jacobian, one residual)."""
+    """``-(J^T J)^-1 J^T r`` at the reference (z = 1) in % per parameter
+    (one Jacobian, one residual)."""
     z = np.ones(objective.n_params)
     r = objective.residual(z)
     J = objective.jacobian(z, scheme="central", rel_step=1e-4)
@@ -62,13 +64,22 @@ def linearised_bias(objective) -> dict[str, float]:
     return {n: 100.0 * float(v) for n, v in zip(objective.names, dz)}
 
 
-def one_row(case: str, cfg: Configuration, *, budget: int, mapper=None, data=None, hifi_mesh=None) -> dict:
+def one_row(
+    case: str, cfg: Configuration, *, budget: int, mapper=None, data=None, hifi_mesh=None
+) -> dict:
     """LM from the default start and the linearised bias for one configuration.
 
-    ``data``: the model-error data set (default: the shipped one, or the DIC route's); ``hifi_mesh``:
+    ``data``: the model-error data set (default: the shipped one, or the DIC route's);
+    ``hifi_mesh``:
     the correction's high-fidelity mesh (default: the next finer preset of the inverse mesh)."""
     from bench.identification import Identification, identify
-    from problems.inverse.build import Region, build_objective, hifi_mesh_for, model_pair, resolve_data
+    from problems.inverse.build import (
+        Region,
+        build_objective,
+        hifi_mesh_for,
+        model_pair,
+        resolve_data,
+    )
     from problems.inverse.cases import get_case
     from problems.inverse.data import get_data, tier_settings
     from problems.inverse.model_error import one_point
@@ -77,11 +88,22 @@ def one_row(case: str, cfg: Configuration, *, budget: int, mapper=None, data=Non
     c = get_case(case)
     if data is None:
         settings = tier_settings("model-error", route=cfg.route)
-        data = get_data(case, settings, progress=True) if cfg.route != "fe" else resolve_data(c, cfg.mesh,
-                                                                                               "model-error", None)
+        data = (
+            get_data(case, settings, progress=True)
+            if cfg.route != "fe"
+            else resolve_data(c, cfg.mesh, "model-error", None)
+        )
     hifi_mesh = hifi_mesh or (hifi_mesh_for(cfg.mesh) if cfg.treatment != "none" else None)
-    spec = Identification(case, "lm", mesh=cfg.mesh, tier="model-error", treatment=cfg.treatment,
-                          hifi_mesh=hifi_mesh, plate_margin_mm=cfg.plate_margin_mm, budget=budget)
+    spec = Identification(
+        case,
+        "lm",
+        mesh=cfg.mesh,
+        tier="model-error",
+        treatment=cfg.treatment,
+        hifi_mesh=hifi_mesh,
+        plate_margin_mm=cfg.plate_margin_mm,
+        budget=budget,
+    )
     result = identify(spec, mapper=mapper, dataset=data)
     region = Region(cfg.plate_margin_mm)
     correction = None
@@ -96,33 +118,69 @@ def one_row(case: str, cfg: Configuration, *, budget: int, mapper=None, data=Non
 
         hifi, inverse = model_pair(c, cfg.mesh, hifi_mesh, data, region)
         correction = bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
-    objective = build_objective(c, mesh=cfg.mesh, data=data, region=region, correction=correction,
-                                hifi_mesh=hifi_mesh, mapper=mapper)
+    objective = build_objective(
+        c,
+        mesh=cfg.mesh,
+        data=data,
+        region=region,
+        correction=correction,
+        hifi_mesh=hifi_mesh,
+        mapper=mapper,
+    )
     bias = linearised_bias(objective)
     errors = result.errors_percent()
-    total_fe = result.forward_equivalents + sum(ch["forward_equivalents"] for ch in result.charges.values())
-    return {"case": case, "mesh": cfg.mesh, "treatment": cfg.treatment, "plate_margin_mm": cfg.plate_margin_mm,
-            "route": cfg.route, "lm_error_percent": errors, "linearised_bias_percent": bias,
-            "max_abs_error_percent": max(abs(v) for v in errors.values()),
-            "n_evals": result.n_evals, "forward_equivalents": result.forward_equivalents,
-            "charges": result.charges, "total_forward_equivalents": total_fe, "status": result.status,
-            "iterations": result.n_iterations, "x": result.x, "provenance": result.provenance,
-            "wall_s": time.perf_counter() - t0}
+    total_fe = result.forward_equivalents + sum(
+        ch["forward_equivalents"] for ch in result.charges.values()
+    )
+    return {
+        "case": case,
+        "mesh": cfg.mesh,
+        "treatment": cfg.treatment,
+        "plate_margin_mm": cfg.plate_margin_mm,
+        "route": cfg.route,
+        "lm_error_percent": errors,
+        "linearised_bias_percent": bias,
+        "max_abs_error_percent": max(abs(v) for v in errors.values()),
+        "n_evals": result.n_evals,
+        "forward_equivalents": result.forward_equivalents,
+        "charges": result.charges,
+        "total_forward_equivalents": total_fe,
+        "status": result.status,
+        "iterations": result.n_iterations,
+        "x": result.x,
+        "provenance": result.provenance,
+        "wall_s": time.perf_counter() - t0,
+    }
 
 
 def configurations(meshes, treatments, margins, dic: bool) -> list[Configuration]:
     """The study's grid (and one DIC-route row on the first mesh, no treatment, no margin)."""
-    grid = [Configuration(m, t, float(g)) for m, t, g in itertools.product(meshes, treatments, margins)]
+    grid = [
+        Configuration(m, t, float(g)) for m, t, g in itertools.product(meshes, treatments, margins)
+    ]
     if dic:
         grid.append(Configuration(meshes[0], "none", 0.0, "dic"))
     return grid
 
 
-def run_model_error(case: str, *, meshes=("coarse",), treatments=TREATMENT_ORDER, margins=(0.0, 30.0),
-                    dic: bool = False, budget: int = 200, mapper=None, out=None, progress=None, data=None,
-                    hifi_mesh: str | None = None) -> ModelErrorRun:
-    """Compute (or resume) the study of ``case``; one ``<key>.json`` per configuration, then ``summary.csv``.
-    ``data`` and ``hifi_mesh`` override the shipped model-error data and the default high-fidelity mesh."""
+def run_model_error(
+    case: str,
+    *,
+    meshes=("coarse",),
+    treatments=TREATMENT_ORDER,
+    margins=(0.0, 30.0),
+    dic: bool = False,
+    budget: int = 200,
+    mapper=None,
+    out=None,
+    progress=None,
+    data=None,
+    hifi_mesh: str | None = None,
+) -> ModelErrorRun:
+    """Compute (or resume) the study of ``case``; one ``<key>.json`` per configuration, then
+    ``summary.csv``.
+    ``data`` and ``hifi_mesh`` override the shipped model-error data and the default high-fidelity
+    mesh."""
     d = output_dir("model_error", case, out)
     run = ModelErrorRun(case, dir=d)
     for cfg in configurations(meshes, treatments, margins, dic):
@@ -132,13 +190,23 @@ def run_model_error(case: str, *, meshes=("coarse",), treatments=TREATMENT_ORDER
             try:
                 row = jsonio.loads(path.read_text())
             except ValueError:
-                path.rename(path.with_suffix(".json.corrupt"))  # torn: recompute, keep it for inspection
-            if row is not None and cfg.route == "fe" and row["provenance"].get("data_hash") != _data_hash(
-                    case, cfg.mesh, data):
+                # torn: recompute, keep it for inspection
+                path.rename(path.with_suffix(".json.corrupt"))
+            if (
+                row is not None
+                and cfg.route == "fe"
+                and row["provenance"].get("data_hash") != _data_hash(case, cfg.mesh, data)
+            ):
                 row = None  # made with other data: stale, recompute
         if row is None:
-            row = one_row(case, cfg, budget=budget, mapper=mapper, data=None if cfg.route == "dic" else data,
-                          hifi_mesh=hifi_mesh)
+            row = one_row(
+                case,
+                cfg,
+                budget=budget,
+                mapper=mapper,
+                data=None if cfg.route == "dic" else data,
+                hifi_mesh=hifi_mesh,
+            )
             tmp = path.with_suffix(".json.tmp")
             tmp.write_text(jsonio.dumps(row, indent=1, sort_keys=True))
             tmp.replace(path)
@@ -154,13 +222,28 @@ def _data_hash(case: str, mesh: str, data) -> str:
     from problems.inverse.build import resolve_data
     from problems.inverse.cases import get_case
 
-    return (data if data is not None else resolve_data(get_case(case), mesh, "model-error", None)).hash
+    return (
+        data if data is not None else resolve_data(get_case(case), mesh, "model-error", None)
+    ).hash
 
 
 def _flat(row: dict) -> dict:
-    out = {k: row[k] for k in ("case", "mesh", "treatment", "plate_margin_mm", "route", "n_evals",
-                                "forward_equivalents", "total_forward_equivalents", "max_abs_error_percent",
-                                "status", "iterations")}
+    out = {
+        k: row[k]
+        for k in (
+            "case",
+            "mesh",
+            "treatment",
+            "plate_margin_mm",
+            "route",
+            "n_evals",
+            "forward_equivalents",
+            "total_forward_equivalents",
+            "max_abs_error_percent",
+            "status",
+            "iterations",
+        )
+    }
     out |= {f"err_{n}": v for n, v in row["lm_error_percent"].items()}
     out |= {f"bias_{n}": v for n, v in row["linearised_bias_percent"].items()}
     return out
@@ -181,10 +264,16 @@ def render_model_error(folder) -> Path:
     for r in rows:
         err = r["max_abs_error_percent"]
         err = float(err) if not isinstance(err, str) else float("nan")
-        ax.plot(r["total_forward_equivalents"], err, markers.get(r["treatment"], "x"),
-                mfc="none" if r["plate_margin_mm"] else None, color="k" if r["mesh"] == "coarse" else "0.5",
-                label=f"{r['mesh']}, {r['treatment']}" + (f", margin {r['plate_margin_mm']:g} mm" if r["plate_margin_mm"] else "")
-                + (" (DIC)" if r.get("route") == "dic" else ""))
+        ax.plot(
+            r["total_forward_equivalents"],
+            err,
+            markers.get(r["treatment"], "x"),
+            mfc="none" if r["plate_margin_mm"] else None,
+            color="k" if r["mesh"] == "coarse" else "0.5",
+            label=f"{r['mesh']}, {r['treatment']}"
+            + (f", margin {r['plate_margin_mm']:g} mm" if r["plate_margin_mm"] else "")
+            + (" (DIC)" if r.get("route") == "dic" else ""),
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     plotting.log_axis(ax, "x")

@@ -1,4 +1,5 @@
-"""Structured 8-node hexahedral mesh of the quarter cube, its named node sets and its mid-height symmetry.
+"""Structured 8-node hexahedral mesh of the quarter cube, its named node sets and its mid-height
+symmetry.
 
 The quarter model spans x, y in [0, 75] mm and z in [0, 150] mm; x = 0 and y = 0 are symmetry
 planes, z = 0 and z = 150 mm the plates, x = 75 mm the front face the camera sees.
@@ -11,6 +12,7 @@ mesh. A mesh spec names the quarter mesh and, optionally, the model that solves 
 ``"coarse"``, ``"coarse:quarter"``, ``"6,6,12:eighth"`` (see :func:`parse_mesh_spec`). The eighth
 is the default wherever it is exact, i.e. whenever nz is even (a node plane at mid-height).
 """
+
 from __future__ import annotations
 
 import re
@@ -19,20 +21,24 @@ from dataclasses import dataclass
 import numpy as np
 
 SIZE_MM = (75.0, 75.0, 150.0)
-#: named presets: ``coarse`` ~ 400-600, ``paper`` ~ 5 000 (paper: 4 960), ``fine`` 15 000-20 000 elements
+#: named presets: ``coarse`` ~ 400-600, ``paper`` ~ 5 000 (paper: 4 960), ``fine`` 15 000-20 000
+#: elements
 MESH_PRESETS: dict[str, tuple[int, int, int]] = {
-    "coarse": (6, 6, 12),   # 432 elements, 12.5 mm cubes
-    "paper": (14, 14, 26),  # 5 096 elements (was 14 x 14 x 25: nz even gives the exact eighth model)
-    "fine": (20, 20, 40),   # 16 000 elements, 3.75 mm cubes
+    "coarse": (6, 6, 12),  # 432 elements, 12.5 mm cubes
+    # 5 096 elements (was 14 x 14 x 25: nz even gives the exact eighth model)
+    "paper": (14, 14, 26),
+    "fine": (20, 20, 40),  # 16 000 elements, 3.75 mm cubes
     "xfine": (24, 24, 48),  # 27 648 elements, 3.125 mm cubes: the model-error data only
 }
 
-#: models of the quarter mesh: ``eighth`` solves z in [0, 75] mm and unfolds it (nz even only), ``quarter`` all of it
+#: models of the quarter mesh: ``eighth`` solves z in [0, 75] mm and unfolds it (nz even only),
+#: ``quarter`` all of it
 SYMMETRIES = ("eighth", "quarter")
 
 # Corner order of the 8-node hexahedron (VTK / Abaqus C3D8 order) in the (i, j, k) offsets.
-HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
-                        [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
+HEX_CORNERS = np.array(
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,7 +74,14 @@ class Mesh:
     def face(self, name: str) -> np.ndarray:
         """Node indices of a boundary face: ``x0, x1, y0, y1, z0, z1`` (x1 = front, z1 = top)."""
         g = self.grid_index()
-        faces = {"x0": g[0], "x1": g[-1], "y0": g[:, 0], "y1": g[:, -1], "z0": g[:, :, 0], "z1": g[:, :, -1]}
+        faces = {
+            "x0": g[0],
+            "x1": g[-1],
+            "y0": g[:, 0],
+            "y1": g[:, -1],
+            "z0": g[:, :, 0],
+            "z1": g[:, :, -1],
+        }
         if name not in faces:
             raise ValueError(f"face {name!r} is unknown; allowed: {', '.join(faces)}")
         return faces[name].ravel()
@@ -76,11 +89,19 @@ class Mesh:
     def info(self) -> dict:
         """Summary for reports: nx, ny, nz, elements, nodes, dofs."""
         nx, ny, nz = self.shape
-        return {"nx": nx, "ny": ny, "nz": nz, "elements": self.n_elements, "nodes": self.n_nodes, "dofs": self.n_dofs}
+        return {
+            "nx": nx,
+            "ny": ny,
+            "nz": nz,
+            "elements": self.n_elements,
+            "nodes": self.n_nodes,
+            "dofs": self.n_dofs,
+        }
 
 
 def box_mesh(nx: int, ny: int, nz: int, size_mm: tuple[float, float, float] = SIZE_MM) -> Mesh:
-    """Uniform structured mesh of the box [0, lx] x [0, ly] x [0, lz] mm with nx x ny x nz hexahedra."""
+    """Uniform structured mesh of the box [0, lx] x [0, ly] x [0, lz] mm with nx x ny x nz
+    hexahedra."""
     for name, n in zip("xyz", (nx, ny, nz)):
         if int(n) != n or n < 1:
             raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
@@ -90,15 +111,16 @@ def box_mesh(nx: int, ny: int, nz: int, size_mm: tuple[float, float, float] = SI
     nodes = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
     i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
     base = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1)  # (ne, 3)
-    corners = base[:, None, :] + HEX_CORNERS[None]             # (ne, 8, 3)
+    corners = base[:, None, :] + HEX_CORNERS[None]  # (ne, 8, 3)
     elements = corners[..., 0] + (nx + 1) * (corners[..., 1] + (ny + 1) * corners[..., 2])
-    order = np.lexsort((base[:, 0], base[:, 1], base[:, 2]))   # x fastest
+    order = np.lexsort((base[:, 0], base[:, 1], base[:, 2]))  # x fastest
     return Mesh(nodes, elements[order], (nx, ny, nz))
 
 
 @dataclass(frozen=True)
 class MeshSpec:
-    """A parsed mesh spec: the quarter mesh (nx, ny, nz over the full height) and the model that solves it.
+    """A parsed mesh spec: the quarter mesh (nx, ny, nz over the full height) and the model that
+    solves it.
 
     symmetry : ``eighth`` (solve the lower half z <= 75 mm, unfold the answer; needs nz even) or
                ``quarter`` (solve the whole height)
@@ -122,18 +144,21 @@ def default_symmetry(shape: tuple[int, int, int]) -> str:
 
 
 def check_symmetry(symmetry: str, shape: tuple[int, int, int], what: str = "symmetry") -> str:
-    """``symmetry`` if it is known and exact on a mesh of ``shape``; ValueError naming ``what`` otherwise."""
+    """``symmetry`` if it is known and exact on a mesh of ``shape``; ValueError naming ``what``
+    otherwise."""
     if symmetry not in SYMMETRIES:
         raise ValueError(f"{what} {symmetry!r} is unknown; allowed: {', '.join(SYMMETRIES)}")
     if symmetry == "eighth" and shape[2] % 2:
-        raise ValueError(f"{what} 'eighth' needs an even NZ (a node plane at mid-height), got NZ = {shape[2]}; "
-                         f"use NZ = {shape[2] + 1} or 'quarter'")
+        raise ValueError(
+            f"{what} 'eighth' needs an even NZ (a node plane at mid-height), got NZ = {shape[2]}; "
+            f"use NZ = {shape[2] + 1} or 'quarter'"
+        )
     return symmetry
 
 
 def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
-    """Parse ``MESH[:SYMMETRY]``: MESH a preset (``coarse``, ``paper``, ``fine``), ``NX,NY,NZ`` or a tuple;
-    SYMMETRY ``eighth`` or ``quarter``, by default ``eighth`` where it is exact (NZ even)."""
+    """Parse ``MESH[:SYMMETRY]``: MESH a preset (``coarse``, ``paper``, ``fine``), ``NX,NY,NZ`` or a
+    tuple; SYMMETRY ``eighth`` or ``quarter``, by default ``eighth`` where it is exact (NZ even)."""
     if isinstance(spec, MeshSpec):
         return spec
     symmetry = None
@@ -153,21 +178,24 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
                 if n < 1:
                     raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
         else:
-            raise ValueError(f"mesh {spec!r} is unknown; allowed: {', '.join(MESH_PRESETS)} or NX,NY,NZ "
-                             f"(whole numbers >= 1), optionally followed by :{'|:'.join(SYMMETRIES)}")
+            raise ValueError(
+                f"mesh {spec!r} is unknown; allowed: {', '.join(MESH_PRESETS)} or NX,NY,NZ "
+                f"(whole numbers >= 1), optionally followed by :{'|:'.join(SYMMETRIES)}"
+            )
     if symmetry is None:
         return MeshSpec(shape, default_symmetry(shape))
     return MeshSpec(shape, check_symmetry(symmetry, shape, f"mesh {spec!r}: symmetry"))
 
 
 def discretisation_key(spec: str | tuple[int, int, int] | MeshSpec) -> str:
-    """``"NX,NY,NZ"`` of a spec: two specs with the same key give the same answer (the eighth and the
-    quarter model of one mesh agree to round-off), whatever their names."""
+    """``"NX,NY,NZ"`` of a spec: two specs with the same key give the same answer (the eighth and
+    the quarter model of one mesh agree to round-off), whatever their names."""
     return ",".join(map(str, parse_mesh_spec(spec).shape))
 
 
 def parse_mesh(spec: str | tuple[int, int, int] | MeshSpec) -> Mesh:
-    """The quarter mesh of a spec (see :func:`parse_mesh_spec`; the symmetry suffix does not change it)."""
+    """The quarter mesh of a spec (see :func:`parse_mesh_spec`; the symmetry suffix does not change
+    it)."""
     return parse_mesh_spec(spec).mesh
 
 
@@ -175,13 +203,15 @@ def mid_height_mirror(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     """Source of every node and element of a mesh symmetric about mid-height in its lower half.
 
     Returns ``node_src, node_upper, elem_src, elem_upper``: for each node (element) of ``mesh`` the
-    index of its mirror image in the lower half z <= z_mid (itself when it lies there), and whether it
-    lies strictly above the mid-plane. The lower half is a prefix of the node and element arrays, so
-    the indices are also those of :func:`lower_half`.
+    index of its mirror image in the lower half z <= z_mid (itself when it lies there), and whether
+    it lies strictly above the mid-plane. The lower half is a prefix of the node and element arrays,
+    so the indices are also those of :func:`lower_half`.
     """
     nx, ny, nz = mesh.shape
     if nz % 2:
-        raise ValueError(f"the mid-height mirror needs an even nz (a node plane at mid-height), got nz = {nz}")
+        raise ValueError(
+            f"the mid-height mirror needs an even nz (a node plane at mid-height), got nz = {nz}"
+        )
     layer_n, layer_e = (nx + 1) * (ny + 1), nx * ny
     k = np.arange(mesh.n_nodes) // layer_n
     node_src = np.arange(mesh.n_nodes) - (k - np.minimum(k, nz - k)) * layer_n
@@ -189,14 +219,19 @@ def mid_height_mirror(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     elem_src = np.arange(mesh.n_elements) - (ke - np.minimum(ke, nz - 1 - ke)) * layer_e
     z = mesh.nodes[:, 2]
     z0, z1 = z[0], z[-1]
-    if not (np.allclose(mesh.nodes[:, :2], mesh.nodes[node_src, :2], rtol=0, atol=1e-9 * (z1 - z0))
-            and np.allclose(np.where(k > nz // 2, z0 + z1 - z, z), z[node_src], rtol=0, atol=1e-9 * (z1 - z0))):
+    if not (
+        np.allclose(mesh.nodes[:, :2], mesh.nodes[node_src, :2], rtol=0, atol=1e-9 * (z1 - z0))
+        and np.allclose(
+            np.where(k > nz // 2, z0 + z1 - z, z), z[node_src], rtol=0, atol=1e-9 * (z1 - z0)
+        )
+    ):
         raise ValueError("the mesh is not symmetric about its mid-height plane")
     return node_src, k > nz // 2, elem_src, ke >= nz // 2
 
 
 def lower_half(mesh: Mesh) -> Mesh:
-    """The part z <= z_mid of a mesh symmetric about mid-height (nz even): nz / 2 layers, same element size."""
+    """The part z <= z_mid of a mesh symmetric about mid-height (nz even): nz / 2 layers, same
+    element size."""
     mid_height_mirror(mesh)  # checks nz even and the symmetry of the nodes
     nx, ny, nz = mesh.shape
     n_nodes, n_elements = (nx + 1) * (ny + 1) * (nz // 2 + 1), nx * ny * (nz // 2)
@@ -208,20 +243,29 @@ Z_MIRROR_VOIGT = np.array([1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
 
 
 def z_mirror_signs(names) -> np.ndarray:
-    """Sign of each named history variable under z -> -z: -1 for the ``*_yz`` and ``*_xz`` tensor components."""
+    """Sign of each named history variable under z -> -z: -1 for the ``*_yz`` and ``*_xz`` tensor
+    components."""
     return np.array([-1.0 if n.endswith(("_yz", "_xz", "_zy", "_zx")) else 1.0 for n in names])
 
 
-def unfold_mid_height(mesh: Mesh, top_mm: np.ndarray, displacements: np.ndarray, stress: np.ndarray,
-                      state: np.ndarray, state_names) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def unfold_mid_height(
+    mesh: Mesh,
+    top_mm: np.ndarray,
+    displacements: np.ndarray,
+    stress: np.ndarray,
+    state: np.ndarray,
+    state_names,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fields of the eighth model (lower half of ``mesh``) unfolded onto the whole of ``mesh``.
 
     top_mm        : (N,) top-plate displacement per snapshot, mm (compression positive)
-    displacements : (N, n_half_nodes, 3) mm;  stress : (N, n_half_elements, 6) MPa;  state : (N, n_half_elements, s)
+    displacements : (N, n_half_nodes, 3) mm
+    stress        : (N, n_half_elements, 6) MPa
+    state         : (N, n_half_elements, s)
 
-    Mirror image of the point (x, y, z) is (x, y, L - z): u_x, u_y are even, u_z(L - z) = -delta - u_z(z)
-    (the top moves by -delta, the bottom is fixed); stress and tensor history variables keep their
-    components except yz and xz, which change sign.
+    Mirror image of the point (x, y, z) is (x, y, L - z): u_x, u_y are even,
+    u_z(L - z) = -delta - u_z(z) (the top moves by -delta, the bottom is fixed); stress and tensor
+    history variables keep their components except yz and xz, which change sign.
     """
     node_src, node_up, elem_src, elem_up = mid_height_mirror(mesh)
     u = displacements[:, node_src].copy()
@@ -235,7 +279,8 @@ def unfold_mid_height(mesh: Mesh, top_mm: np.ndarray, displacements: np.ndarray,
 
 
 def distort(mesh: Mesh, amount: float, seed: int = 0) -> Mesh:
-    """Copy of ``mesh`` with interior nodes moved randomly by up to ``amount`` x the smallest spacing.
+    """Copy of ``mesh`` with interior nodes moved randomly by up to ``amount`` x the smallest
+    spacing.
 
     Boundary nodes stay on their faces so that boundary conditions keep their meaning.
     """

@@ -21,6 +21,7 @@ Where data sets live:
   (default ``$XDG_CACHE_HOME/femubench/data``, i.e. ``~/.cache/femubench/data``), never inside
   the installed package; DIC-route images go next to the data file, in ``<stem>__dic_images/``.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -33,10 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
+from problems.fe.front_face import measurement_grid
+from problems.fe.newton import Loading
 from problems.inverse.case import Case
 from problems.inverse.cases import get_case
-from problems.fe.newton import Loading
-from problems.fe.front_face import measurement_grid
 
 FORMAT = "femubench-data/1"
 #: The shipped default data sets (package data of problems.inverse).
@@ -103,14 +104,18 @@ class DataSettings:
                 raise ValueError(f"{name} = {v!r} is out of range: must be >= 0")
         if self.route not in ("fe", "dic"):
             raise ValueError(f"route = {self.route!r} is unknown; allowed: fe, dic")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+        if (
+            isinstance(self.seed, bool)
+            or not isinstance(self.seed, (int, np.integer))
+            or self.seed < 0
+        ):
             raise ValueError(f"seed = {self.seed!r} is out of range: a whole number >= 0")
         if self.tier not in TIERS:
             raise ValueError(f"tier = {self.tier!r} is unknown; allowed: {', '.join(TIERS)}")
         from problems.fe.mesh import parse_mesh_spec
 
         parse_mesh_spec(self.mesh)  # validates the mesh spec
-        self.loading  # validates displacement, snapshots, plates
+        _ = self.loading  # validates displacement, snapshots, plates
 
     @property
     def loading(self) -> Loading:
@@ -123,17 +128,18 @@ class DataSettings:
 
 @dataclass(frozen=True, eq=False)
 class Dataset:
-    """Measured front-face displacements (mm) and plate force (kN) with their standard deviations."""
+    """Measured front-face displacements (mm) and plate force (kN) with their standard
+    deviations."""
 
     case: str
     settings: DataSettings
     parameters: dict
-    points: np.ndarray          # (m, 2) y, z mm
-    snapshots_mm: np.ndarray    # (N,)
-    u_h: np.ndarray             # (N, m) mm
-    u_v: np.ndarray             # (N, m) mm
-    reaction_kN: np.ndarray     # (N,)
-    std_u_mm: np.ndarray        # (2, N, m) standard deviation of u_h and u_v, mm
+    points: np.ndarray  # (m, 2) y, z mm
+    snapshots_mm: np.ndarray  # (N,)
+    u_h: np.ndarray  # (N, m) mm
+    u_v: np.ndarray  # (N, m) mm
+    reaction_kN: np.ndarray  # (N,)
+    std_u_mm: np.ndarray  # (2, N, m) standard deviation of u_h and u_v, mm
     meta: dict = field(default_factory=dict)
 
     @property
@@ -158,16 +164,25 @@ class Dataset:
 
     def _doc(self) -> dict:
         return {
-            "format": FORMAT, "case": self.case, "settings": asdict(self.settings), "parameters": self.parameters,
-            "points": self.points.tolist(), "snapshots_mm": self.snapshots_mm.tolist(),
-            "u_h": self.u_h.tolist(), "u_v": self.u_v.tolist(), "reaction_kN": self.reaction_kN.tolist(),
-            "std_u_mm": self.std_u_mm.tolist(), "meta": self.meta,
+            "format": FORMAT,
+            "case": self.case,
+            "settings": asdict(self.settings),
+            "parameters": self.parameters,
+            "points": self.points.tolist(),
+            "snapshots_mm": self.snapshots_mm.tolist(),
+            "u_h": self.u_h.tolist(),
+            "u_v": self.u_v.tolist(),
+            "reaction_kN": self.reaction_kN.tolist(),
+            "std_u_mm": self.std_u_mm.tolist(),
+            "meta": self.meta,
         }
 
 
 def _digest(doc: dict) -> str:
     body = {k: v for k, v in doc.items() if k != "hash"}
-    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    return hashlib.sha256(
+        json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
+    ).hexdigest()
 
 
 def package_version() -> str:
@@ -182,7 +197,8 @@ def _round(values: np.ndarray, step: float) -> np.ndarray:
 
 
 def displacement_std_mm(settings: DataSettings) -> float:
-    """Standard deviation of one displacement value: uniform rounding error (step/sqrt 12) and noise.
+    """Standard deviation of one displacement value: uniform rounding error (step/sqrt 12) and
+    noise.
 
     Unrounded, noise-free data are weighted as if rounded to 1 um (a weight is needed; the
     cost scale is then that of the default data).
@@ -191,12 +207,22 @@ def displacement_std_mm(settings: DataSettings) -> float:
     return math.hypot(res_mm / math.sqrt(12.0), settings.noise_um * 1e-3)
 
 
-def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None, progress: bool = False,
-              image_dir: str | Path | None = None, **overrides) -> Dataset:
-    """Compute a data set: the FE response at ``x`` (default: the case's reference) on ``settings.mesh``.
+def make_data(
+    case: Case | str,
+    settings: DataSettings | None = None,
+    *,
+    x=None,
+    progress: bool = False,
+    image_dir: str | Path | None = None,
+    **overrides,
+) -> Dataset:
+    """Compute a data set: the FE response at ``x`` (default: the case's reference) on
+    ``settings.mesh``.
 
-    Keyword overrides go into :class:`DataSettings` (``make_data(case, mesh="coarse", resolution_um=0)``).
-    ``image_dir``: where the DIC route writes its images (default: nowhere; see :func:`dic_image_dir`).
+    Keyword overrides go into :class:`DataSettings`
+    (``make_data(case, mesh="coarse", resolution_um=0)``).
+    ``image_dir``: where the DIC route writes its images (default: nowhere; see
+    :func:`dic_image_dir`).
     Raises RuntimeError when the data model itself does not converge.
     """
     from problems.inverse.forward import FEForwardModel
@@ -207,13 +233,20 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
     model = FEForwardModel(case, settings.mesh, settings.loading, settings.points)
     resp = model.response(x, progress=progress)
     if not resp.converged:
-        raise RuntimeError(f"data model of {case.name} on mesh {settings.mesh} failed: {resp.message}")
-    meta = {"package_version": package_version(), "mesh": resp.mesh.info(), "symmetry": resp.symmetry}
+        raise RuntimeError(
+            f"data model of {case.name} on mesh {settings.mesh} failed: {resp.message}"
+        )
+    meta = {
+        "package_version": package_version(),
+        "mesh": resp.mesh.info(),
+        "symmetry": resp.symmetry,
+    }
     if settings.route == "dic":
         from problems.dic.route import measure_by_dic
 
-        u_h, u_v, std, dic_meta = measure_by_dic(resp, settings.points, seed=settings.seed, progress=progress,
-                                                 image_dir=image_dir)
+        u_h, u_v, std, dic_meta = measure_by_dic(
+            resp, settings.points, seed=settings.seed, progress=progress, image_dir=image_dir
+        )
         meta |= dic_meta
     else:
         u_h, u_v = resp.front_face(settings.points)
@@ -225,8 +258,18 @@ def make_data(case: Case | str, settings: DataSettings | None = None, *, x=None,
         res = settings.resolution_um * 1e-3
         u_h, u_v = _round(u_h, res), _round(u_v, res)
         std = np.full((2,) + u_h.shape, displacement_std_mm(settings))
-    return Dataset(case.name, settings, case.identified(x), settings.points, resp.snapshots_mm, u_h, u_v,
-                   _round(resp.reaction_kN, settings.force_resolution_kN), std, meta)
+    return Dataset(
+        case.name,
+        settings,
+        case.identified(x),
+        settings.points,
+        resp.snapshots_mm,
+        u_h,
+        u_v,
+        _round(resp.reaction_kN, settings.force_resolution_kN),
+        std,
+        meta,
+    )
 
 
 def tier_settings(tier: str, inverse_mesh: str = DEFAULT_INVERSE_MESH, **overrides) -> DataSettings:
@@ -277,7 +320,9 @@ def load(path: str | Path) -> Dataset:
     if missing:
         raise ValueError(f"data file {path}: field(s) {', '.join(missing)} missing")
     if doc.get("hash") != _digest(doc):
-        raise ValueError(f"data file {path}: content hash does not match (file modified or truncated)")
+        raise ValueError(
+            f"data file {path}: content hash does not match (file modified or truncated)"
+        )
     try:
         return _dataset_from_doc(doc)
     except (ValueError, TypeError) as exc:
@@ -285,12 +330,23 @@ def load(path: str | Path) -> Dataset:
 
 
 #: Fields every data file must have (``meta`` is optional).
-_FIELDS = ("case", "settings", "parameters", "points", "snapshots_mm", "u_h", "u_v", "reaction_kN", "std_u_mm",
-           "hash")
+_FIELDS = (
+    "case",
+    "settings",
+    "parameters",
+    "points",
+    "snapshots_mm",
+    "u_h",
+    "u_v",
+    "reaction_kN",
+    "std_u_mm",
+    "hash",
+)
 
 
 def _dataset_from_doc(doc: dict) -> Dataset:
-    """The Dataset of a parsed data file; ValueError naming the field whose type or shape is wrong."""
+    """The Dataset of a parsed data file; ValueError naming the field whose type or shape is
+    wrong."""
     for name, kind in (("case", str), ("settings", dict), ("parameters", dict)):
         if not isinstance(doc[name], kind):
             raise ValueError(f"field {name} must be a JSON {'string' if kind is str else 'object'}")
@@ -298,25 +354,48 @@ def _dataset_from_doc(doc: dict) -> Dataset:
         settings = DataSettings(**doc["settings"])
     except (TypeError, ValueError) as exc:
         raise ValueError(f"field settings: {exc}") from None
-    arrays = {name: _array(doc, name) for name in ("points", "snapshots_mm", "u_h", "u_v", "reaction_kN", "std_u_mm")}
+    arrays = {
+        name: _array(doc, name)
+        for name in ("points", "snapshots_mm", "u_h", "u_v", "reaction_kN", "std_u_mm")
+    }
     n, m = settings.snapshots, len(arrays["points"])
-    expected = {"points": (m, 2), "snapshots_mm": (n,), "u_h": (n, m), "u_v": (n, m), "reaction_kN": (n,),
-                "std_u_mm": (2, n, m)}
+    expected = {
+        "points": (m, 2),
+        "snapshots_mm": (n,),
+        "u_h": (n, m),
+        "u_v": (n, m),
+        "reaction_kN": (n,),
+        "std_u_mm": (2, n, m),
+    }
     for name, shape in expected.items():
         if arrays[name].shape != shape:
-            raise ValueError(f"field {name} has shape {arrays[name].shape}, expected {shape} "
-                             f"({n} snapshots, {m} points)")
+            raise ValueError(
+                f"field {name} has shape {arrays[name].shape}, expected {shape} "
+                f"({n} snapshots, {m} points)"
+            )
     for name in ("points", "snapshots_mm", "u_h", "u_v", "reaction_kN"):
         if not np.all(np.isfinite(arrays[name])):
             raise ValueError(f"field {name} holds non-finite numbers (NaN or infinite)")
     std = arrays["std_u_mm"]
     if np.any(np.isnan(std)) or np.any(std <= 0):
-        raise ValueError("field std_u_mm must hold standard deviations > 0 mm (infinite: a point not measured)")
+        raise ValueError(
+            "field std_u_mm must hold standard deviations > 0 mm (infinite: a point not measured)"
+        )
     meta = doc.get("meta", {})
     if not isinstance(meta, dict):
         raise ValueError("field meta must be a JSON object")
-    return Dataset(doc["case"], settings, doc["parameters"], arrays["points"], arrays["snapshots_mm"], arrays["u_h"],
-                   arrays["u_v"], arrays["reaction_kN"], arrays["std_u_mm"], meta)
+    return Dataset(
+        doc["case"],
+        settings,
+        doc["parameters"],
+        arrays["points"],
+        arrays["snapshots_mm"],
+        arrays["u_h"],
+        arrays["u_v"],
+        arrays["reaction_kN"],
+        arrays["std_u_mm"],
+        meta,
+    )
 
 
 def _array(doc: dict, name: str) -> np.ndarray:
@@ -328,7 +407,8 @@ def _array(doc: dict, name: str) -> np.ndarray:
 
 
 def default_path(case: str, tier: str = "model-error") -> Path:
-    """Where the default data set of ``case`` in ``tier`` lives (shipped, or in ``$FEMUBENCH_DATA_DIR``)."""
+    """Where the default data set of ``case`` in ``tier`` lives (shipped, or in
+    ``$FEMUBENCH_DATA_DIR``)."""
     return data_dir() / tier / f"{case}.json"
 
 
@@ -344,13 +424,18 @@ def cached_path(case: str, settings: DataSettings) -> Path:
 
 
 def get_data(case: str, settings: DataSettings | None = None, *, progress: bool = False) -> Dataset:
-    """The data set of ``case`` for ``settings`` (default: shipped), computed and cached if missing."""
+    """The data set of ``case`` for ``settings`` (default: shipped), computed and cached if
+    missing."""
     settings = settings or DataSettings()
-    path = default_path(case, settings.tier) if is_default(settings) else cached_path(case, settings)
+    path = (
+        default_path(case, settings.tier) if is_default(settings) else cached_path(case, settings)
+    )
     if path.exists():
         return load(path)
     if progress:
-        print(f"computing data for {case} on mesh {settings.mesh} (cached in {path}) ...", flush=True)
+        print(
+            f"computing data for {case} on mesh {settings.mesh} (cached in {path}) ...", flush=True
+        )
     ds = make_data(case, settings, progress=progress, image_dir=dic_image_dir(path))
     save(ds, path)
     return ds
