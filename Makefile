@@ -24,8 +24,9 @@ run: $(STAMP)
 	$(BIN)/femubench run suites/default.toml --out results/default
 	$(BIN)/femubench report results/default --format md,csv,tex
 
-## make test: the fast, deterministic test suite (slow checks: make test-slow)
+## make test: the linter (ruff), then the fast, deterministic test suite (slow checks: make test-slow)
 test: $(STAMP)
+	$(BIN)/ruff check .
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/python -m pytest -n 2
 
 test-slow: $(STAMP)
