@@ -522,13 +522,14 @@ def run_suite(
     return summary
 
 
-def data_key(config: RunConfig) -> tuple[str, str] | None:
-    """Runs with the same key share one data set (None: analytic, no data set)."""
+def data_key(config: RunConfig) -> tuple[str, str, str, str] | None:
+    """Runs with the same key share one data set (None: analytic, no data set): the case, the data
+    tier, the inverse mesh (a consistent-tier data set is made on it) and the [data] settings."""
     if is_analytic(config.case):
         return None
     from bench.suite import canonical_json
 
-    return config.case, canonical_json(config.data)
+    return config.case, config.tier, config.mesh, canonical_json(config.data)
 
 
 def prepare_datasets(pending: list[RunConfig], *, progress: bool = False) -> dict:

@@ -274,3 +274,13 @@ def test_tiers_and_treatments_span_the_suite_without_correcting_consistent_data(
         parse_suite({"suite": {**raw["suite"], "treatments": ["twice"]}})
     with pytest.raises(ValueError, match="plate_margin_mm = 80"):
         parse_suite({"suite": {**raw["suite"], "plate_margin_mm": 80}})
+
+
+def test_runs_of_different_tiers_never_share_a_data_set():
+    from bench.runner import data_key, dataset_for
+
+    s = parse_suite({"suite": {"cases": ["linear-compression"], "methods": ["lm"], "budgets": [50],
+                               "tiers": ["consistent", "model-error"]}})
+    a, b = s.runs()
+    assert data_key(a) != data_key(b)
+    assert {dataset_for(r).settings.tier for r in (a, b)} == {"consistent", "model-error"}
