@@ -40,6 +40,8 @@ import time
 from pathlib import Path
 from typing import Any, Iterator
 
+from problems.io import jsonio
+
 RECORD_SCHEMA = 1
 RUNS = "runs"
 #: Sub-folder of ``DIR/runs`` holding the unreadable records the runner moved aside.
@@ -97,7 +99,7 @@ def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:
     h = record["config_hash"]
     path = record_path(out_dir, h)
     atomic_write_text(
-        path, json.dumps(_json_safe(record), sort_keys=True, separators=(",", ":")) + "\n"
+        path, json.dumps(jsonio.encode(record), sort_keys=True, separators=(",", ":")) + "\n"
     )
     return path
 
@@ -387,18 +389,3 @@ def write_parquet(out_dir: str | Path, dest: str | Path | None = None) -> tuple[
         df.to_parquet(tmp, index=False)
         os.replace(tmp, p)
     return paths
-
-
-def _json_safe(obj):
-    """Non-finite floats -> "inf"/"-inf"/"nan" (as RunResult.to_dict does); numpy -> Python."""
-    if isinstance(obj, float):
-        if not math.isfinite(obj):
-            return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
-        return obj
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if hasattr(obj, "tolist"):  # numpy scalars and arrays
-        return _json_safe(obj.tolist())
-    return obj

@@ -25,6 +25,7 @@ import warnings
 import numpy as np
 
 from problems.inverse.evaluator import BudgetExhausted
+from problems.io import jsonio
 from solvers.base import Outcome, Run, isolated_global_rng, register
 
 CMA_OPTIONS = {
@@ -127,7 +128,7 @@ def run_cma(r: Run) -> Outcome:
                     popsize=popsize,
                     sigma=float(es.sigma),
                 )
-            terminations.append({k: _plain(v) for k, v in es.stop().items()})
+            terminations.append({k: jsonio.plain(v) for k, v in es.stop().items()})
             if restarts_done >= int(o["restarts"]) or obj.remaining == 0:
                 break
             restarts_done += 1
@@ -140,9 +141,3 @@ def run_cma(r: Run) -> Outcome:
         generations,
         {"restarts": restarts_done, "terminations": terminations},
     )
-
-
-def _plain(v):
-    if isinstance(v, (np.generic, np.ndarray)):
-        return v.tolist()
-    return v

@@ -25,6 +25,8 @@ from typing import Iterable
 
 import numpy as np
 
+from problems.io import jsonio
+
 DATA_CHOICES = "auto | shipped | synthetic | PATH"
 DATA_HELP = (
     "data the objective is compared with: shipped (the case's pseudo-experimental data from the "
@@ -155,26 +157,9 @@ def write_csv(path: Path, rows: list[dict]) -> Path:
     return path
 
 
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if math.isfinite(v) else str(v)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
 def write_json(path: Path, doc: dict) -> Path:
     path = Path(path)
-    path.write_text(json.dumps(_plain(doc), indent=1) + "\n")
+    path.write_text(jsonio.dumps(doc, indent=1) + "\n")
     return path
 
 
