@@ -152,6 +152,19 @@ def dataset_for(config: RunConfig, *, progress: bool = False):
     )
 
 
+def identification_extras(config: RunConfig) -> dict[str, Any]:
+    """The Identification settings of a run's later dimensions (track, Jacobian, budget unit),
+    only where they differ from the defaults."""
+    extra: dict[str, Any] = {}
+    if config.jacobian != "exact":
+        extra["jacobian"] = config.jacobian
+    if config.budget_unit != "evaluations":
+        extra["budget_unit"] = config.budget_unit
+    if config.track == "surrogate":
+        extra.update(surrogate="default", polish=True, polish_budget=config.polish_budget)
+    return extra
+
+
 def failed_result(
     config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0
 ):
@@ -256,6 +269,7 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
             start=config.start,
             start_index=config.start_index,
             options=dict(config.options),
+            **identification_extras(config),
         )
         result = identify(
             spec,

@@ -248,15 +248,22 @@ def _num(v) -> float:
 
 def method_label(config: dict) -> str:
     """How a run's method is shown in tables and figures: the solver with its data tier and, when
-    there is one, its model-error treatment, e.g. ``lm (model-error, iterated)``."""
+    there is one, its model-error treatment, finite-difference Jacobian and surrogate track, e.g.
+    ``lm (model-error, iterated)``, ``lm (consistent, FD forward)``,
+    ``cma (consistent, surrogate + FE polish)``."""
     from problems.inverse.cases import all_cases
 
     case = all_cases().get(config["case"])
     if case is None or case.is_analytic:  # analytic problems have no data tiers
         return config["method"]
-    tier = config.get("tier", "model-error")
-    treatment = config.get("treatment", "none")
-    return f"{config['method']} ({tier}{'' if treatment == 'none' else ', ' + treatment})"
+    tags = [config.get("tier", "model-error")]
+    if config.get("treatment", "none") != "none":
+        tags.append(config["treatment"])
+    if config.get("jacobian", "exact") != "exact":
+        tags.append(f"FD {config['jacobian']}")
+    if config.get("track", "fe") == "surrogate":
+        tags.append("surrogate + FE polish")
+    return f"{config['method']} ({', '.join(tags)})"
 
 
 def to_frames(out_dir: str | Path, records: list[dict] | None = None):
@@ -304,6 +311,9 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
         row["solver"] = cfg["method"]
         row["tier"] = cfg.get("tier", "model-error")
         row["treatment"] = cfg.get("treatment", "none")
+        row["track"] = cfg.get("track", "fe")
+        row["jacobian"] = cfg.get("jacobian", "exact")
+        row["polish"] = cfg.get("track", "fe") == "surrogate"
         row["mesh"] = cfg.get("mesh")
         charges = res.get("charges") or {}
         row["forward_equivalents"] = _num(res.get("forward_equivalents"))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import math
 import tomllib
@@ -56,8 +57,19 @@ SUITE_KEYS = {
         'list of model-error treatments: "none", "one-point", "iterated", "bae" (default ["none"])'
     ),
     "plate_margin_mm": "leave out front-face points closer than this to the plates, mm (default 0)",
+    "tracks": (
+        'list of "fe" (the solver on the FE model) and/or "surrogate" (the solver on the stored '
+        'default surrogate, then an FE polish) (default ["fe"])'
+    ),
+    "jacobians": (
+        'list of "exact" (the model\'s own Jacobian), "forward", "central" (finite differences); '
+        'only methods that use a Jacobian are run with each (default ["exact"])'
+    ),
+    "budget_unit": '"evaluations" or "forward-equivalents" (nominal; default "evaluations")',
+    "polish_budget": "FE evaluations of the polish after a surrogate-track run (default 100)",
 }
-TOP_KEYS = ("suite", "data", "options")
+PART_KEYS = tuple(k for k in SUITE_KEYS if k not in ("name", "description"))
+TOP_KEYS = ("suite", "part", "data", "options")
 
 
 @dataclass(frozen=True)
@@ -81,9 +93,20 @@ class RunConfig:
     tier: str = "model-error"
     treatment: str = "none"
     plate_margin_mm: float = 0.0
+    track: str = "fe"
+    jacobian: str = "exact"
+    budget_unit: str = "evaluations"
+    polish_budget: int = 0
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """The configuration as a dict; the keys added after schema 2 appear only when they differ
+        from their defaults, so that the records of earlier suites keep their hashes."""
+        extra = {
+            k: getattr(self, k)
+            for k, default in _LATER_KEYS.items()
+            if getattr(self, k) != default
+        }
+        return extra | {
             "case": self.case,
             "method": self.method,
             "seed": self.seed,
@@ -113,6 +136,7 @@ class RunConfig:
             tier=d.get("tier", "model-error"),
             treatment=d.get("treatment", "none"),
             plate_margin_mm=float(d.get("plate_margin_mm", 0.0)),
+            **{k: type(v)(d.get(k, v)) for k, v in _LATER_KEYS.items()},
         )
 
     @property
@@ -126,7 +150,17 @@ class RunConfig:
         return (
             f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}/"
             f"{self.tier}/{self.treatment}"
+            + (f"/{self.track}" if self.track != "fe" else "")
+            + (f"/jac-{self.jacobian}" if self.jacobian != "exact" else "")
         )
+
+
+#: Run-configuration keys added after schema 2, with their defaults (left out of the hash when
+#: default).
+_LATER_KEYS = {"track": "fe", "jacobian": "exact", "budget_unit": "evaluations", "polish_budget": 0}
+TRACKS = ("fe", "surrogate")
+JACOBIANS = ("exact", "forward", "central")
+BUDGET_UNITS = ("evaluations", "forward-equivalents")
 
 
 def canonical_json(obj: Any) -> str:
@@ -141,10 +175,9 @@ def config_hash(config: RunConfig) -> str:
 
 
 @dataclass(frozen=True)
-class Suite:
-    """A validated suite: the lists it spans and the per-method options."""
+class Part:
+    """One product of run dimensions of a suite (the [suite] table, or one [[part]] over it)."""
 
-    name: str
     cases: tuple[str, ...]
     methods: tuple[str, ...]
     seeds: tuple[int, ...] = (0,)
@@ -152,53 +185,136 @@ class Suite:
     random_starts: int = 1
     budgets: tuple[int, ...] = (200,)
     mesh: str = "coarse"
-    data: dict = field(default_factory=dict)
-    options: dict = field(default_factory=dict)  # method -> {option: value}
     tiers: tuple[str, ...] = ("model-error",)
     treatments: tuple[str, ...] = ("none",)
     plate_margin_mm: float = 0.0
+    tracks: tuple[str, ...] = ("fe",)
+    jacobians: tuple[str, ...] = ("exact",)
+    budget_unit: str = "evaluations"
+    polish_budget: int = 100
+
+    def runs(self, data: dict, options: dict) -> list[RunConfig]:
+        """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
+        start index. The consistent tier is never corrected; the Jacobian choice only multiplies
+        the methods that use one."""
+        out = []
+        for track, tier, treatment, case, method, jac, budget, seed, start in itertools.product(
+            self.tracks,
+            self.tiers,
+            self.treatments,
+            self.cases,
+            self.methods,
+            self.jacobians,
+            self.budgets,
+            self.seeds,
+            self.starts,
+        ):
+            if tier == "consistent" and treatment != "none":
+                continue  # nothing to correct: the data come from the inverse model itself
+            if jac != "exact" and not uses_jacobian(method):
+                continue
+            n = 1 if start == "default" else self.random_starts
+            for i in range(n):
+                out.append(
+                    RunConfig(
+                        case,
+                        method,
+                        seed,
+                        start,
+                        i,
+                        budget,
+                        self.mesh,
+                        dict(data),
+                        dict(options.get(method, {})),
+                        tier,
+                        treatment,
+                        self.plate_margin_mm,
+                        track=track,
+                        jacobian=jac,
+                        budget_unit=self.budget_unit,
+                        polish_budget=self.polish_budget if track == "surrogate" else 0,
+                    )
+                )
+        return out
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A validated suite: its parts (products of run dimensions) and the shared settings."""
+
+    name: str
+    parts: tuple[Part, ...]
+    data: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)  # method -> {option: value}
     description: str = ""
     source: str | None = None  # the TOML text it was read from, if any
 
     def runs(self) -> list[RunConfig]:
-        """All runs, ordered tier, treatment, case, method, budget, seed, start, start index."""
-        out = []
-        for tier in self.tiers:
-            for treatment in self.treatments:
-                if tier == "consistent" and treatment != "none":
-                    continue  # nothing to correct: the data come from the inverse model itself
-                for case in self.cases:
-                    for method in self.methods:
-                        for budget in self.budgets:
-                            for seed in self.seeds:
-                                for start in self.starts:
-                                    n = 1 if start == "default" else self.random_starts
-                                    for i in range(n):
-                                        out.append(
-                                            RunConfig(
-                                                case,
-                                                method,
-                                                seed,
-                                                start,
-                                                i,
-                                                budget,
-                                                self.mesh,
-                                                dict(self.data),
-                                                dict(self.options.get(method, {})),
-                                                tier,
-                                                treatment,
-                                                self.plate_margin_mm,
-                                            )
-                                        )
+        """All runs of all parts, each once (in part order)."""
+        seen, out = set(), []
+        for part in self.parts:
+            for r in part.runs(self.data, self.options):
+                if r.hash not in seen:
+                    seen.add(r.hash)
+                    out.append(r)
         return out
+
+    def _union(self, attr: str) -> tuple:
+        return tuple(dict.fromkeys(v for p in self.parts for v in getattr(p, attr)))
+
+    @property
+    def cases(self) -> tuple[str, ...]:
+        return self._union("cases")
+
+    @property
+    def methods(self) -> tuple[str, ...]:
+        return self._union("methods")
+
+    @property
+    def seeds(self) -> tuple[int, ...]:
+        return self._union("seeds")
+
+    @property
+    def starts(self) -> tuple[str, ...]:
+        return self._union("starts")
+
+    @property
+    def budgets(self) -> tuple[int, ...]:
+        return self._union("budgets")
+
+    @property
+    def tiers(self) -> tuple[str, ...]:
+        return self._union("tiers")
+
+    @property
+    def treatments(self) -> tuple[str, ...]:
+        return self._union("treatments")
+
+    @property
+    def random_starts(self) -> int:
+        return max(p.random_starts for p in self.parts)
+
+    @property
+    def mesh(self) -> str:
+        """The inverse mesh (of the first part; parts may differ)."""
+        return self.parts[0].mesh
 
     def __len__(self) -> int:
         return len(self.runs())
 
     @property
     def total_budget(self) -> int:
-        """Upper bound on the forward evaluations of the whole suite."""
-        return sum(r.budget for r in self.runs())
+        """Upper bound on the evaluations of the whole suite (solver budget plus FE polish)."""
+        return sum(r.budget + r.polish_budget for r in self.runs())
+
+
+def uses_jacobian(method: str) -> bool:
+    """Whether ``method`` asks the objective for Jacobians (so that exact and finite-difference
+    Jacobians are two different runs of it)."""
+    from solvers import find_method
+
+    info = find_method(method)
+    return info is not None and "scheme" in (info.options or {})
 
 
 # --- what is allowed ------------------------------------------------------------------------
@@ -294,7 +410,7 @@ def parse_suite(
         if key not in TOP_KEYS:
             err(
                 f"unknown top-level table [{key}]; allowed: "
-                f"{', '.join('[' + k + ']' for k in TOP_KEYS)}"
+                f"{', '.join('[[part]]' if k == 'part' else '[' + k + ']' for k in TOP_KEYS)}"
             )
     s = raw.get("suite")
     if s is None:
@@ -320,90 +436,30 @@ def parse_suite(
         err(f"[suite] description must be a string, got {description!r}")
         description = ""
 
-    # cases
-    from problems.inverse.cases import CASES, all_cases
-    from solvers import METHODS, find_method
     from solvers.base import option_value_error
 
-    known_cases = all_cases()
-    cases = s.get("cases")
-    if cases is None:
-        err("[suite] missing key 'cases' (\"all\" or a list of case names)")
-        cases = []
-    elif cases == "all":
-        cases = list(CASES)
-    elif not isinstance(cases, list) or not cases:
-        err(f'[suite] cases must be "all" or a non-empty list of case names, got {cases!r}')
-        cases = []
+    parts_raw = raw.get("part", [])
+    if not isinstance(parts_raw, list) or not all(isinstance(p, dict) for p in parts_raw):
+        err("'part' must be an array of tables: [[part]]")
+        parts_raw = []
+    specs = []
+    if not parts_raw:
+        specs.append(_parse_spec(s, err))
     else:
-        for c in cases:
-            if not isinstance(c, str) or c not in known_cases:
-                err(
-                    f'[suite] cases: case {c!r} is unknown; allowed: "all" or '
-                    f"{', '.join(known_cases)}"
-                )
-        _no_duplicates("cases", cases, err)
+        for i, part in enumerate(parts_raw, 1):
+            for key in part:
+                if key not in SUITE_KEYS or key in ("name", "description"):
+                    hint = _did_you_mean(key, SUITE_KEYS)
+                    err(
+                        f"[[part]] {i}: unknown key {key!r}{hint}; allowed: {', '.join(PART_KEYS)}"
+                    )
+            merged = {k: v for k, v in s.items() if k not in ("name", "description")} | part
 
-    # methods
-    methods = s.get("methods")
-    if methods is None:
-        err("[suite] missing key 'methods' (a list of method names)")
-        methods = []
-    elif not isinstance(methods, list) or not methods:
-        err(f"[suite] methods must be a non-empty list of method names, got {methods!r}")
-        methods = []
-    else:
-        allowed = list(METHODS)
-        for m in methods:
-            if not isinstance(m, str) or find_method(m) is None:
-                hint = _did_you_mean(m, allowed) if isinstance(m, str) else ""
-                err(
-                    f"[suite] methods: method {m!r} is unknown{hint}; allowed: {', '.join(allowed)}"
-                    " (or nlopt:<ALGORITHM>)"
-                )
-        _no_duplicates("methods", methods, err)
+            def part_err(msg, i=i):
+                errors.append(msg.replace("[suite]", f"[[part]] {i}:", 1))
 
-    seeds = _int_list(s, "seeds", [0], minimum=0, err=err)
-    budgets = _int_list(s, "budgets", None, minimum=1, err=err)
-
-    starts = s.get("starts", ["default"])
-    if not isinstance(starts, list) or not starts:
-        err(f'[suite] starts must be a non-empty list of "default" and/or "random", got {starts!r}')
-        starts = ["default"]
-    else:
-        for st in starts:
-            if st not in START_KINDS:
-                err(
-                    f"[suite] starts: {st!r} is not a start kind; allowed: {', '.join(START_KINDS)}"
-                )
-        _no_duplicates("starts", starts, err)
-        starts = [st for st in START_KINDS if st in starts]  # canonical order
-
-    random_starts = s.get("random_starts", 1)
-    if isinstance(random_starts, bool) or not isinstance(random_starts, int) or random_starts < 1:
-        err(f"[suite] random_starts must be an integer >= 1, got {random_starts!r}")
-        random_starts = 1
-    elif "random_starts" in s and "random" not in starts:
-        err('[suite] random_starts is set but starts does not list "random"')
-
-    mesh = s.get("mesh", "coarse")
-    why = _mesh_error(mesh)
-    if why:
-        err(f"[suite] {why}")
-
-    from problems.inverse.data import TIERS
-    from problems.inverse.model_error import TREATMENTS
-
-    tiers = _choice_list(s, "tiers", ["model-error"], TIERS, err)
-    treatments = _choice_list(s, "treatments", ["none"], TREATMENTS, err)
-    plate_margin = s.get("plate_margin_mm", 0.0)
-    if (
-        isinstance(plate_margin, bool)
-        or not isinstance(plate_margin, (int, float))
-        or not (math.isfinite(plate_margin) and 0 <= plate_margin < 75)
-    ):
-        err(f"[suite] plate_margin_mm = {plate_margin!r} is out of range: 0 <= margin < 75 mm")
-        plate_margin = 0.0
+            specs.append(_parse_spec(merged, part_err))
+    methods = list(dict.fromkeys(m for sp in specs for m in sp["methods"] if isinstance(m, str)))
 
     # [data]
     raw_data = raw.get("data", {})
@@ -491,6 +547,114 @@ def parse_suite(
 
     return Suite(
         name=sname,
+        parts=tuple(Part(**spec) for spec in specs),
+        data=dict(data),
+        options=clean_options,
+        description=description,
+        source=source,
+    )
+
+
+def _parse_spec(s: dict, err) -> dict:
+    """Validate the run dimensions of a [suite] table (or a [[part]] merged over it); returns
+    them as a dict of clean values (errors go to ``err``)."""
+    # cases
+    from problems.inverse.cases import CASES, all_cases
+    from solvers import METHODS, find_method
+
+    known_cases = all_cases()
+    cases = s.get("cases")
+    if cases is None:
+        err("[suite] missing key 'cases' (\"all\" or a list of case names)")
+        cases = []
+    elif cases == "all":
+        cases = list(CASES)
+    elif not isinstance(cases, list) or not cases:
+        err(f'[suite] cases must be "all" or a non-empty list of case names, got {cases!r}')
+        cases = []
+    else:
+        for c in cases:
+            if not isinstance(c, str) or c not in known_cases:
+                err(
+                    f'[suite] cases: case {c!r} is unknown; allowed: "all" or '
+                    f"{', '.join(known_cases)}"
+                )
+        _no_duplicates("cases", cases, err)
+
+    # methods
+    methods = s.get("methods")
+    if methods is None:
+        err("[suite] missing key 'methods' (a list of method names)")
+        methods = []
+    elif not isinstance(methods, list) or not methods:
+        err(f"[suite] methods must be a non-empty list of method names, got {methods!r}")
+        methods = []
+    else:
+        allowed = list(METHODS)
+        for m in methods:
+            if not isinstance(m, str) or find_method(m) is None:
+                hint = _did_you_mean(m, allowed) if isinstance(m, str) else ""
+                err(
+                    f"[suite] methods: method {m!r} is unknown{hint}; allowed: {', '.join(allowed)}"
+                    " (or nlopt:<ALGORITHM>)"
+                )
+        _no_duplicates("methods", methods, err)
+
+    seeds = _int_list(s, "seeds", [0], minimum=0, err=err)
+    budgets = _int_list(s, "budgets", None, minimum=1, err=err)
+
+    starts = s.get("starts", ["default"])
+    if not isinstance(starts, list) or not starts:
+        err(f'[suite] starts must be a non-empty list of "default" and/or "random", got {starts!r}')
+        starts = ["default"]
+    else:
+        for st in starts:
+            if st not in START_KINDS:
+                err(
+                    f"[suite] starts: {st!r} is not a start kind; allowed: {', '.join(START_KINDS)}"
+                )
+        _no_duplicates("starts", starts, err)
+        starts = [st for st in START_KINDS if st in starts]  # canonical order
+
+    random_starts = s.get("random_starts", 1)
+    if isinstance(random_starts, bool) or not isinstance(random_starts, int) or random_starts < 1:
+        err(f"[suite] random_starts must be an integer >= 1, got {random_starts!r}")
+        random_starts = 1
+    elif "random_starts" in s and "random" not in starts:
+        err('[suite] random_starts is set but starts does not list "random"')
+
+    mesh = s.get("mesh", "coarse")
+    why = _mesh_error(mesh)
+    if why:
+        err(f"[suite] {why}")
+
+    from problems.inverse.data import TIERS
+    from problems.inverse.model_error import TREATMENTS
+
+    tiers = _choice_list(s, "tiers", ["model-error"], TIERS, err)
+    treatments = _choice_list(s, "treatments", ["none"], TREATMENTS, err)
+    plate_margin = s.get("plate_margin_mm", 0.0)
+    if (
+        isinstance(plate_margin, bool)
+        or not isinstance(plate_margin, (int, float))
+        or not (math.isfinite(plate_margin) and 0 <= plate_margin < 75)
+    ):
+        err(f"[suite] plate_margin_mm = {plate_margin!r} is out of range: 0 <= margin < 75 mm")
+        plate_margin = 0.0
+
+    tracks = _choice_list(s, "tracks", ["fe"], TRACKS, err)
+    jacobians = _choice_list(s, "jacobians", ["exact"], JACOBIANS, err)
+    budget_unit = s.get("budget_unit", "evaluations")
+    if budget_unit not in BUDGET_UNITS:
+        err(
+            f"[suite] budget_unit = {budget_unit!r} is unknown; allowed: {', '.join(BUDGET_UNITS)}"
+        )
+        budget_unit = "evaluations"
+    polish_budget = s.get("polish_budget", 100)
+    if isinstance(polish_budget, bool) or not isinstance(polish_budget, int) or polish_budget < 1:
+        err(f"[suite] polish_budget = {polish_budget!r} is out of range: a whole number >= 1")
+        polish_budget = 100
+    return dict(
         cases=tuple(cases),
         methods=tuple(methods),
         seeds=tuple(seeds),
@@ -498,13 +662,13 @@ def parse_suite(
         random_starts=random_starts,
         budgets=tuple(budgets),
         mesh=mesh,
-        data=dict(data),
-        options=clean_options,
         tiers=tuple(tiers),
         treatments=tuple(treatments),
         plate_margin_mm=float(plate_margin),
-        description=description,
-        source=source,
+        tracks=tuple(tracks),
+        jacobians=tuple(jacobians),
+        budget_unit=budget_unit,
+        polish_budget=int(polish_budget),
     )
 
 

@@ -146,7 +146,7 @@ def test_config_hash_is_canonical_and_stable():
         (with_("suite.mesh", "huge"), ["mesh 'huge' is unknown", "coarse"]),
         (
             with_("results.x", 1),
-            ["unknown top-level table [results]", "[suite], [data], [options]"],
+            ["unknown top-level table [results]", "[suite], [[part]], [data], [options]"],
         ),
         (with_("data.noize_um", 1.0), ["[data] unknown key 'noize_um'", "allowed:"]),
         (with_("data.noise_um", -1.0), ["[data] noise_um = -1.0 is out of range"]),
@@ -284,3 +284,63 @@ def test_runs_of_different_tiers_never_share_a_data_set():
     a, b = s.runs()
     assert data_key(a) != data_key(b)
     assert {dataset_for(r).settings.tier for r in (a, b)} == {"consistent", "model-error"}
+
+
+# --- parts, tracks, Jacobians -------------------------------------------------------------
+
+
+PARTS = {
+    "suite": {"name": "p", "cases": ["analytic-smooth"], "budgets": [40], "seeds": [0]},
+    "part": [
+        {"methods": ["lm", "ga"], "jacobians": ["exact", "forward"]},
+        {"methods": ["ga", "pso"], "tracks": ["surrogate"], "seeds": [0, 1], "polish_budget": 7},
+    ],
+}
+
+
+def test_parts_are_a_union_of_products_over_the_shared_suite_table():
+    s = parse_suite(PARTS)
+    labels = sorted(r.label for r in s.runs())
+    # part 1: lm x {exact, forward} + ga exact only (ga uses no Jacobian);
+    # part 2: 2 methods x 2 seeds
+    assert len(labels) == 3 + 4
+    assert sum("/jac-forward" in lab for lab in labels) == 1
+    assert sum(lab.endswith("/surrogate") for lab in labels) == 4
+    assert s.methods == ("lm", "ga", "pso") and s.seeds == (0, 1)
+    surrogate = [r for r in s.runs() if r.track == "surrogate"]
+    assert {r.polish_budget for r in surrogate} == {7}
+    assert {r.polish_budget for r in s.runs() if r.track == "fe"} == {0}
+    assert s.total_budget == 7 * 40 + 4 * 7
+
+
+def test_a_bad_key_in_a_part_names_the_part():
+    raw = copy.deepcopy(PARTS)
+    raw["part"][1]["trakcs"] = ["fe"]
+    raw["part"][0]["jacobians"] = ["exact", "complex-step"]
+    with pytest.raises(ValueError) as info:
+        parse_suite(raw)
+    msg = str(info.value)
+    assert "[[part]] 2: unknown key 'trakcs' (did you mean 'tracks'?)" in msg
+    assert "[[part]] 1: jacobians: 'complex-step' unknown; allowed: exact, forward, central" in msg
+
+
+def test_later_keys_keep_the_hash_of_earlier_records_when_default():
+    fe = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse")
+    assert "track" not in fe.to_dict() and "jacobian" not in fe.to_dict()
+    sur = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", track="surrogate")
+    assert sur.to_dict()["track"] == "surrogate" and sur.hash != fe.hash
+    assert RunConfig.from_dict(sur.to_dict()) == sur
+
+
+def test_the_runner_passes_the_later_dimensions_to_the_identification():
+    from bench.runner import identification_extras
+
+    fe = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse")
+    assert identification_extras(fe) == {}
+    fd = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", jacobian="central")
+    assert identification_extras(fd) == {"jacobian": "central"}
+    sur = RunConfig(
+        "analytic-smooth", "cma", 0, "default", 0, 50, "coarse", track="surrogate", polish_budget=9
+    )
+    expected = {"surrogate": "default", "polish": True, "polish_budget": 9}
+    assert identification_extras(sur) == expected

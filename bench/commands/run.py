@@ -51,20 +51,29 @@ def main(args) -> int:
     suite = load_suite(args.suite)  # ValueError -> message + exit 2 (bench.cli)
     out = Path(args.out) if args.out else Path("results") / suite.name
     runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
-    fe_evals = sum(r.budget for r in pending if not get_case(r.case).is_analytic)
+    fe_evals = sum(
+        r.polish_budget if r.track == "surrogate" else r.budget
+        for r in pending
+        if not get_case(r.case).is_analytic
+    )
     warn_if_long(
         NAME, fe_evals, suite.mesh, workers=args.workers, what=f"{len(pending)} pending runs"
     )
 
     if args.dry_run:
-        print(
-            f"suite {suite.name!r}: {len(suite.cases)} cases x {len(suite.methods)} methods x "
-            f"{len(suite.budgets)} budgets x {len(suite.seeds)} seeds x starts {list(suite.starts)}"
-            + (f" ({suite.random_starts} random per seed)" if "random" in suite.starts else "")
-        )
+        for i, part in enumerate(suite.parts, 1):
+            print(
+                f"suite {suite.name!r}"
+                + (f" part {i}" if len(suite.parts) > 1 else "")
+                + f": {len(part.cases)} cases x {len(part.methods)} methods x "
+                f"{len(part.budgets)} budgets x {len(part.seeds)} seeds x starts "
+                f"{list(part.starts)}"
+                + (f" ({part.random_starts} random per seed)" if "random" in part.starts else "")
+                + f", tracks {list(part.tracks)}, tiers {list(part.tiers)}"
+            )
         print(
             f"{len(runs)} runs, {len(runs) - len(pending)} with a record in {out}, {len(pending)} "
-            f"to run; at most {sum(r.budget for r in pending)} forward evaluations"
+            f"to run; at most {fe_evals} FE evaluations"
         )
         return 0
 
