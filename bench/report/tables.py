@@ -93,6 +93,11 @@ def case_order(cases) -> list[str]:
     return [c for c in canon if c in cases] + sorted(c for c in cases if c not in canon)
 
 
+def base_method(label: str) -> str:
+    """The solver name of a method label (``"lm (consistent) [surrogate]"`` -> ``"lm"``)."""
+    return str(label).split(" (")[0].split(" [")[0]
+
+
 def method_order(methods) -> list[str]:
     """Methods by family (local, global, sampling), then in the order of the study's list."""
     from solvers import METHODS, find_method
@@ -101,9 +106,9 @@ def method_order(methods) -> list[str]:
     canon = list(METHODS)  # registration order
 
     def key(m):
-        info = find_method(m.split(" (")[0])  # labels carry the data tier: "lm (consistent)"
+        base = base_method(m)  # labels carry the data tier and track: "lm (consistent) [FD]"
+        info = find_method(base)
         fam = rank.get(getattr(info, "family", None), 3)
-        base = m.split(" (")[0]
         return fam, canon.index(base) if base in canon else len(canon), m
 
     return sorted(dict.fromkeys(methods), key=key)
@@ -116,16 +121,39 @@ def identified(runs: pd.DataFrame) -> pd.DataFrame:
     return runs[~runs["crashed"].astype(bool)]
 
 
-def success(runs: pd.DataFrame, tol: float) -> pd.Series:
-    """True where every active parameter is within ``tol`` percent of its reference."""
+#: The success criterion of the comparison (issue 16), defined here once: every identified
+#: parameter within SUCCESS_TOL percent of its reference and every derived parameter (the exponent
+#: cases' ``a``, see :mod:`bench.report.derived`) within DERIVED_TOL[name] percent.
+SUCCESS_TOL = 2.0
+DERIVED_TOL = {"a": 20.0}
+
+
+def success_rule(tol: float = SUCCESS_TOL, derived_tol: dict | None = None) -> str:
+    """The success criterion in words (for captions and report.md)."""
+    dt = DERIVED_TOL if derived_tol is None else derived_tol
+    extra = "".join(f", and {p} within {v:g} %" for p, v in dt.items())
+    return f"every identified parameter within {tol:g} % of its reference{extra}"
+
+
+def success(runs: pd.DataFrame, tol: float = SUCCESS_TOL, derived_tol: dict | None = None):
+    """True where every active identified parameter is within ``tol`` percent of its reference and
+    every derived parameter (``derived_tol``, default :data:`DERIVED_TOL`) within its own
+    tolerance; crashed runs and runs without any active parameter fail."""
+    dt = DERIVED_TOL if derived_tol is None else derived_tol
     params = runs.attrs.get("parameters") or parameter_order(
         c[4:] for c in runs.columns if c.startswith("err.")
     )
-    err = runs[[f"err.{p}" for p in params]].abs()
-    active = err.notna()
-    ok = ((err <= tol) | ~active).all(axis=1) & (active.sum(axis=1) > 0)
+    params = [p for p in params if f"err.{p}" in runs]
+    ok = pd.Series(True, index=runs.index)
+    n_active = pd.Series(0, index=runs.index)
+    for p in params:
+        err = runs[f"err.{p}"].astype(float).abs()
+        active = err.notna()
+        n_active += (active & (p not in dt)).astype(int)
+        ok &= (err <= dt.get(p, tol)) | ~active
+    ok &= n_active > 0
     if "crashed" in runs:
-        ok &= ~runs["crashed"].astype(bool)
+        ok &= ~runs["crashed"].fillna(False).astype(bool)
     return ok
 
 
