@@ -24,7 +24,11 @@ class Identification:
     mesh             : inverse-model mesh spec
     tier             : ``model-error`` or ``consistent`` data (ignored with ``data``)
     data             : an explicit data file (path), else the tier's default data set
-    treatment        : ``none``, ``one-point``, ``iterated`` or ``bae`` (model-error correction)
+    treatment        : ``none``, ``one-point``, ``iterated`` or ``bae`` (model-error correction),
+                       or ``default``: the case's default treatment
+                       (:func:`problems.inverse.cases.default_treatment`), which also sets
+                       ``plate_margin_mm``, ``hifi_mesh`` and ``bae_samples`` (the given ones are
+                       replaced; ``none`` on consistent-tier data, which have no model error)
     hifi_mesh        : high-fidelity mesh of the correction (default: the next finer preset)
     plate_margin_mm  : leave out front-face points closer than this to the plates, mm
     budget, seed     : forward evaluations of the solver; seed of the solver and of random starts
@@ -60,6 +64,28 @@ class Identification:
             raise ValueError(
                 f"bae_samples = {self.bae_samples!r} is out of range: a whole number >= 2"
             )
+
+
+def with_default_treatment(spec: Identification, tier: str | None = None) -> Identification:
+    """``spec`` with ``treatment = "default"`` replaced by the case's default treatment and its
+    settings (unchanged for any other treatment). ``tier``: the data's tier when known (default
+    ``spec.tier``); consistent-tier data get ``none``."""
+    from dataclasses import replace
+
+    from problems.inverse.cases import default_treatment
+
+    if spec.treatment != "default":
+        return spec
+    d = default_treatment(spec.case)
+    if (tier or spec.tier) == "consistent" or d.treatment == "none":
+        return replace(spec, treatment="none", hifi_mesh=None, plate_margin_mm=0.0)
+    return replace(
+        spec,
+        treatment=d.treatment,
+        plate_margin_mm=d.plate_margin_mm,
+        hifi_mesh=d.hifi_mesh if spec.mesh == d.inverse_mesh else None,
+        bae_samples=d.bae_samples,
+    )
 
 
 def bae_path(spec: Identification, hifi_mesh: str, data) -> Path:
@@ -143,6 +169,8 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
             objective, spec.method, budget=spec.budget, seed=spec.seed, x0=x0, **spec.options
         )
     data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
+    requested = spec.treatment
+    spec = with_default_treatment(spec, data.settings.tier)
     region = Region(spec.plate_margin_mm)
     hifi_mesh = None
     if spec.treatment != "none":
@@ -203,5 +231,58 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         "start_index": spec.start_index,
         "data_file": spec.data,
         "treatment": spec.treatment,
+        "treatment_requested": requested,
+        "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
     }
     return replace(result, provenance=provenance)
+
+
+def treated_objective(spec: Identification, *, mapper=None, dataset=None):
+    """``(objective, resolved spec)``: the objective of ``spec`` with its data, region and
+    model-error correction, without solving (the studies' objective). The one-point correction is
+    made at the start; ``iterated`` needs a solver's solutions and is refused."""
+    from problems.inverse.build import (
+        Region,
+        build_objective,
+        hifi_mesh_for,
+        model_pair,
+        resolve_data,
+    )
+    from problems.inverse.cases import get_case
+    from problems.inverse.model_error import one_point
+    from problems.inverse.starts import start_point
+
+    case = get_case(spec.case)
+    if case.is_analytic:
+        return build_objective(case, mapper=mapper), spec
+    data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
+    spec = with_default_treatment(spec, data.settings.tier)
+    if spec.treatment == "iterated":
+        raise ValueError(
+            "treatment 'iterated' re-evaluates the correction at a solver's solutions: it exists "
+            "for identifications only; allowed here: none, one-point, bae, default"
+        )
+    region = Region(spec.plate_margin_mm)
+    hifi_mesh = None if spec.treatment == "none" else spec.hifi_mesh or hifi_mesh_for(spec.mesh)
+
+    def objective_with(correction):
+        return build_objective(
+            case,
+            mesh=spec.mesh,
+            data=data,
+            region=region,
+            correction=correction,
+            hifi_mesh=hifi_mesh,
+            mapper=mapper,
+        )
+
+    if spec.treatment == "none":
+        return objective_with(None), spec
+    objective_with(None)  # checks the honesty rule before any high-fidelity run
+    hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
+    if spec.treatment == "one-point":
+        x0 = start_point(case, kind=spec.start, seed=spec.seed, index=spec.start_index)
+        corr = one_point(hifi, inverse, x0, mapper=mapper)
+    else:
+        corr = bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
+    return objective_with(corr), spec

@@ -115,6 +115,7 @@ def test_cases_cli_json(capsys):
     doc = json.loads(capsys.readouterr().out)
     assert len(doc) == 9
     first = doc[0]
-    assert set(first) == {"name", "form", "hardening", "parameters", "fixed"}
+    assert set(first) == {"name", "form", "hardening", "parameters", "fixed", "default_treatment"}
+    assert first["default_treatment"]["treatment"] == "bae"
     assert set(first["parameters"][0]) == {"name", "unit", "reference", "lower", "upper", "start"}
     assert first["fixed"]["nu"] == 0.2

@@ -215,6 +215,34 @@ def study_data(text: str) -> str:
         ) from None
 
 
+def add_tier_arguments(parser) -> None:
+    """``--tier``, ``--correction`` and ``--plate-margin-mm`` of the studies (see
+    :func:`bench.studies.study_objective`); they reach ``args.tier``, ``args.correction`` and
+    ``args.plate_margin_mm``."""
+    parser.add_argument(
+        "--tier",
+        choices=["consistent", "model-error"],
+        default=None,
+        help="fit the tier's shipped data set for the inverse mesh: consistent (made with the "
+        "inverse mesh itself) or model-error (made on xfine); in place of --data",
+    )
+    parser.add_argument(
+        "--correction",
+        choices=["none", "one-point", "bae", "default"],
+        default="none",
+        help="model-error treatment of the objective (default none; one-point at the default "
+        "start; default = the case's default treatment with its plate margin, see `femubench "
+        "cases`)",
+    )
+    parser.add_argument(
+        "--plate-margin-mm",
+        type=float_in(0.0, 75.0, high_open=True),
+        default=0.0,
+        metavar="MM",
+        help="leave out front-face points closer than MM to the plates (default 0)",
+    )
+
+
 def assignments(items, option: str, names=None, *, units: dict | None = None) -> dict[str, float]:
     """``["E=3e4", "nu=0.2"]`` -> ``{"E": 30000.0, "nu": 0.2}``.
 

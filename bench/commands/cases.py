@@ -1,9 +1,13 @@
-"""``femubench cases``: the nine Table-1 cases with their parameters, bounds and default starts."""
+"""``femubench cases``: the nine Table-1 cases with their parameters, bounds, default starts and
+default model-error treatment."""
 
 from __future__ import annotations
 
 NAME = "cases"
-HELP = "List the nine identification cases (table, or --json)."
+HELP = (
+    "List the nine identification cases with their default model-error treatment (table, or "
+    "--json)."
+)
 
 
 def add_arguments(p) -> None:
@@ -14,15 +18,27 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     import json
 
-    from problems.inverse.cases import CASES, all_cases
+    from problems.inverse.cases import CASES, all_cases, default_treatment
 
     cases = all_cases() if args.analytic else CASES
     if args.json:
-        print(json.dumps([c.to_dict() for c in cases.values()], indent=1))
+        print(
+            json.dumps(
+                [
+                    {**c.to_dict(), "default_treatment": default_treatment(c.name).to_dict()}
+                    for c in cases.values()
+                ],
+                indent=1,
+            )
+        )
         return 0
     for case in cases.values():
         fixed = ", ".join(f"{k} = {v}" for k, v in case.fixed.items())
         print(f"\n{case.name}  (form {case.form}, hardening {case.hardening}; fixed: {fixed})")
+        print(
+            f"  default model-error treatment (--correction default): "
+            f"{default_treatment(case.name).label()}"
+        )
         print(
             f"  {'parameter':10} {'unit':10} {'reference':>12} {'lower':>12} {'upper':>12} "
             f"{'start':>12}"

@@ -28,6 +28,7 @@ def add_arguments(p) -> None:
         add_cluster_arguments,
         add_mesh_argument,
         add_quiet_argument,
+        add_tier_arguments,
         int_at_least,
         nonneg_int,
         output_dir,
@@ -47,6 +48,7 @@ def add_arguments(p) -> None:
     )
     add_mesh_argument(p, "coarse")
     p.add_argument("--data", default="auto", type=study_data, help=DATA_HELP)
+    add_tier_arguments(p)
     p.add_argument(
         "--box-scale",
         default="auto",
@@ -132,6 +134,9 @@ def main(args) -> int:
             samples=samples,
             mesh=args.mesh,
             data=args.data,
+            tier=args.tier,
+            correction=args.correction,
+            plate_margin_mm=args.plate_margin_mm,
             box_scale=scale,
             seed=args.seed,
             mapper=m,

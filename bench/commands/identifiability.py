@@ -13,6 +13,7 @@ def add_arguments(p) -> None:
     from bench.commands._args import (
         add_cluster_arguments,
         add_mesh_argument,
+        add_tier_arguments,
         float_in,
         output_dir,
         study_data,
@@ -27,6 +28,7 @@ def add_arguments(p) -> None:
     )
     add_mesh_argument(p, "coarse")
     p.add_argument("--data", default="auto", type=study_data, help=DATA_HELP)
+    add_tier_arguments(p)
     p.add_argument(
         "--x",
         nargs="+",
@@ -114,6 +116,9 @@ def main(args) -> int:
             cases,
             mesh=args.mesh,
             data=args.data,
+            tier=args.tier,
+            correction=args.correction,
+            plate_margin_mm=args.plate_margin_mm,
             x=x,
             scheme=args.scheme,
             rel_step=args.rel_step,

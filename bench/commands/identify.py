@@ -30,9 +30,10 @@ def add_arguments(p) -> None:
     )
     p.add_argument(
         "--correction",
-        choices=["none", "one-point", "iterated", "bae"],
+        choices=["none", "one-point", "iterated", "bae", "default"],
         default="none",
-        help="model-error treatment (default none; see `femubench cases` for each case's default)",
+        help="model-error treatment (default none); 'default' is the case's default treatment "
+        "with its plate margin, high-fidelity mesh and BAE samples (listed by `femubench cases`)",
     )
     p.add_argument(
         "--hifi-mesh",
@@ -42,9 +43,10 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--plate-margin-mm",
         type=float,
-        default=0.0,
+        default=None,
         metavar="MM",
-        help="leave out front-face points closer than MM to the plates (default 0)",
+        help="leave out front-face points closer than MM to the plates (default 0; with "
+        "--correction default the case's margin)",
     )
     p.add_argument(
         "--budget",
@@ -132,6 +134,12 @@ def format_identification(case, result) -> str:
             f"{str(prov.get('data_hash'))[:12]}; inverse mesh {prov.get('inverse_mesh')}; "
             f"treatment {prov.get('treatment')}"
             + (f" (high-fidelity mesh {prov['hifi_mesh']})" if prov.get("hifi_mesh") else "")
+            + (
+                f", plate margin {prov['region_plate_margin_mm']:g} mm"
+                if prov.get("region_plate_margin_mm")
+                else ""
+            )
+            + (" = the case's default" if prov.get("treatment_requested") == "default" else "")
         )
     return "\n".join(lines)
 
@@ -158,6 +166,13 @@ def main(args) -> int:
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
+    if args.correction == "default" and (
+        args.plate_margin_mm is not None or args.hifi_mesh is not None
+    ):
+        raise ValueError(
+            "--correction default sets the plate margin and the high-fidelity mesh itself (see "
+            "`femubench cases`); to change them name the treatment, e.g. --correction bae"
+        )
     spec = Identification(
         case.name,
         args.solver,
@@ -166,7 +181,7 @@ def main(args) -> int:
         data=args.data,
         treatment=args.correction,
         hifi_mesh=args.hifi_mesh,
-        plate_margin_mm=args.plate_margin_mm,
+        plate_margin_mm=args.plate_margin_mm or 0.0,
         budget=args.budget,
         seed=args.seed,
         start=args.start,

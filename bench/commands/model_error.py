@@ -68,10 +68,13 @@ def add_arguments(p) -> None:
 
 def _treatment(text: str) -> str:
     from bench.commands._args import ArgumentTypeError
-    from problems.inverse.model_error import TREATMENTS
+    from problems.inverse.model_error import CORRECTIONS
 
-    if text not in TREATMENTS:
-        raise ArgumentTypeError(f"{text!r} is unknown; allowed: {', '.join(TREATMENTS)}")
+    if text not in CORRECTIONS:
+        raise ArgumentTypeError(
+            f"{text!r} is unknown; allowed: {', '.join(CORRECTIONS)} (the study compares the "
+            "treatments; 'default' is one of its rows: bae with the case's plate margin)"
+        )
     return text
 
 

@@ -15,6 +15,7 @@ def add_arguments(p) -> None:
         add_cluster_arguments,
         add_mesh_argument,
         add_quiet_argument,
+        add_tier_arguments,
         int_at_least,
         nonneg_int,
         output_dir,
@@ -26,6 +27,7 @@ def add_arguments(p) -> None:
     p.add_argument("case", metavar="CASE", help="case name (FE or analytic-*)")
     add_mesh_argument(p, "coarse")
     p.add_argument("--data", default="auto", type=study_data, help=DATA_HELP)
+    add_tier_arguments(p)
     p.add_argument(
         "--budget",
         type=positive_int,
@@ -132,6 +134,9 @@ def main(args) -> int:
                     case.name,
                     mesh=args.mesh,
                     data=args.data,
+                    tier=args.tier,
+                    correction=args.correction,
+                    plate_margin_mm=args.plate_margin_mm,
                     budget=args.budget,
                     seed=args.seed,
                     x=x,

@@ -78,38 +78,93 @@ def case_names(items: Iterable[str]) -> list[str]:
     return names
 
 
-def study_objective(case_name: str, *, mesh: str = "coarse", data: str = "auto", mapper=None):
-    """``(objective, description of the data)`` for the studies (see :data:`DATA_HELP`)."""
-    from problems.inverse.build import build_objective
+def study_objective(
+    case_name: str,
+    *,
+    mesh: str = "coarse",
+    data: str = "auto",
+    mapper=None,
+    tier: str | None = None,
+    correction: str = "none",
+    plate_margin_mm: float = 0.0,
+):
+    """``(objective, description of the data)`` for the studies (see :data:`DATA_HELP`).
+
+    tier            : ``consistent`` or ``model-error``: the tier's shipped data set for the
+                      inverse ``mesh`` (in place of ``data``, which must then be ``auto``)
+    correction      : model-error treatment of the objective: ``none``, ``one-point`` (at the
+                      default start), ``bae`` or ``default`` (the case's default treatment, with its
+                      plate margin); see :func:`bench.identification.treated_objective`
+    plate_margin_mm : leave out front-face points within this distance of the plates
+    """
     from problems.inverse.cases import get_case
 
     case = get_case(case_name)
     if case.is_analytic:
+        from problems.inverse.build import build_objective
+
         return build_objective(
             case, mapper=mapper
         ), "analytic synthetic data (noise-free, at the reference)"
     from problems.inverse.data import default_path, get_data, make_data
 
-    if data == "auto":
-        data = "shipped" if default_path(case.name).exists() else "synthetic"
-    if data == "shipped":
-        ds = get_data(case.name, progress=True)
-        text = f"shipped data {default_path(case.name)} (mesh {ds.settings.mesh})"
-    elif data == "synthetic":
-        ds = make_data(
-            case, mesh=mesh, resolution_um=0.0, force_resolution_kN=0.0, tier="consistent"
+    if correction == "default" and plate_margin_mm:
+        raise ValueError(
+            "the default treatment sets the plate margin itself (see `femubench cases`); to change "
+            "it name the treatment, e.g. --correction bae"
         )
-        text = (
-            f"synthetic data: the {mesh} mesh's own response at the reference, unrounded "
-            f"(weights as for 1 um rounding; no model error)"
-        )
+    if tier is not None:
+        if data != "auto":
+            raise ValueError(
+                f"--tier {tier} and --data {data}: give one of them (--tier picks the tier's "
+                "shipped data set)"
+            )
+        ds = None  # the tier's data set for the inverse mesh
+        text = f"{tier}-tier data"
     else:
-        path = Path(data)
-        if not path.exists():
-            raise ValueError(f"--data {data!r}: no such file; allowed: {DATA_CHOICES}")
-        ds = data
-        text = f"data file {path}"
-    return build_objective(case, mesh=mesh, data=ds, mapper=mapper), text
+        if data == "auto":
+            data = "shipped" if default_path(case.name).exists() else "synthetic"
+        if data == "shipped":
+            ds = get_data(case.name, progress=True)
+            text = f"shipped data {default_path(case.name)}"
+        elif data == "synthetic":
+            ds = make_data(
+                case, mesh=mesh, resolution_um=0.0, force_resolution_kN=0.0, tier="consistent"
+            )
+            text = (
+                f"synthetic data: the {mesh} mesh's own response at the reference, unrounded "
+                f"(weights as for 1 um rounding; no model error)"
+            )
+        else:
+            path = Path(data)
+            if not path.exists():
+                raise ValueError(f"--data {data!r}: no such file; allowed: {DATA_CHOICES}")
+            ds = data
+            text = f"data file {path}"
+    from bench.identification import Identification, treated_objective
+
+    spec = Identification(
+        case.name,
+        "none",
+        mesh=mesh,
+        tier=tier or "model-error",
+        treatment=correction,
+        plate_margin_mm=plate_margin_mm,
+    )
+    obj, spec = treated_objective(spec, mapper=mapper, dataset=ds)
+    prov = obj.provenance
+    text += (
+        f" ({prov['data_tier']} tier, data mesh {prov['data_mesh']}, hash "
+        f"{str(prov['data_hash'])[:12]}); treatment {prov['treatment']}"
+        + (f" (high-fidelity mesh {prov['hifi_mesh']})" if prov.get("hifi_mesh") else "")
+        + (" = the case's default" if correction == "default" else "")
+        + (
+            f"; points within {prov['region_plate_margin_mm']:g} mm of the plates left out"
+            if prov.get("region_plate_margin_mm")
+            else ""
+        )
+    )
+    return obj, text
 
 
 def outside_bounds(what: str, case_name: str, obj, z) -> str | None:

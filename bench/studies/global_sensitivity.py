@@ -87,6 +87,9 @@ def run_gsa(
     samples: int = 32,
     mesh: str = "coarse",
     data: str = "auto",
+    tier: str | None = None,
+    correction: str = "none",
+    plate_margin_mm: float = 0.0,
     box_scale: str | float = "auto",
     seed: int = 0,
     mapper=None,
@@ -114,7 +117,15 @@ def run_gsa(
     if method not in ("sobol", "morris"):
         raise ValueError(f"method {method!r} is unknown; allowed: sobol, morris")
     t0 = time.perf_counter()
-    obj, text = study_objective(case.name, mesh=mesh, data=data, mapper=mapper)
+    obj, text = study_objective(
+        case.name,
+        mesh=mesh,
+        data=data,
+        mapper=mapper,
+        tier=tier,
+        correction=correction,
+        plate_margin_mm=plate_margin_mm,
+    )
     names, ref = case.names, case.reference
     d = len(names)
     if method == "sobol":

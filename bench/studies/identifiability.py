@@ -46,6 +46,9 @@ def case_identifiability(
     *,
     mesh: str = "coarse",
     data: str = "auto",
+    tier: str | None = None,
+    correction: str = "none",
+    plate_margin_mm: float = 0.0,
     x: dict | None = None,
     scheme: str = "forward",
     rel_step: float = 1e-6,
@@ -55,7 +58,15 @@ def case_identifiability(
     (or at ``x`` overrides)."""
     from problems.analysis.identifiability import identifiability
 
-    obj, text = study_objective(case_name, mesh=mesh, data=data, mapper=mapper)
+    obj, text = study_objective(
+        case_name,
+        mesh=mesh,
+        data=data,
+        mapper=mapper,
+        tier=tier,
+        correction=correction,
+        plate_margin_mm=plate_margin_mm,
+    )
     z = np.ones(obj.n_params)
     for name, value in (x or {}).items():
         z[obj.names.index(name)] = value / obj.reference[obj.names.index(name)]
@@ -152,6 +163,9 @@ def run_identifiability(
     *,
     mesh: str = "coarse",
     data: str = "auto",
+    tier: str | None = None,
+    correction: str = "none",
+    plate_margin_mm: float = 0.0,
     x: dict | None = None,
     scheme: str = "forward",
     rel_step: float = 1e-6,
@@ -168,7 +182,16 @@ def run_identifiability(
     for name in tqdm(cases, desc="identifiability", disable=not progress or len(cases) < 2):
         t0 = time.perf_counter()
         ident, obj, text = case_identifiability(
-            name, mesh=mesh, data=data, x=x, scheme=scheme, rel_step=rel_step, mapper=mapper
+            name,
+            mesh=mesh,
+            data=data,
+            x=x,
+            scheme=scheme,
+            rel_step=rel_step,
+            mapper=mapper,
+            tier=tier,
+            correction=correction,
+            plate_margin_mm=plate_margin_mm,
         )
         wall = time.perf_counter() - t0
         d = output_dir(

@@ -121,6 +121,9 @@ def run_uncertainty(
     *,
     mesh: str = "coarse",
     data: str = "auto",
+    tier: str | None = None,
+    correction: str = "none",
+    plate_margin_mm: float = 0.0,
     budget: int = 2000,
     seed: int = 0,
     x: dict | None = None,
@@ -140,7 +143,15 @@ def run_uncertainty(
     from solvers import solve
 
     t_start = time.perf_counter()
-    obj, text = study_objective(case_name, mesh=mesh, data=data, mapper=mapper)
+    obj, text = study_objective(
+        case_name,
+        mesh=mesh,
+        data=data,
+        mapper=mapper,
+        tier=tier,
+        correction=correction,
+        plate_margin_mm=plate_margin_mm,
+    )
     obj.observers.extend(observers)
     names, ref = obj.names, obj.reference
     z0 = np.ones(obj.n_params)

@@ -157,6 +157,53 @@ def make_case(form: str, hardening: str) -> Case:
 CASES: dict[str, Case] = {c.name: c for c in (make_case(f, h) for f in FORMS for h in HARDENINGS)}
 
 
+@dataclass(frozen=True)
+class DefaultTreatment:
+    """The model-error treatment a case uses when ``default`` is asked for (``--correction
+    default``, suite ``treatments = ["default"]``), chosen from the model-error study
+    (docs/objective.md, "The default treatment"): BAE statistics of the discretisation error
+    ``U_paper - U_coarse`` over ``bae_samples`` prior samples, front-face points within
+    ``plate_margin_mm`` of the plates left out. ``hifi_mesh`` is the high-fidelity mesh for the
+    inverse mesh ``inverse_mesh``; another inverse mesh takes its next finer preset."""
+
+    treatment: str = "bae"
+    plate_margin_mm: float = 30.0
+    hifi_mesh: str = "paper"
+    bae_samples: int = 32
+    inverse_mesh: str = "coarse"
+
+    def to_dict(self) -> dict:
+        return {
+            "treatment": self.treatment,
+            "plate_margin_mm": self.plate_margin_mm,
+            "hifi_mesh": self.hifi_mesh,
+            "bae_samples": self.bae_samples,
+            "inverse_mesh": self.inverse_mesh,
+        }
+
+    def label(self) -> str:
+        """E.g. ``bae (32 samples on paper for coarse), plate margin 30 mm``."""
+        if self.treatment == "none":
+            text = "none"
+        elif self.treatment == "bae":
+            text = f"bae ({self.bae_samples} samples on {self.hifi_mesh} for {self.inverse_mesh})"
+        else:
+            text = f"{self.treatment} (high-fidelity {self.hifi_mesh} for {self.inverse_mesh})"
+        margin = self.plate_margin_mm
+        return text + (f", plate margin {margin:g} mm" if margin else "")
+
+
+#: the default treatment of every FE case (one setting for all nine: see docs/objective.md)
+DEFAULT_TREATMENTS: dict[str, DefaultTreatment] = {name: DefaultTreatment() for name in CASES}
+
+
+def default_treatment(name: str) -> DefaultTreatment:
+    """The default model-error treatment of case ``name`` (analytic cases: ``none``, they have no
+    discretisation error)."""
+    get_case(name)  # ValueError listing the allowed names
+    return DEFAULT_TREATMENTS.get(name, DefaultTreatment("none", 0.0, "", 0, ""))
+
+
 def all_cases() -> dict[str, Case]:
     """The nine FE cases plus the analytic test problems (``analytic-*``) by name."""
     return {**CASES, **ANALYTIC_CASES}

@@ -32,7 +32,12 @@ import numpy as np
 from problems.inverse.evaluator import sequential_map
 from problems.inverse.protocol import RunModel
 
-TREATMENTS = ("none", "one-point", "iterated", "bae")
+#: the treatments a correction can be; see :data:`TREATMENTS` for what a caller may ask for
+CORRECTIONS = ("none", "one-point", "iterated", "bae")
+#: what ``--correction``, a suite's ``treatments`` and ``Identification.treatment`` accept:
+#: a correction, or ``default`` = the case's default treatment with its region, high-fidelity
+#: mesh and samples (:func:`problems.inverse.cases.default_treatment`)
+TREATMENTS = (*CORRECTIONS, "default")
 
 
 class HonestyError(ValueError):
@@ -63,7 +68,7 @@ def check_honest(data_discretisation: str | None, tier: str, **models_in_loop: s
 class Correction:
     """A model-error treatment's effect on the objective.
 
-    treatment  : one of :data:`TREATMENTS`
+    treatment  : one of :data:`CORRECTIONS`
     shift      : (m,) subtracted from the data (mean model error), same units as the data
     factor     : (m, K) low-rank factor V of the added covariance ``C_eps = V V^T`` (or None)
     n_hifi     : high-fidelity runs it took; ``hifi_wall_s`` their total wall time, s
