@@ -1,0 +1,170 @@
+"""The case's default model-error treatment (``--correction default``) and the studies' data
+tier and treatment (``--tier``, ``--correction``)."""
+
+import json
+
+import pytest
+
+from bench.identification import Identification, treated_objective, with_default_treatment
+from problems.inverse.cases import CASES, default_treatment
+
+
+def test_default_treatment_is_bae_with_a_plate_margin_on_every_case():
+    for name in CASES:
+        d = default_treatment(name)
+        assert (d.treatment, d.plate_margin_mm, d.hifi_mesh, d.bae_samples, d.inverse_mesh) == (
+            "bae",
+            30.0,
+            "paper",
+            32,
+            "coarse",
+        )
+    assert default_treatment("analytic-smooth").treatment == "none"
+
+
+def test_default_resolves_to_the_case_settings_and_explicit_treatments_stay():
+    spec = Identification("linear-shear", "lm", treatment="default", plate_margin_mm=5.0)
+    got = with_default_treatment(spec)
+    assert (got.treatment, got.plate_margin_mm, got.hifi_mesh, got.bae_samples) == (
+        "bae",
+        30.0,
+        "paper",
+        32,
+    )
+    # another inverse mesh takes its own next finer preset (never the coarse default's paper)
+    assert (
+        with_default_treatment(
+            Identification("linear-shear", "lm", mesh="paper", treatment="default")
+        ).hifi_mesh
+        is None
+    )
+    # consistent data have no model error: nothing to treat
+    assert with_default_treatment(spec, "consistent").treatment == "none"
+    explicit = Identification("linear-shear", "lm", treatment="one-point", plate_margin_mm=5.0)
+    assert with_default_treatment(explicit) is explicit
+
+
+def test_cases_lists_the_default_treatment(capsys):
+    from bench.cli import main
+
+    assert main(["cases"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        out.count("--correction default): bae (32 samples on paper for coarse), plate margin 30 mm")
+        == 9
+    )
+
+
+def test_identify_refuses_a_margin_with_the_default(capsys):
+    from bench.cli import main
+
+    code = main(
+        [
+            "identify",
+            "linear-compression",
+            "--solver",
+            "lm",
+            "--correction",
+            "default",
+            "--plate-margin-mm",
+            "10",
+            "--quiet",
+        ]
+    )
+    assert code == 2 and "sets the plate margin" in capsys.readouterr().err
+
+
+def test_default_objective_uses_the_shipped_statistics_without_a_run():
+    obj, spec = treated_objective(Identification("linear-compression", "lm", treatment="default"))
+    prov = obj.provenance
+    assert (prov["treatment"], prov["hifi_mesh"], prov["region_plate_margin_mm"]) == (
+        "bae",
+        "paper",
+        30.0,
+    )
+    assert obj.n_evals == 0 and obj.charges["hifi"]["n"] == 32
+
+
+@pytest.mark.parametrize("tier, mesh", [("consistent", "coarse"), ("model-error", "xfine")])
+def test_study_objective_takes_the_tier_data(tier, mesh):
+    from bench.studies import study_objective
+
+    obj, text = study_objective("linear-compression", tier=tier)
+    assert obj.provenance["data_tier"] == tier and obj.provenance["data_mesh"] == mesh
+    assert f"{tier} tier" in text and "treatment none" in text
+
+
+def test_study_objective_refuses_tier_with_data_and_iterated():
+    from bench.studies import study_objective
+
+    with pytest.raises(ValueError, match="give one of them"):
+        study_objective("linear-compression", tier="consistent", data="shipped")
+    with pytest.raises(ValueError, match="identifications only"):
+        study_objective("linear-compression", tier="model-error", correction="iterated")
+    with pytest.raises(ValueError, match="sets the plate margin"):
+        study_objective("linear-compression", correction="default", plate_margin_mm=10.0)
+    obj, text = study_objective("linear-compression", tier="consistent", correction="default")
+    assert obj.provenance["treatment"] == "none"  # consistent data: nothing to correct
+
+
+def test_study_objective_default_treatment_on_model_error_data():
+    from bench.studies import study_objective
+
+    obj, text = study_objective("linear-compression", tier="model-error", correction="default")
+    assert obj.provenance["treatment"] == "bae" and "= the case's default" in text
+    assert "30 mm of the plates left out" in text
+
+
+@pytest.mark.parametrize("command", ["identifiability", "gsa", "uncertainty"])
+def test_study_commands_pass_the_tier_and_correction_on(command, monkeypatch):
+    """The options reach the study's run function (which hands them to study_objective)."""
+    import bench.studies.global_sensitivity as gsa
+    import bench.studies.identifiability as ident
+    import bench.studies.uncertainty as unc
+    from bench.cli import main
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake(*args, **kwargs):
+        seen.update(kwargs)
+        raise Stop
+
+    module, fn = {
+        "identifiability": (ident, "run_identifiability"),
+        "gsa": (gsa, "run_gsa"),
+        "uncertainty": (unc, "run_uncertainty"),
+    }[command]
+    monkeypatch.setattr(module, fn, fake)
+    argv = [
+        command,
+        "linear-compression",
+        "--tier",
+        "consistent",
+        "--correction",
+        "one-point",
+        "--plate-margin-mm",
+        "20",
+        "--quiet",
+        "--workers",
+        "1",
+    ]
+    if command == "identifiability":
+        argv.remove("--quiet")
+    assert main(argv) == 1  # the fake's exception: an internal error, after the call
+    assert (seen["tier"], seen["correction"], seen["plate_margin_mm"]) == (
+        "consistent",
+        "one-point",
+        20.0,
+    )
+
+
+def test_identifiability_study_records_the_tier(tmp_path):
+    """End to end on coarse (7 FE runs): the consistent tier's data reach the study's files."""
+    from bench.studies.identifiability import run_identifiability
+
+    run_identifiability(["linear-compression"], tier="consistent", out=tmp_path, progress=False)
+    doc = json.loads((tmp_path / "identifiability.json").read_text())
+    assert "consistent tier, data mesh coarse" in doc["data"]
