@@ -168,3 +168,24 @@ def test_identifiability_study_records_the_tier(tmp_path):
     run_identifiability(["linear-compression"], tier="consistent", out=tmp_path, progress=False)
     doc = json.loads((tmp_path / "identifiability.json").read_text())
     assert "consistent tier, data mesh coarse" in doc["data"]
+
+
+def test_identify_json_says_where_it_stands(tmp_path):
+    """Issue item 8: the JSON of `femubench identify` has the provenance block and iterations."""
+    from bench.cli import main
+    from problems.inverse.data import make_data, save
+
+    data = save(make_data("linear-compression", mesh="2,2,4", snapshots=2), tmp_path / "me.json")
+    out = tmp_path / "run.json"
+    argv = ["identify", "linear-compression", "--solver", "lm", "--mesh", "1,1,2", "--data",
+            str(data), "--correction", "one-point", "--hifi-mesh", "1,1,4", "--budget", "8",
+            "--quiet", "--json", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    doc = json.loads(out.read_text())
+    prov = doc["provenance"]
+    assert prov["case"] == "linear-compression" and prov["data_tier"] == "model-error"
+    assert prov["data_mesh"] == "2,2,4" and prov["inverse_mesh"] == "1,1,2"
+    assert prov["treatment"] == "one-point" and prov["hifi_mesh"] == "1,1,4"
+    assert len(prov["data_hash"]) >= 12 and prov["data_file"] == str(data)
+    assert doc["iterations"] == doc["n_iterations"] >= 1
+    assert doc["charges"]["hifi"]["n"] == 1
