@@ -196,7 +196,8 @@ class Part:
     def runs(self, data: dict, options: dict) -> list[RunConfig]:
         """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
         start index. The consistent tier is never corrected; the Jacobian choice only multiplies
-        the methods that use one."""
+        the methods that use one; a deterministic method runs once from the default start (under
+        the first seed)."""
         out = []
         for track, tier, treatment, case, method, jac, budget, seed, start in itertools.product(
             self.tracks,
@@ -213,6 +214,8 @@ class Part:
                 continue  # nothing to correct: the data come from the inverse model itself
             if jac != "exact" and not uses_jacobian(method):
                 continue
+            if start == "default" and seed != self.seeds[0] and not is_stochastic(method):
+                continue  # a deterministic method from the default start gives one answer
             n = 1 if start == "default" else self.random_starts
             for i in range(n):
                 out.append(
@@ -306,6 +309,14 @@ class Suite:
     def total_budget(self) -> int:
         """Upper bound on the evaluations of the whole suite (solver budget plus FE polish)."""
         return sum(r.budget + r.polish_budget for r in self.runs())
+
+
+def is_stochastic(method: str) -> bool:
+    """Whether ``method`` draws random numbers (so that its seeds give different runs)."""
+    from solvers import find_method
+
+    info = find_method(method)
+    return info is None or bool(info.stochastic)
 
 
 def uses_jacobian(method: str) -> bool:

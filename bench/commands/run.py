@@ -73,7 +73,8 @@ def main(args) -> int:
             )
         print(
             f"{len(runs)} runs, {len(runs) - len(pending)} with a record in {out}, {len(pending)} "
-            f"to run; at most {fe_evals} FE evaluations"
+            f"to run; at most {sum(r.budget + r.polish_budget for r in pending)} evaluations "
+            f"({fe_evals} of an FE model)"
         )
         return 0
 
