@@ -9,11 +9,12 @@
   runs on a mesh, and a one-line warning when it exceeds an hour.
 
 How the estimate is made: one forward run (10 snapshots, plastic) on the ``coarse`` mesh solved as
-the eighth (1 029 dofs) takes :data:`COARSE_RUN_S` = 1 s on one core (README and docs/suites.md:
-0.5-1.3 s measured); the time grows with the solved dofs to the power :data:`DOFS_EXPONENT` = 1.6,
-the growth measured between ``coarse`` (0.30 s, 1 029 dofs) and ``paper`` (11.0 s, 9 450 dofs) in
-docs/fe_model.md (the sparse factorisation grows faster than linearly). ``paper`` is then ~35 s
-per plastic run, ``fine`` (27 783 dofs) ~3 min. Analytic cases cost nothing.
+the eighth (1 029 dofs) takes :data:`COARSE_RUN_S` = 0.3 s on one core (bench/perf/forward.py:
+0.17 s measured on a quiet core, 0.3 s on the shared 2-core machine); the time grows with the
+solved dofs to the power :data:`DOFS_EXPONENT` = 1.5, the growth measured between ``coarse``
+(0.17 s, 1 029 dofs) and ``paper`` (4.7 s, 9 450 dofs) by bench/perf/forward.py (the sparse
+factorisation grows faster than linearly). ``paper`` is then ~8 s per plastic run on a loaded
+core, ``fine`` (27 783 dofs) ~40 s. Analytic cases cost nothing.
 """
 
 from __future__ import annotations
@@ -22,9 +23,9 @@ import math
 import sys
 import time
 
-COARSE_RUN_S = 1.0  #: s, one plastic forward run on coarse (eighth, 1 029 dofs), one core
+COARSE_RUN_S = 0.3  #: s, one plastic forward run on coarse (eighth, 1 029 dofs), one core
 COARSE_DOFS = 1029  #: dofs of the coarse eighth model
-DOFS_EXPONENT = 1.6  #: run time ~ dofs ** DOFS_EXPONENT (coarse -> paper, docs/fe_model.md)
+DOFS_EXPONENT = 1.5  #: run time ~ dofs ** DOFS_EXPONENT (coarse -> paper, bench/perf/forward.py)
 WARN_ABOVE_S = 3600.0  #: warn when an estimate exceeds this, s
 
 
@@ -149,8 +150,8 @@ def warn_if_long(
         print(
             f"femubench {command}: warning: {what or 'these settings'}: up to {n_runs:.0f} "
             f"forward run(s) on mesh {mesh} at ~{format_duration(per)} each on {w} worker(s) "
-            f"take about {format_duration(est)} (rough estimate: 1 s per coarse run, scaled by "
-            "solved dofs^1.6)",
+            f"take about {format_duration(est)} (rough estimate: {COARSE_RUN_S:g} s per coarse "
+            f"run, scaled by solved dofs^{DOFS_EXPONENT:g})",
             file=stream or sys.stderr,
             flush=True,
         )

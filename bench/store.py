@@ -257,8 +257,15 @@ def method_label(config: dict) -> str:
     if case is None or case.is_analytic:  # analytic problems have no data tiers
         return config["method"]
     tags = [config.get("tier", "model-error")]
-    if config.get("treatment", "none") != "none":
-        tags.append(config["treatment"])
+    treatment = config.get("treatment", "none")
+    if treatment == "default":
+        from problems.inverse.cases import default_treatment
+
+        d = default_treatment(config["case"])
+        margin = f" {d.plate_margin_mm:g} mm" if d.plate_margin_mm else ""
+        tags.append(f"default {d.treatment}{margin}")
+    elif treatment != "none":
+        tags.append(treatment)
     if config.get("jacobian", "exact") != "exact":
         tags.append(f"FD {config['jacobian']}")
     if config.get("track", "fe") == "surrogate":

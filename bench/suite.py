@@ -195,7 +195,8 @@ class Part:
 
     def runs(self, data: dict, options: dict) -> list[RunConfig]:
         """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
-        start index. The consistent tier is never corrected; the Jacobian choice only multiplies
+        start index. The consistent tier is never corrected (it runs once, untreated, whatever
+        the treatments); the Jacobian choice only multiplies
         the methods that use one; a deterministic method runs once from the default start (under
         the first seed)."""
         out = []
@@ -210,8 +211,10 @@ class Part:
             self.seeds,
             self.starts,
         ):
-            if tier == "consistent" and treatment != "none":
+            if tier == "consistent" and treatment != self.treatments[0]:
                 continue  # nothing to correct: the data come from the inverse model itself
+            if tier == "consistent":
+                treatment = "none"
             if jac != "exact" and not uses_jacobian(method):
                 continue
             if start == "default" and seed != self.seeds[0] and not is_stochastic(method):

@@ -236,16 +236,20 @@ def test_default_and_paper_suites_have_the_documented_shape():
     from problems.inverse.cases import CASES
 
     d = load_suite(ROOT / "suites" / "default.toml")
-    assert set(d.cases) == set(CASES) and set(d.methods) == {"lm", "gauss-newton"}
-    assert (
-        d.starts == ("default",) and d.mesh == "coarse" and d.tiers == ("model-error", "consistent")
-    )
-    # 9 cases x 2 methods x (consistent, model-error untreated, model-error one-point)
-    assert len(d) == 54 and {(r.tier, r.treatment) for r in d.runs()} == {
-        ("consistent", "none"),
-        ("model-error", "none"),
-        ("model-error", "one-point"),
+    mission = {"lm", "gauss-newton", "ga", "pso", "sa", "mcmc", "cma"}
+    assert set(d.cases) == set(CASES) and set(d.methods) == mission
+    assert d.starts == ("default",) and d.mesh == "coarse"
+    runs = d.runs()
+    # the local methods on FE, both tiers (model-error with the default treatment): 9 x 2 x 2
+    local = [r for r in runs if r.method in ("lm", "gauss-newton")]
+    assert len(local) == 36 and {(r.tier, r.treatment, r.track) for r in local} == {
+        ("consistent", "none", "fe"),
+        ("model-error", "default", "fe"),
     }
+    # the global and sampling methods on the surrogate, consistent tier, with an FE polish: 9 x 5
+    rest = [r for r in runs if r not in local]
+    assert len(rest) == 45 and {(r.tier, r.track) for r in rest} == {("consistent", "surrogate")}
+    assert all(r.polish_budget > 0 for r in rest)
     p = load_suite(ROOT / "suites" / "paper.toml")
     assert (
         set(p.cases) == set(CASES)

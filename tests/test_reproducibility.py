@@ -1,0 +1,43 @@
+"""The shipped results are reproducible: a record of the shipped default suite is rerun from its
+stored configuration and must give the same numbers bit for bit (parameters, cost, evaluations,
+iterations). A change of the code that changes the answers fails here until the shipped results
+are regenerated (``make run``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: (results folder, the configuration to pick): cheap runs, one per kind of shipped run
+PICKS = [
+    ("results/default", {"case": "linear-compression", "method": "lm", "tier": "consistent"}),
+]
+
+
+def _record(folder: str, want: dict) -> dict:
+    for path in sorted((ROOT / folder / "runs").glob("*.json")):
+        rec = json.loads(path.read_text())
+        if all(rec["config"].get(k) == v for k, v in want.items()):
+            return rec
+    raise AssertionError(f"no record of {want} in {folder}/runs")
+
+
+@pytest.mark.parametrize("folder, want", PICKS, ids=[f"{f}:{w['method']}" for f, w in PICKS])
+def test_a_shipped_record_is_reproduced_bit_for_bit(folder, want, tmp_path):
+    from bench import store
+    from bench.runner import run_one
+
+    shipped = _record(folder, want)
+    again = run_one(shipped["config"], suite=shipped.get("suite"))
+    store.write_record(tmp_path, again)
+    again = store.load_record(store.record_path(tmp_path, again["config_hash"]))
+    assert again["config_hash"] == shipped["config_hash"]
+    old, new = shipped["result"], again["result"]
+    assert new["status"] == old["status"]
+    assert new["x"] == old["x"]  # bit for bit: the JSON floats are exact
+    assert new["cost"] == old["cost"]
+    assert (new["n_evals"], new.get("n_iterations")) == (old["n_evals"], old.get("n_iterations"))
