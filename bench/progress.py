@@ -121,7 +121,9 @@ def forward_run_s(mesh: str) -> float:
 
 
 def format_duration(seconds: float) -> str:
-    """``"45 s"``, ``"12 min"``, ``"3.4 h"``, ``"2.1 days"``."""
+    """``"0.3 s"``, ``"45 s"``, ``"12 min"``, ``"3.4 h"``, ``"2.1 days"``."""
+    if seconds < 9.5:
+        return f"{seconds:.1g} s"
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:
