@@ -713,9 +713,10 @@ class _Newton:
             upd = self.material.update(deps, stress_n, state_n)
             self.timing["material_s"] += time.perf_counter() - t
             if not np.all(upd.ok):
-                return _Increment(
-                    False, f"material return mapping failed at {np.count_nonzero(~upd.ok)} points"
-                )
+                why = f"material return mapping failed at {np.count_nonzero(~upd.ok)} points"
+                diagnose = getattr(self.material, "failure_reason", None)
+                detail = diagnose(deps, stress_n, state_n, upd.ok) if diagnose else ""
+                return _Increment(False, f"{why} ({detail})" if detail else why)
             t = time.perf_counter()
             f_int = self._internal_force(upd.stress)
             self.timing["assembly_s"] += time.perf_counter() - t

@@ -683,6 +683,55 @@ def _meridional_illinois(mp, yp, gp, p_tr, q_tr, eqps_n, f_tol):
 
 
 @njit(**_JIT)
+def _work_fold(mp, yp, gp, p_tr, q_tr, eqps_n):
+    """Whether the meridional return of a von Mises-section form with the work rule has no
+    solution because the work rule runs out of strength (see :func:`work_exhaustion`).
+
+    The work rule q_hat (sbar_n + H u) u = dl w(dl) has a real root u iff
+    ``dl w(dl) >= -q_hat sbar_n^2 / (4 H)``; w decreases with dl (q falls, p rises), so the
+    multipliers with a root form an interval [0, dl_fold]. Returns (exhausted, dl_fold, F at
+    dl_fold on the root's branch, sigma_bar there = sbar_n / 2): exhausted when a fold exists and
+    F > 0 at the fold and at 64 equally spaced multipliers below it (no sign change of F, hence no
+    return). Not exhausted (dl_fold = inf) without a fold (H = 0, or w never that negative)."""
+    E, nu, H, q_hat = mp[M_E], mp[M_NU], mp[M_H], mp[M_RULE_C]
+    sbar_n = mp[M_S0] + H * eqps_n
+    if not (H > 0.0 and sbar_n > 0.0):
+        return False, _INF, np.nan, sbar_n
+    lim = -q_hat * sbar_n * sbar_n / (4.0 * H)
+    lo = 0.0
+    hi = max(_meridional_f(mp, yp, gp, p_tr, q_tr, sbar_n, eqps_n, 0.0), 1e-12) / (
+        3.0 * E / (2.0 * (1.0 + nu))
+    )
+    found = False
+    for _ in range(200):
+        p, q, _e = _meridional_state(mp, gp, p_tr, q_tr, sbar_n, eqps_n, hi)
+        if hi * (q * q / math.sqrt(gp[2] * gp[2] + q * q) - p * gp[1]) < lim:
+            found = True
+            break
+        lo, hi = hi, 4.0 * hi
+    if not found:
+        return False, _INF, np.nan, sbar_n
+    for _ in range(200):  # bisection: lo has a root, hi has none
+        mid = 0.5 * (lo + hi)
+        if not (mid > lo and mid < hi):
+            break
+        p, q, _e = _meridional_state(mp, gp, p_tr, q_tr, sbar_n, eqps_n, mid)
+        if mid * (q * q / math.sqrt(gp[2] * gp[2] + q * q) - p * gp[1]) < lim:
+            hi = mid
+        else:
+            lo = mid
+    p, q, eqps = _meridional_state(mp, gp, p_tr, q_tr, sbar_n, eqps_n, lo)
+    f_fold = _yield_pq(yp, p, q * q, mp[M_S0] + H * eqps)[0]
+    exhausted = f_fold > 0.0
+    for k in range(1, 65):
+        if not exhausted:
+            break
+        fk = _meridional_f(mp, yp, gp, p_tr, q_tr, sbar_n, eqps_n, lo * k / 64.0)
+        exhausted = fk > 0.0  # False for NaN as well
+    return exhausted, lo, f_fold, mp[M_S0] + H * eqps
+
+
+@njit(**_JIT)
 def _coaxial_return(mp, yp, gp, p_tr, s_tr, J2_tr, eqps_n, a, mu, x):
     """The smooth return of the linear form solved in the trial deviator's coaxial basis; writes
     x and returns True on success (x untouched otherwise).
@@ -1405,6 +1454,35 @@ def update_sensitivities(
                 for b in range(n_st):
                     dstate[i, k, b] = np.nan
     return dstress, dstate
+
+
+@njit(**_JIT)
+def work_exhaustion(mp, yp, gp, sig_tr, eqps_n):
+    """Diagnosis of failed returns of the von Mises-section forms (hyperbolic, exponent) with the
+    plastic-work rule, at trial stresses (m, 6) and eqps_n (m,): (exhausted (m,) bool, dl_fold,
+    F at the fold (MPa), sigma_bar at the fold (MPa)).
+
+    Exhausted: the backward-Euler return has no solution because negative plastic work (high
+    confinement with dilatant flow, w = sigma : dG/dsigma < 0) would take more strength than the
+    work rule can give in one increment -- at most sigma_bar_n / 2 (the quadratic's fold) -- and
+    F is still positive there (:func:`_work_fold`). Smaller increments then only approach
+    sigma_bar = 0, where the linear hardening law ends: the model itself has no continuation. Always
+    False for the linear form (its eqps never decreases)."""
+    m = sig_tr.shape[0]
+    exhausted = np.zeros(m, np.bool_)
+    dl_fold = np.full(m, _INF)
+    f_fold = np.full(m, np.nan)
+    sbar_fold = np.full(m, np.nan)
+    if int(yp[0]) == LINEAR or int(mp[M_RULE]) != WORK:
+        return exhausted, dl_fold, f_fold, sbar_fold
+    for n in range(m):
+        st = (sig_tr[n, 0], sig_tr[n, 1], sig_tr[n, 2], sig_tr[n, 3], sig_tr[n, 4], sig_tr[n, 5])
+        p_tr, s_tr = _deviator(st)
+        q_tr = math.sqrt(3.0 * _j2(s_tr))
+        exhausted[n], dl_fold[n], f_fold[n], sbar_fold[n] = _work_fold(
+            mp, yp, gp, p_tr, q_tr, eqps_n[n]
+        )
+    return exhausted, dl_fold, f_fold, sbar_fold
 
 
 @njit(**_JIT)

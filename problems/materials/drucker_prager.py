@@ -352,6 +352,40 @@ class DruckerPrager:
         )
         return out
 
+    def failure_reason(self, strain_increment, stress_old, state_old, ok) -> str:
+        """Why the returns flagged ``ok`` False by :meth:`update` of these inputs failed, where
+        that is known ("" otherwise); called by the FE solver for its message, only on failure.
+
+        Known: the strength is exhausted (hyperbolic and exponent forms, see
+        :func:`_kernels.work_exhaustion`): negative plastic work has lowered sigma_bar, and the
+        backward-Euler return, which can take at most half of sigma_bar_n in one increment, has
+        no solution; cutting the increment only approaches sigma_bar = 0, past which the hardening
+        law sigma0 + H eqps is not defined. ``docs/drucker_prager.md`` section 5.
+        """
+        bad = np.flatnonzero(~np.asarray(ok, bool))
+        if bad.size == 0:
+            return ""
+        de = np.ascontiguousarray(np.asarray(strain_increment, float)[bad])
+        sig_n = np.ascontiguousarray(np.asarray(stress_old, float)[bad])
+        eqps_n = np.ascontiguousarray(np.asarray(state_old, float)[bad, 0])
+        sig_tr, _, _ = self._elastic_trial(de, sig_n, eqps_n)
+        exhausted = _K.work_exhaustion(
+            self._kernel_params,
+            self.yield_function.kernel_params,
+            self.potential.kernel_params,
+            sig_tr,
+            eqps_n,
+        )[0]
+        n = int(np.count_nonzero(exhausted))
+        if n == 0:
+            return ""
+        sbar = float(np.min(self.yield_stress(eqps_n[exhausted])))
+        return (
+            f"strength exhausted at {n} of them: negative plastic work under confinement has "
+            f"lowered sigma_bar to {sbar:.3g} MPa (sigma0 {self.law.sigma0:.3g} MPa) and no "
+            "return exists; the model has no solution once sigma_bar reaches 0"
+        )
+
     # ---- parameter sensitivities (direct differentiation) -------------------------------------
     @property
     def parameter_names(self) -> tuple[str, ...]:
