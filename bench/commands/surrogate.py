@@ -56,7 +56,8 @@ def add_arguments(p) -> None:
         type=int,
         default=0,
         metavar="N",
-        help="extra design points near the data set's parameters (default 0)",
+        help="second-stage design points around the optimum of the first-stage surrogate "
+        "fitted to the data (the data's own search; default 0)",
     )
     p.add_argument(
         "--local-scale",
@@ -71,6 +72,13 @@ def add_arguments(p) -> None:
         default="auto",
         help="regression of the POD coefficients; auto chooses by error on set-aside training "
         "points",
+    )
+    p.add_argument(
+        "--gp-restarts",
+        type=int,
+        default=2,
+        metavar="R",
+        help="optimiser restarts of each GP's marginal likelihood (default 2)",
     )
     p.add_argument(
         "--tol-sigma",
@@ -134,6 +142,9 @@ def summary(sur, folder, size_bytes: int) -> dict:
         "fe_eval_s": val.get("fe_eval_s"),
         "speed_ratio": val.get("speed_ratio"),
         "cost": info["cost"],
+        "build_wall_s": info["cost"].get("build_wall_s"),
+        "enrichment": info.get("enrichment"),
+        "discretisation": info["description"].get("discretisation"),
     }
 
 
@@ -174,7 +185,10 @@ def main(args) -> int:
         tol_sigma=args.tol_sigma,
         regression=args.regression,
         batch=args.batch,
+        gp_restarts=args.gp_restarts,
     )
+    if args.gp_restarts < 0:
+        raise ValueError(f"--gp-restarts {args.gp_restarts} is out of range: must be >= 0")
     folder = Path(args.out) if args.out else surrogate_root() / default_name(case.name, args.mesh)
     print(
         f"surrogate of {case.name} on mesh {args.mesh}: {args.samples} training + {args.local} "

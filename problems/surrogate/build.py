@@ -49,7 +49,13 @@ class SurrogateSettings:
     seed               : seed of the designs, the selection split and the GP restarts
     design             : ``lhs`` or ``sobol``
     n_local, local_scale, center : optional local design of ``n_local`` points in
-                         ``center +- local_scale (upper - lower)`` (center in physical units)
+                         ``center +- local_scale (upper - lower)`` (center in physical units);
+                         without a centre and with a ``target`` (the data), a second stage:
+                         the centre is the optimum of the first-stage surrogate fitted to the
+                         data (the data's own search, never the reference values), then the
+                         surrogate is refitted on both designs (:func:`surrogate_optimum`)
+    separate           : blocks kept out of the POD, each value its own coefficient with its own
+                         GP (default: the force)
     tol_sigma          : POD truncation: RMS projection error per block <= tol_sigma sigma
     max_modes          : cap on the number of POD modes (None: none)
     regression         : ``auto``, ``rbf`` or ``gp``
@@ -80,6 +86,7 @@ class SurrogateSettings:
     gp_individual: int = 8
     gp_restarts: int = 2
     batch: int = 16
+    separate: tuple = ("force",)
 
     def __post_init__(self):
         if self.regression not in REGRESSIONS:
@@ -120,7 +127,7 @@ def training_hash(runs: Runs, settings: dict) -> str:
     return h.hexdigest()
 
 
-def _fit_family(kind: str, Z, A, scorer, s: SurrogateSettings):
+def _fit_family(kind: str, Z, A, scorer, s: SurrogateSettings, individual=()):
     if kind == "rbf":
         cfg, table = select_rbf(
             Z,
@@ -133,8 +140,21 @@ def _fit_family(kind: str, Z, A, scorer, s: SurrogateSettings):
         )
         return fit_rbf(Z, A, **cfg), {"rbf_cv": table, "rbf_choice": cfg}
     return fit_gp(
-        Z, A, nu=s.gp_nu, n_individual=s.gp_individual, restarts=s.gp_restarts, seed=s.seed
+        Z,
+        A,
+        nu=s.gp_nu,
+        n_individual=s.gp_individual,
+        restarts=s.gp_restarts,
+        seed=s.seed,
+        individual=individual,
     ), {}
+
+
+def _separate_columns(pod, blocks, separate) -> tuple[int, ...]:
+    """Coefficient indices of the separate blocks' values (the last columns of the modes)."""
+    m = pod.modes.shape[0]
+    k = sum(len(range(*blocks[b].indices(m))) for b in separate if b in blocks)
+    return tuple(range(pod.n_modes - k, pod.n_modes))
 
 
 def fit_surrogate(
@@ -164,6 +184,7 @@ def fit_surrogate(
             f"{lower.size + 3} (more training points, or a smaller box)"
         )
     blocks = blocks or {"all": slice(0, m)}
+    separate = tuple(b for b in s.separate if b in blocks)
     Z = (runs.X - lower) / (upper - lower)
     selection = {}
     kind = s.regression
@@ -172,13 +193,20 @@ def fit_surrogate(
         n_sel = max(1, int(round(s.selection_fraction * n)))
         sel, fit = perm[:n_sel], perm[n_sel:]
         pod = fit_pod(
-            runs.Y[fit], sigma, tol_sigma=s.tol_sigma, blocks=blocks, max_modes=s.max_modes
+            runs.Y[fit],
+            sigma,
+            tol_sigma=s.tol_sigma,
+            blocks=blocks,
+            max_modes=s.max_modes,
+            separate=separate,
         )
         A = pod.coefficients(runs.Y[fit])
         scorer = Scorer(pod.modes, blocks)
         scores = {}
         for family in ("rbf", "gp"):
-            reg, _ = _fit_family(family, Z[fit], A, scorer, s)
+            reg, _ = _fit_family(
+                family, Z[fit], A, scorer, s, _separate_columns(pod, blocks, separate)
+            )
             E = (pod.reconstruct(reg.predict(Z[sel])) - runs.Y[sel]) / pod.scale
             ms = scorer.scaled_ms(E)
             scores[family] = {
@@ -188,9 +216,18 @@ def fit_surrogate(
             }
         kind = min(scores, key=lambda k: scores[k]["score"])
         selection = {"n_fit": len(fit), "n_selection": n_sel, "scores": scores, "chosen": kind}
-    pod = fit_pod(runs.Y, sigma, tol_sigma=s.tol_sigma, blocks=blocks, max_modes=s.max_modes)
+    pod = fit_pod(
+        runs.Y,
+        sigma,
+        tol_sigma=s.tol_sigma,
+        blocks=blocks,
+        max_modes=s.max_modes,
+        separate=separate,
+    )
     A = pod.coefficients(runs.Y)
-    reg, extra = _fit_family(kind, Z, A, Scorer(pod.modes, blocks), s)
+    reg, extra = _fit_family(
+        kind, Z, A, Scorer(pod.modes, blocks), s, _separate_columns(pod, blocks, separate)
+    )
     selection.update(extra)
     box = design_box or (lower, upper)
     info = {
@@ -223,6 +260,48 @@ def fit_surrogate(
     )
 
 
+def merge_runs(a: Runs, b: Runs) -> Runs:
+    """The runs of ``a`` then ``b`` (counts and times added)."""
+    return Runs(
+        np.vstack([a.X, b.X]),
+        np.vstack([a.Y, b.Y]),
+        np.concatenate([a.wall_s, b.wall_s]),
+        a.failed + b.failed,
+        a.infeasible + b.infeasible,
+        a.fe_wall_s + b.fe_wall_s,
+        a.elapsed_s + b.elapsed_s,
+    )
+
+
+def surrogate_optimum(sur: SurrogateModel, values, sigma, *, n_starts: int = 5):
+    """The least-squares optimum of ``sur`` against data ``values`` with standard deviations
+    ``sigma``: bounded trust-region (scipy ``least_squares``, the surrogate's exact Jacobian) from
+    the ``n_starts`` training points that fit the data best. Returns ``(x, cost)``, cost = the
+    sum of squared whitened residuals. Uses only the data and the surrogate (no reference)."""
+    from scipy.optimize import least_squares
+
+    values, sigma = np.asarray(values, float), np.asarray(sigma, float)
+    span = sur.upper - sur.lower
+    train_x = sur.lower + sur.train_z * span
+    misfit = np.sum(((sur.predict(train_x) - values) / sigma) ** 2, axis=1)
+    best = (None, np.inf)
+    for x0 in train_x[np.argsort(misfit)[:n_starts]]:
+        res = least_squares(
+            lambda z: (sur.predict(sur.lower + z * span)[0] - values) / sigma,
+            (x0 - sur.lower) / span,
+            jac=lambda z: sur(sur.lower + z * span, jacobian=True).jacobian
+            * span[None]
+            / sigma[:, None],
+            bounds=(0.0, 1.0),
+            method="trf",
+            max_nfev=200,
+        )
+        cost = 2.0 * res.cost
+        if cost < best[1]:
+            best = (sur.lower + res.x * span, cost)
+    return best
+
+
 def build_surrogate(
     model,
     lower,
@@ -236,9 +315,14 @@ def build_surrogate(
     mapper=None,
     progress: bool = False,
     description: dict | None = None,
+    target=None,
 ) -> SurrogateModel:
     """Design, run (through ``mapper``), fit and validate a surrogate of ``model`` over
     ``[lower, upper]``.
+
+    target        : ``(values, sigma)`` of the data: with ``n_local`` and no ``center``, the
+                    local design is centred on the optimum of the first-stage surrogate fitted
+                    to them (two stages, see :class:`SurrogateSettings`)
 
     sigma         : (m,) the data's standard deviations (mm, kN for the FE model)
     blocks        : disjoint blocks of the truncation rule and of the selection score
@@ -250,6 +334,9 @@ def build_surrogate(
     t0 = time.perf_counter()
     s = settings
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    two_stage = bool(s.n_local and s.center is None)
+    if two_stage and target is None:
+        raise ValueError("a local design needs a centre, or the data (target) to search")
     design = make_design(
         lower,
         upper,
@@ -257,7 +344,7 @@ def build_surrogate(
         seed=s.seed,
         method=s.design,
         center=s.center,
-        n_local=s.n_local,
+        n_local=0 if two_stage else s.n_local,
         local_scale=s.local_scale,
     )
     runs = run_points(
@@ -268,6 +355,47 @@ def build_surrogate(
         raise ValueError(
             f"no successful training run out of {len(design)} points: {'; '.join(reasons)}"
         )
+    enrichment = None
+    if two_stage:
+        first = fit_surrogate(
+            runs,
+            lower,
+            upper,
+            sigma,
+            names=model.names,
+            settings=dataclasses.replace(
+                s, regression="gp" if s.regression == "auto" else s.regression
+            ),
+            blocks=blocks,
+            checker=model,
+        )
+        centre, cost0 = surrogate_optimum(first, *target)
+        local = make_design(
+            lower,
+            upper,
+            0,
+            seed=[s.seed, 2],
+            method=s.design,
+            center=centre,
+            n_local=s.n_local,
+            local_scale=s.local_scale,
+        )
+        more = run_points(
+            model,
+            local.X,
+            mapper=mapper,
+            batch=s.batch,
+            progress=progress,
+            desc="enrichment",
+            n_values=runs.Y.shape[1],
+        )
+        runs = merge_runs(runs, more)
+        enrichment = {
+            "centre": [float(v) for v in centre],
+            "centre_cost": float(cost0),
+            "local_box": [[float(v) for v in b] for b in local.local_box],
+            "runs": more.cost(),
+        }
     sur = fit_surrogate(
         runs,
         lower,
@@ -280,6 +408,8 @@ def build_surrogate(
         checker=model,
     )
     info = dict(sur.info, description=description or {})
+    if enrichment is not None:
+        info["enrichment"] = enrichment
     cost = {"training": runs.cost()}
     variance = None
     if s.n_holdout:
@@ -317,6 +447,7 @@ def build_case_surrogate(
     """Surrogate of the FE forward model of ``case`` on ``mesh`` for the loading and points of
     ``data`` (default: the case's shipped data set); measurements scaled by the data's sigma. A
     local design without a centre is centred on the data set's parameters."""
+    from problems.fe.mesh import discretisation_key
     from problems.inverse import layout
     from problems.inverse.cases import get_case
     from problems.inverse.data import Dataset, get_data, load
@@ -331,12 +462,6 @@ def build_case_surrogate(
         data = load(data)
     if data.case != case.name:
         raise ValueError(f"data set is for case {data.case!r}, not {case.name!r}")
-    if settings.n_local and settings.center is None:
-        import dataclasses
-
-        settings = dataclasses.replace(
-            settings, center=tuple(float(data.parameters[n]) for n in case.names)
-        )
     model = FEForwardModel(case, mesh, data.settings.loading, data.points)
     N, m = len(data.snapshots_mm), len(data.points)
     all_blocks = layout.blocks(N, m)
@@ -345,7 +470,9 @@ def build_case_surrogate(
     description = {
         "case": case.name,
         "mesh": mesh,
+        "discretisation": discretisation_key(mesh),
         "data_hash": data.hash,
+        "data_tier": data.settings.tier,
         "sigma_force_kN": sigma_force_kN,
         "n_snapshots": N,
         "n_points": m,
@@ -362,4 +489,5 @@ def build_case_surrogate(
         mapper=mapper,
         progress=progress,
         description=description,
+        target=(data.values, data.sigma(sigma_force_kN)),
     )

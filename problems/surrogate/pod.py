@@ -87,12 +87,23 @@ def fit_pod(
     tol_sigma: float = 0.1,
     blocks: dict[str, slice] | None = None,
     max_modes: int | None = None,
+    separate: tuple[str, ...] = (),
 ) -> POD:
     """The POD of the snapshots ``Y`` (n, m) scaled by ``scale`` (m,), truncated by the rule of the
     module docstring (``max_modes`` caps ``r``; then the criterion may not be met, see
-    ``projection_rms``)."""
+    ``projection_rms``).
+
+    separate : names of ``blocks`` kept out of the POD: each of their values is a coefficient of
+               its own (an identity column, so the modes stay orthonormal and the block is exact,
+               projection error 0); the POD and its truncation are those of the other blocks. The
+               modes are block-diagonal: POD modes first (zero on the separate rows), then one
+               column per separate value. Used for the N force values, which the shared POD of
+               the 2 N m displacements represents poorly.
+    """
     Y = np.asarray(Y, float)
     n, m = Y.shape
+    if separate:
+        return _fit_pod_separate(Y, scale, tol_sigma, blocks or {}, max_modes, tuple(separate))
     scale = np.broadcast_to(np.asarray(scale, float), (m,)).copy()
     if n < 2:
         raise ValueError(f"POD needs at least 2 snapshots, got {n}")
@@ -116,4 +127,63 @@ def fit_pod(
         s,
         float(tol_sigma),
         {k: float(v[r]) for k, v in rms.items()},
+    )
+
+
+def _fit_pod_separate(Y, scale, tol_sigma, blocks, max_modes, separate) -> POD:
+    """:func:`fit_pod` with the ``separate`` blocks as identity columns (see there)."""
+    n, m = Y.shape
+    unknown = [b for b in separate if b not in blocks]
+    if unknown:
+        raise ValueError(f"separate blocks {unknown} are not among the blocks {list(blocks)}")
+    sep_rows = np.zeros(m, bool)
+    for b in separate:
+        sep_rows[blocks[b]] = True
+    rest = np.flatnonzero(~sep_rows)
+    if rest.size == 0:
+        raise ValueError("separate blocks cover the whole measurement vector: nothing to POD")
+    # blocks of the POD part, re-indexed into the kept rows (contiguous blocks stay contiguous)
+    pos = np.full(m, -1)
+    pos[rest] = np.arange(rest.size)
+    sub_blocks = {}
+    for k, sl in blocks.items():
+        idx = np.arange(m)[sl]
+        if k in separate or sep_rows[idx].any():
+            continue
+        sub_blocks[k] = slice(int(pos[idx[0]]), int(pos[idx[-1]]) + 1)
+    scale = np.broadcast_to(np.asarray(scale, float), (m,))
+    inner = fit_pod(
+        Y[:, rest],
+        scale[rest],
+        tol_sigma=tol_sigma,
+        blocks=sub_blocks or None,
+        max_modes=max_modes,
+    )
+    sep_idx = np.flatnonzero(sep_rows)
+    modes = np.zeros((m, inner.n_modes + sep_idx.size))
+    modes[rest, : inner.n_modes] = inner.modes
+    modes[sep_idx, inner.n_modes + np.arange(sep_idx.size)] = 1.0
+    mean = Y.mean(axis=0)
+    rms = dict(inner.projection_rms)
+    rms.update({b: 0.0 for b in separate})
+    for k, sl in blocks.items():  # mixed blocks (e.g. all) from their parts
+        if k not in rms:
+            rows = np.arange(m)[sl]
+            rms[k] = float(
+                np.sqrt(
+                    sum(
+                        inner.projection_rms[j] ** 2 * len(range(*sub_blocks[j].indices(rest.size)))
+                        for j in sub_blocks
+                        if np.all(np.isin(rest[sub_blocks[j]], rows))
+                    )
+                    / rows.size
+                )
+            )
+    return POD(
+        mean,
+        np.array(scale, float),
+        np.ascontiguousarray(modes),
+        inner.singular_values,
+        float(tol_sigma),
+        rms,
     )

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -367,18 +368,76 @@ class GPFit:
 
     kind = "gp"
 
+    @cached_property
+    def _packed(self):
+        """All components at once when they share the training points and ``nu`` (the usual
+        case): ``(X, inv_ls2 (d, C), amplitude (C,), comp (r,), alpha (n, r), y_mean, y_std)``;
+        None otherwise (then the components are evaluated one by one)."""
+        cs = self.components
+        X = cs[0].X
+        if any(c.nu != cs[0].nu or c.X.shape != X.shape or not np.array_equal(c.X, X) for c in cs):
+            return None
+        r = self.n_outputs
+        comp = np.zeros(r, int)
+        alpha = np.zeros((len(X), r))
+        y_mean, y_std = np.zeros(r), np.ones(r)
+        for i, c in enumerate(cs):
+            comp[c.outputs] = i
+            alpha[:, c.outputs] = c.alpha
+            y_mean[c.outputs], y_std[c.outputs] = c.y_mean, c.y_std
+        inv_ls2 = np.column_stack([1.0 / c.length_scale**2 for c in cs])
+        amp = np.array([c.amplitude for c in cs])
+        return X, inv_ls2, amp, comp, alpha, y_mean, y_std
+
+    def _kernel(self, d, amp):
+        """Kernel values and ``(dk/dd) / d`` of the packed components at scaled distances
+        ``d`` (..., C)."""
+        nu = self.components[0].nu
+        if nu == 1.5:
+            e = amp * np.exp(-math.sqrt(3.0) * d)
+            return (1.0 + math.sqrt(3.0) * d) * e, -3.0 * e
+        if nu == 2.5:
+            sd = math.sqrt(5.0) * d
+            e = amp * np.exp(-sd)
+            return (1.0 + sd + sd * sd / 3.0) * e, -5.0 / 3.0 * (1.0 + sd) * e
+        k = amp * np.exp(-0.5 * d * d)
+        return k, -k
+
     def predict(self, Z) -> np.ndarray:
         Z = np.atleast_2d(np.asarray(Z, float))
+        packed = self._packed
+        if packed is None:
+            out = np.empty((len(Z), self.n_outputs))
+            for c in self.components:
+                out[:, c.outputs] = c.predict(Z)
+            return out
+        X, inv_ls2, amp, comp, alpha, y_mean, y_std = packed
+        if len(Z) == 1:
+            diff = Z[0] - X  # (n, d)
+            k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (n, C)
+            return (np.einsum("nr,nr->r", k[:, comp], alpha) * y_std + y_mean)[None]
         out = np.empty((len(Z), self.n_outputs))
-        for c in self.components:
-            out[:, c.outputs] = c.predict(Z)
-        return out
+        x2w = (X * X) @ inv_ls2  # (n, C)
+        z2w = (Z * Z) @ inv_ls2  # (q, C)
+        cols = [np.flatnonzero(comp == c) for c in range(len(amp))]
+        for c in range(len(amp)):  # squared distances by one GEMM per component: (q, n)
+            d2 = z2w[:, c : c + 1] + x2w[None, :, c] - 2.0 * ((Z * inv_ls2[:, c]) @ X.T)
+            k, _ = self._kernel(np.sqrt(np.maximum(d2, 0.0)), amp[c])
+            out[:, cols[c]] = k @ alpha[:, cols[c]]
+        return out * y_std + y_mean
 
     def gradient(self, z) -> np.ndarray:
-        out = np.empty((self.n_outputs, len(np.atleast_1d(z))))
-        for c in self.components:
-            out[c.outputs] = c.gradient(z)
-        return out
+        packed = self._packed
+        if packed is None:
+            out = np.empty((self.n_outputs, len(np.atleast_1d(z))))
+            for c in self.components:
+                out[c.outputs] = c.gradient(z)
+            return out
+        X, inv_ls2, amp, comp, alpha, y_mean, y_std = packed
+        diff = np.asarray(z, float) - X  # (n, d)
+        _, f = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (n, C)
+        G = (f[:, comp] * alpha).T @ diff  # (r, d)
+        return G * inv_ls2[:, comp].T * y_std[:, None]
 
     def settings(self) -> dict:
         return {
@@ -454,17 +513,27 @@ def fit_gp_component(
 
 
 def fit_gp(
-    Z, A, *, nu: float = 2.5, n_individual: int = 8, restarts: int = 2, seed: int = 0
+    Z,
+    A,
+    *,
+    nu: float = 2.5,
+    n_individual: int = 8,
+    restarts: int = 2,
+    seed: int = 0,
+    individual: tuple[int, ...] = (),
 ) -> GPFit:
     """GP regression of all coefficients ``A`` (n, r): one GP per leading mode up to
-    ``n_individual``, one shared multi-output GP for the rest."""
+    ``n_individual`` and per column in ``individual`` (e.g. the separate force values), one
+    shared multi-output GP for the rest."""
     if nu not in (1.5, 2.5) and math.isfinite(nu):
         raise ValueError(f"GP nu = {nu} is unsupported; allowed: 1.5, 2.5, inf")
     A = np.asarray(A, float)
     r = A.shape[1]
-    groups = [np.array([j]) for j in range(min(n_individual, r))]
-    if r > n_individual:
-        groups.append(np.arange(n_individual, r))
+    own = sorted(set(range(min(n_individual, r))) | {int(j) for j in individual if 0 <= j < r})
+    groups = [np.array([j]) for j in own]
+    rest = np.setdiff1d(np.arange(r), own)
+    if rest.size:
+        groups.append(rest)
     comps = tuple(
         fit_gp_component(Z, A, g, nu=nu, restarts=restarts, seed=seed + i)
         for i, g in enumerate(groups)
