@@ -70,6 +70,24 @@ def test_jacobian_away_from_the_reference_on_a_finer_mesh():
     check_columns(model, x, model(x, jacobian=True).jacobian, steps=(1e-6, 1e-7))
 
 
+@pytest.mark.parametrize("name", ["linear-tension", "hyperbolic-shear", "exponent-compression"])
+def test_one_material_pass_gives_the_jacobian_of_two_calls(name, monkeypatch):
+    """The one-pass affine split (problems.materials.ddm.affine_sensitivity, the default) and the
+    two ``sensitivity`` calls per increment of the material interface give the same Jacobian,
+    and the run itself is the plain run bit for bit."""
+    case = get_case(name)
+    model = FEForwardModel(case, "2,2,4")
+    x = case.start
+    out = {}
+    for affine in (True, False):
+        monkeypatch.setattr(sensitivity, "DEFAULT_AFFINE", affine)
+        out[affine] = model(x, jacobian=True)
+        assert out[affine].ok
+    np.testing.assert_array_equal(out[True].values, model(x).values)
+    for j in range(len(x)):
+        assert rel(out[True].jacobian[:, j], out[False].jacobian[:, j]) < 1e-10, case.names[j]
+
+
 def test_krylov_and_direct_sensitivity_solves_agree(monkeypatch):
     case = get_case("hyperbolic-shear")
     disc = discretise(parse_mesh_spec("3,3,6").mesh, symmetry="eighth")

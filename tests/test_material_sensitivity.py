@@ -32,7 +32,11 @@ from problems.materials.base import (
     isotropic_stiffness,
     isotropic_stiffness_derivatives,
 )
-from problems.materials.ddm import kernel_parameter_jacobian, run_path_sensitivity
+from problems.materials.ddm import (
+    affine_sensitivity,
+    kernel_parameter_jacobian,
+    run_path_sensitivity,
+)
 from problems.materials.elastic import LinearElastic
 
 TOL = 1e-6
@@ -326,3 +330,39 @@ def test_linear_elastic_sensitivity():
         np.testing.assert_allclose(
             dsig[:, k], (plus - minus) / (2 * h), rtol=1e-7, atol=1e-9 * np.abs(dsig[:, k]).max()
         )
+
+
+@pytest.mark.parametrize("name", VARIANTS)
+def test_one_pass_affine_split_equals_the_sensitivity(name):
+    """affine_sensitivity: c + T_s e and h + T_q e equal ``sensitivity`` with the strain-increment
+    derivative dde_known + e, for a subset of the parameter columns, at elastic, plastic and
+    (linear form, hydrostatic tension) apex points; T_s is the consistent tangent."""
+    _, _, mat = _reference(name)
+    rng = np.random.default_rng(5)
+    incs = np.concatenate([general_paths(rng, 8)[2:], tension_paths()], axis=1)  # (6, 12, 6)
+    res = run_path_sensitivity(mat, incs[:5])
+    sig_n, st_n = res.stress[-1], res.state[-1]
+    ds_n, dq_n = res.dstress[-1], res.dstate[-1]
+    de = incs[5]
+    up = mat.update(de, sig_n, st_n)
+    assert up.ok.all()
+    kinds = _kinds(run_path_sensitivity(mat, incs))[-1]
+    assert "P" in kinds and ("A" in kinds or mat.form != "linear")
+    n, P = de.shape[0], len(mat.parameter_names)
+    known = rng.normal(size=(n, P, 6)) * 1e-4
+    e = rng.normal(size=(n, P, 6)) * 1e-4
+    full_s, full_q = mat.sensitivity(de, sig_n, st_n, up, ds_n, dq_n, known + e)
+    cols = [j for j in range(P) if j % 2 == 0]  # a subset, as the FE model asks
+    c, h, T = affine_sensitivity(
+        mat, de, sig_n, st_n, up, ds_n[:, cols], dq_n[:, cols], known[:, cols], cols
+    )
+    assert c.shape == (n, len(cols), 6) and h.shape == (n, len(cols), 7) and T.shape == (n, 13, 6)
+    np.testing.assert_allclose(T[:, :6], up.tangent, rtol=0, atol=1e-9 * np.abs(up.tangent).max())
+    lin = np.einsum("nrj,nkj->nkr", T, e[:, cols])
+    for got, want in ((c + lin[..., :6], full_s[:, cols]), (h + lin[..., 6:], full_q[:, cols])):
+        scale = np.maximum(np.abs(want).max(axis=(1, 2), keepdims=True), 1e-300)
+        assert (np.abs(got - want) / scale).max() < 1e-12
+    assert (
+        affine_sensitivity(LinearElastic(30_000.0, 0.2), de, sig_n, st_n, up, None, None, None, [0])
+        is None
+    )

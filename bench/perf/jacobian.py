@@ -2,22 +2,26 @@
 
     OMP_NUM_THREADS=1 python -m bench.perf.jacobian [--meshes coarse,paper] [--cases all|NAME,...]
                       [--paper-cases linear-compression,hyperbolic-shear,exponent-tension]
-                      [--modes auto|direct,krylov] [--repeat 2] [--step 1e-5] [--no-fd]
+                      [--modes auto|direct,krylov|auto,auto-2pass] [--repeat 2]
+                      [--step 1e-5] [--no-fd]
 
 Per mesh and case, at the case's reference: the best of ``--repeat`` plain forward evaluations
 ``model(x)`` and of evaluations with the Jacobian ``model(x, jacobian=True)`` (response + dU/dx,
 6 identified parameters), alternated so that both see the same machine load, and their ratio
-(``cost``: the target is <= 1.6); where the sensitivity time went (material: the two
-``sensitivity`` calls per increment; assem: pseudo-loads, strains, internal-force sensitivities and
-converged tangents; solve: factorisations + back-substitutions or Krylov iterations, ``its``);
-then, unless ``--no-fd``, the largest relative 2-norm error of a Jacobian column against central
-differences of plain runs with relative step ``--step`` (default 1e-5) and the parameter it belongs
-to, and the same with a step 100 times smaller (``err/100``): where a Gauss point starts to yield
-within the first step of the reference (a kink of the discrete response: the one-sided
-differences converge to the DDM column from one side only), the smaller step is in the clean
-range again.
+(``cost``, wall time: the target is <= 1.6; ``cpu``: the same ratio of this process's CPU times,
+steadier when other processes share the cores); where the sensitivity time went (material: the
+material pass(es) per increment and the affine update; assem: pseudo-loads, strains,
+internal-force sensitivities and converged tangents; solve: factorisations + back-substitutions
+or Krylov iterations, ``its``); then, unless ``--no-fd``, the largest relative 2-norm error of a
+Jacobian column against central differences of plain runs with relative step ``--step`` (default
+1e-5) and the parameter it belongs to, and the same with a step 100 times smaller (``err/100``):
+where a Gauss point starts to yield within the first step of the reference (a kink of the
+discrete response: the one-sided differences converge to the DDM column from one side only), the
+smaller step is in the clean range again.
 ``--modes direct,krylov`` times each sensitivity solve mode of problems/fe/sensitivity.py (the
-measured choice behind ``auto``). ``coarse`` runs all nine cases, ``paper`` only ``--paper-cases``.
+measured choice behind ``auto``); ``--modes auto,auto-2pass`` the one material pass per increment
+against the two ``sensitivity`` calls of the first implementation. ``coarse`` runs all nine
+cases, ``paper`` only ``--paper-cases``.
 """
 
 from __future__ import annotations
@@ -33,11 +37,19 @@ from problems.inverse.forward import FEForwardModel, discretisation
 
 PAPER_CASES = "linear-compression,hyperbolic-shear,exponent-tension"
 
+#: ``--modes`` values: (sensitivity solve mode, one material pass per increment); the ``-2pass``
+#: variants time the two ``sensitivity`` calls per increment of the first implementation
+MODES = {
+    **{m: (m, True) for m in sensitivity.SOLVE_MODES},
+    **{f"{m}-2pass": (m, False) for m in sensitivity.SOLVE_MODES},
+}
+
 
 def timed(fn):
-    t = time.perf_counter()
+    """(wall s, CPU s of this process, fn())."""
+    t, c = time.perf_counter(), time.process_time()
     out = fn()
-    return time.perf_counter() - t, out
+    return time.perf_counter() - t, time.process_time() - c, out
 
 
 def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> list[str]:
@@ -46,16 +58,17 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
     x = case.reference
     FEForwardModel(case, "1,1,2")(x, jacobian=True)  # compiled kernels loaded outside the timings
     best_plain, best = np.inf, {m: np.inf for m in modes}
+    cpu_plain, cpu = np.inf, {m: np.inf for m in modes}
     out = {}
     for _ in range(repeat):
-        t, plain = timed(lambda: model(x))
-        best_plain = min(best_plain, t)
+        t, c, plain = timed(lambda: model(x))
+        best_plain, cpu_plain = min(best_plain, t), min(cpu_plain, c)
         for mode in modes:
-            sensitivity.DEFAULT_MODE = mode
-            t, res = timed(lambda: model(x, jacobian=True))
-            best[mode] = min(best[mode], t)
+            sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = MODES[mode]
+            t, c, res = timed(lambda: model(x, jacobian=True))
+            best[mode], cpu[mode] = min(best[mode], t), min(cpu[mode], c)
             out[mode] = res
-    sensitivity.DEFAULT_MODE = "auto"
+    sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = "auto", True
     if not plain.ok or any(not r.ok or r.jacobian is None for r in out.values()):
         return [f"{mesh:8} {name:22} failed: {plain.message or next(iter(out.values())).message}"]
     err, worst, err_small = np.nan, "", np.nan
@@ -74,13 +87,14 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
         worst = case.names[int(np.argmax(errs[step]))]
     rows = []  # the split of the sensitivity time: one more run per mode
     for mode in modes:
-        sensitivity.DEFAULT_MODE = mode
+        sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = MODES[mode]
         tm = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities.timing
-        sensitivity.DEFAULT_MODE = "auto"
+        sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = "auto", True
         solve = tm["factor_s"] + tm["solve_s"]
         rows.append(
-            f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {tm['mode']:7} "
+            f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {mode:9} "
             f"{best_plain:7.3f} {best[mode]:7.3f} {best[mode] / best_plain:5.2f} "
+            f"{cpu[mode] / cpu_plain:5.2f} "
             f"{tm['material_s']:6.3f} {tm['assembly_s']:6.3f} {solve:6.3f} "
             f"{tm['krylov_iterations']:5d} {err:9.1e} {worst:>7} {err_small:9.1e}"
         )
@@ -99,7 +113,10 @@ def main(argv=None) -> None:
         "--paper-cases", default=PAPER_CASES, help="cases on paper (comma-separated, or all)"
     )
     ap.add_argument(
-        "--modes", default="auto", help="sensitivity solve modes to time: auto | direct,krylov"
+        "--modes",
+        default="auto",
+        help="sensitivity paths to time (comma-separated): auto, direct, krylov, or one of them "
+        "with -2pass (two material calls per increment)",
     )
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--step", type=float, default=1e-5, help="relative central-difference step")
@@ -107,11 +124,11 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     modes = args.modes.split(",")
     for m in modes:
-        if m not in sensitivity.SOLVE_MODES:
-            allowed = ", ".join(sensitivity.SOLVE_MODES)
-            raise SystemExit(f"mode {m!r} is unknown; allowed: {allowed}")
+        if m not in MODES:
+            raise SystemExit(f"mode {m!r} is unknown; allowed: {', '.join(MODES)}")
     print(
-        f"{'mesh':8} {'dofs':>6} {'case':22} {'mode':7} {'plain s':>7} {'jac s':>7} {'cost':>5} "
+        f"{'mesh':8} {'dofs':>6} {'case':22} {'mode':9} {'plain s':>7} {'jac s':>7} {'cost':>5} "
+        f"{'cpu':>5} "
         f"{'mater':>6} {'assem':>6} {'solve':>6} {'its':>5} {'max err':>9} {'worst':>7} "
         f"{'err/100':>9}",
         flush=True,

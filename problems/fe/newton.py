@@ -529,6 +529,9 @@ class _Newton:
         )
         self._factor: Factor | None = None  # the current factorisation / preconditioner
         self._factor_D = None  # the material tangent it was formed from
+        # the last free block assembled and the tangent array it is of (the same object): the
+        # sensitivity solve assembles the converged tangent, which the next predictor reuses
+        self._kff_of: tuple | None = None
         self._fresh_rate = None  # Krylov iterations per decade right after it
         self._excess = 0.0  # Krylov iterations its ageing has added since
 
@@ -562,22 +565,33 @@ class _Newton:
         """The free-free block of the tangent K(D), permuted to the elimination order (CSC, N/mm).
 
         Fused assembly writes it directly (no full matrix); numpy assembly extracts it from K.
+        The block of the last array assembled is kept and returned again for the same array (the
+        predictor of the increment after a sensitivity solve reuses the converged tangent's).
         """
+        if D is not None and self._kff_of is not None and self._kff_of[0] is D:
+            return self._kff_of[1]  # same array object, never written after the update
         if self._fused is None:
             K = self._tangent(D)
             t = time.perf_counter()
             Kff = self.bc.free_block(K)
             self.timing["assembly_s"] += time.perf_counter() - t
-            return Kff
-        t = time.perf_counter()
-        if D is None:
-            D = self._virgin_tangent()
-        slot, indices, indptr = self._free_slot
-        n = len(indptr) - 1
-        Kff = sp.csc_matrix(
-            (self._fused.tangent(D, slot, len(indices)), indices, indptr), shape=(n, n)
-        )
-        self.timing["assembly_s"] += time.perf_counter() - t
+        else:
+            t = time.perf_counter()
+            slot, indices, indptr = self._free_slot
+            n = len(indptr) - 1
+            Kff = sp.csc_matrix(
+                (
+                    self._fused.tangent(
+                        self._virgin_tangent() if D is None else D, slot, len(indices)
+                    ),
+                    indices,
+                    indptr,
+                ),
+                shape=(n, n),
+            )
+            self.timing["assembly_s"] += time.perf_counter() - t
+        if D is not None:
+            self._kff_of = (D, Kff)
         return Kff
 
     def _predictor(self, D, du):

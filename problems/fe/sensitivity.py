@@ -39,6 +39,7 @@ from numba import njit
 
 from problems.fe.linear_solver import SingularMatrixError, superlu_factor
 from problems.materials.base import MaterialUpdate
+from problems.materials.ddm import affine_sensitivity
 
 #: relative residual ||K X - F|| / ||F|| of each column of the Krylov solve of the sensitivity
 #: equations. Measured (coarse, linear-compression, against solves to 1e-12): the Jacobian's
@@ -55,6 +56,10 @@ SOLVE_MODES = ("auto", "direct", "krylov")
 DIRECT_MAX_DOFS = 2500
 #: the mode :func:`problems.fe.newton.run` uses (bench/perf/jacobian.py sets it to compare)
 DEFAULT_MODE = "auto"
+
+#: whether :func:`problems.fe.newton.run` uses the one-pass material sensitivities where the
+#: material offers them (tests and bench/perf/jacobian.py set it to False for the two-call path)
+DEFAULT_AFFINE = True
 
 #: memory of the Krylov search space (U and A U), bytes; GCR restarts when it is full
 KRYLOV_MEMORY = 64 * 2**20
@@ -128,10 +133,13 @@ class GlobalDDM:
     solver are reused, its state (the factorisation its iterations reuse, its counters) is never
     changed, so the run's answers are bit for bit those of a run without sensitivities.
     ``columns`` are the indices of the parameters to solve for; ``mode`` one of SOLVE_MODES
-    (default DEFAULT_MODE).
+    (default DEFAULT_MODE); ``affine=False`` forces the two ``sensitivity`` calls per increment
+    even where the material offers the one-pass split (the reference path of the tests).
     """
 
-    def __init__(self, newton, material, columns, mode: str | None = None):
+    def __init__(
+        self, newton, material, columns, mode: str | None = None, affine: bool | None = None
+    ):
         from problems.fe.assembly import FusedAssembler
         from problems.fe.newton import _shared
 
@@ -146,7 +154,15 @@ class GlobalDDM:
         self._fused = _shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
         self.names = tuple(material.parameter_names)
         self.columns = np.asarray(columns, dtype=np.int64)
-        P, n_pts, ns = len(self.names), disc.n_points, len(material.state_names)
+        # one material pass per increment (problems.materials.ddm.affine_sensitivity) where the
+        # material offers it, with only the columns asked for; else two ``sensitivity`` calls
+        # per increment with all P columns (the material's interface)
+        affine = DEFAULT_AFFINE if affine is None else affine
+        self.affine = bool(affine) and _has_affine_pass(material)
+        P = len(self.columns) if self.affine else len(self.names)
+        # the solved columns' positions in the carried arrays below
+        self.cols = np.arange(P) if self.affine else self.columns
+        n_pts, ns = disc.n_points, len(material.state_names)
         self.U = np.zeros((disc.pattern.n_dofs, P))  # dU/dp, mm per unit
         self.eps = np.zeros((n_pts, P, 6))  # B dU/dp
         self.dstress = np.zeros((n_pts, P, 6))
@@ -191,11 +207,19 @@ class GlobalDDM:
             self.wall_s += time.perf_counter() - t0
 
     def _advance(self, inc, stress_n, state_n) -> None:
-        mat, bc, cols = self.material, self.bc, self.columns
+        mat, bc, cols = self.material, self.bc, self.cols
         deps = inc.strain_increment
         upd = MaterialUpdate(inc.stress, inc.tangent, inc.state, np.ones(len(deps), bool))
         t = time.perf_counter()
-        c, _ = mat.sensitivity(deps, stress_n, state_n, upd, self.dstress, self.dstate, -self.eps)
+        T = None
+        if self.affine:  # c, h and T = d(stress, state)/d(deps) in one pass
+            c, h, T = affine_sensitivity(
+                mat, deps, stress_n, state_n, upd, self.dstress, self.dstate, -self.eps, cols
+            )
+        else:
+            c, _ = mat.sensitivity(
+                deps, stress_n, state_n, upd, self.dstress, self.dstate, -self.eps
+            )
         self.timing["material_s"] += time.perf_counter() - t
         t = time.perf_counter()
         rhs = -self._forces(c)[bc.free]  # (n_free, k) N per unit
@@ -203,22 +227,46 @@ class GlobalDDM:
         X = self._solve(inc, rhs)
         t = time.perf_counter()
         U = np.zeros_like(self.U)
-        U[np.ix_(bc.free, cols)] = X
-        eps = np.zeros_like(self.eps)
-        _strains_kernel(self._fused.B, U, cols, self._fused.edofs, eps)
-        self.timing["assembly_s"] += time.perf_counter() - t
-        t = time.perf_counter()
-        dstress, dstate = mat.sensitivity(
-            deps, stress_n, state_n, upd, self.dstress, self.dstate, eps - self.eps
-        )
-        self.timing["material_s"] += time.perf_counter() - t
-        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(dstress[:, cols]))):
-            self._fail("sensitivity is not finite")
-            return
+        if T is not None:
+            # one pass over the elements: strains B U_{n+1}, dstress = c + T_s B U_{n+1},
+            # dstate = h + T_q B U_{n+1} and their internal forces
+            U[bc.free] = X
+            eps, dstress, dstate = np.empty_like(c), np.empty_like(c), np.empty_like(h)
+            f = np.empty((self.disc.pattern.n_dofs, len(cols)))
+            _affine_kernel(
+                self._fused.B,
+                self._fused.dV,
+                self._fused.edofs,
+                U,
+                c,
+                h,
+                T,
+                eps,
+                dstress,
+                dstate,
+                f,
+            )
+            self.timing["material_s"] += time.perf_counter() - t
+            if not (np.all(np.isfinite(f)) and np.all(np.isfinite(X))):
+                self._fail("sensitivity is not finite")
+                return
+        else:
+            U[np.ix_(bc.free, cols)] = X
+            eps = np.zeros_like(self.eps)
+            _strains_kernel(self._fused.B, U, cols, self._fused.edofs, eps)
+            self.timing["assembly_s"] += time.perf_counter() - t
+            t = time.perf_counter()
+            dstress, dstate = mat.sensitivity(
+                deps, stress_n, state_n, upd, self.dstress, self.dstate, eps - self.eps
+            )
+            self.timing["material_s"] += time.perf_counter() - t
+            if not (np.all(np.isfinite(X)) and np.all(np.isfinite(dstress[:, cols]))):
+                self._fail("sensitivity is not finite")
+                return
+            t = time.perf_counter()
+            f = self._forces(dstress)  # (n_dofs, k)
+            self.timing["assembly_s"] += time.perf_counter() - t
         self.U, self.eps, self.dstress, self.dstate = U, eps, dstress, dstate
-        t = time.perf_counter()
-        f = self._forces(dstress)  # (n_dofs, k)
-        self.timing["assembly_s"] += time.perf_counter() - t
         self.dforce = np.array([bc.plate_force_kN(f[:, j]) for j in range(f.shape[1])])
         scale = max(float(np.linalg.norm(f[bc.fixed])), 1e-300)
         self.residual = max(self.residual, float(np.linalg.norm(f[bc.free])) / scale)
@@ -234,7 +282,7 @@ class GlobalDDM:
         _forces_kernel(
             self._fused.B,
             np.ascontiguousarray(stress),
-            self.columns,
+            self.cols,
             self._fused.dV,
             self._fused.edofs,
             out,
@@ -281,7 +329,7 @@ class GlobalDDM:
     def snapshot(self) -> None:
         """Keep the current sensitivities as those of a snapshot."""
         nn = self.disc.mesh.n_nodes
-        self._snap_u.append(self.U[:, self.columns].reshape(nn, 3, len(self.columns)).copy())
+        self._snap_u.append(self.U[:, self.cols].reshape(nn, 3, len(self.columns)).copy())
         self._snap_f.append(np.array(self.dforce, dtype=float))
 
     def result(self, full_mesh) -> Sensitivities:
@@ -306,6 +354,13 @@ class GlobalDDM:
             self.wall_s,
             {**self.timing, "mode": self.mode},
         )
+
+
+def _has_affine_pass(material) -> bool:
+    """Whether :func:`problems.materials.ddm.affine_sensitivity` handles ``material``."""
+    from problems.materials.drucker_prager import DruckerPrager
+
+    return isinstance(material, DruckerPrager)
 
 
 def _symmetric(D) -> bool:
@@ -436,3 +491,48 @@ def _forces_kernel(B, S, cols, dV, edofs, out):
             d = edofs[e, a]
             for q in range(k):
                 out[d, q] += fe[q, a]
+
+
+@njit(**_JIT)
+def _affine_kernel(B, dV, edofs, U, c, h, T, eps, dstress, dstate, f):
+    """For every column q of U (n_dofs, k): eps[p, q] = B_p U_e, dstress[p, q] = c[p, q] +
+    T[p, :6] eps[p, q], dstate[p, q] = h[p, q] + T[p, 6:] eps[p, q] and f[:, q] = sum B^T
+    dstress[:, q] dV (a non-finite dstress makes f non-finite)."""
+    ne, ng = dV.shape
+    k, ns = c.shape[1], h.shape[2]
+    f[:, :] = 0.0
+    ue = np.empty((k, 24))
+    fe = np.empty((k, 24))
+    ep = np.empty(6)
+    for e in range(ne):
+        for a in range(24):
+            for q in range(k):
+                ue[q, a] = U[edofs[e, a], q]
+        fe[:, :] = 0.0
+        for g in range(ng):
+            p = e * ng + g
+            w = dV[e, g]
+            for q in range(k):
+                for i in range(6):
+                    s = 0.0
+                    for a in range(24):
+                        s += B[e, g, i, a] * ue[q, a]
+                    ep[i] = s
+                    eps[p, q, i] = s
+                for r in range(6):
+                    s = c[p, q, r]
+                    for j in range(6):
+                        s += T[p, r, j] * ep[j]
+                    dstress[p, q, r] = s
+                    sw = s * w
+                    for a in range(24):
+                        fe[q, a] += B[e, g, r, a] * sw
+                for r in range(ns):
+                    s = h[p, q, r]
+                    for j in range(6):
+                        s += T[p, 6 + r, j] * ep[j]
+                    dstate[p, q, r] = s
+        for a in range(24):
+            d = edofs[e, a]
+            for q in range(k):
+                f[d, q] += fe[q, a]

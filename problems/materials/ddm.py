@@ -1,12 +1,15 @@
 """Parameter sensitivities of the material update by direct differentiation (DDM).
 
-Two pieces sit here beside the materials' ``sensitivity`` methods:
+Three pieces sit here beside the materials' ``sensitivity`` methods:
 
 * :func:`kernel_parameter_jacobian`: the chain rule from the physical Drucker-Prager parameters
   (``DruckerPrager.parameter_names``: E, sigma0, H, pt0 in MPa, beta and psi in degrees, a in
   MPa^(1-b), K, b, nu -) to the kernel parameters theta that the compiled return mapping reads
   (E, nu, sigma0, H, the eqps-rule constant, ``yp[1:]``, ``gp[1:]``; see ``_kernels.TH_*``),
   written analytically after the mapping of :func:`drucker_prager.make_material`;
+* :func:`affine_sensitivity`: the sensitivities of one update as an affine function of the
+  unknown part of the strain-increment derivative (one kernel pass instead of two per increment
+  of the global DDM, problems/fe/sensitivity.py);
 * :func:`run_path_sensitivity`: a material-point DDM driver that takes points along prescribed
   strain paths through ``update`` and ``sensitivity``, carrying the derivatives of stress and
   state from increment to increment.
@@ -102,6 +105,82 @@ def _eccentricity_rows(out, col, ecc, s0, tp) -> None:
         out[_K.TH_G + 1, col["psi"]] = ecc * s0 * _dtan_deg(tp)
     else:
         out[_K.TH_G + 1, col["sigma0"]] = 1e-6
+
+
+# --------------------------------------------------------------------------------------------
+# One-pass sensitivities for the global DDM
+# --------------------------------------------------------------------------------------------
+
+
+def affine_sensitivity(
+    material,
+    strain_increment,
+    stress_old,
+    state_old,
+    update,
+    dstress_old,
+    dstate_old,
+    dstrain_known,
+    columns,
+):
+    """The update's parameter sensitivities as an affine function of the still unknown part of
+    the strain-increment derivative, from one pass of the kernel, or None when ``material`` has
+    no such pass (then call ``material.sensitivity`` twice).
+
+    ``sensitivity`` is linear in (dtheta, dstress_old, dstate_old, dstrain_increment) jointly, so
+    for ``dstrain_increment = dstrain_known + e``::
+
+        dstress = c + T_s e,   dstate = h + T_q e
+
+    with (c, h) the sensitivities for e = 0 and T = [T_s; T_q] = d(stress, state)/d(strain
+    increment) of the update (T_s is the consistent tangent). One kernel call with k + 6
+    columns gives both: the k parameter ``columns`` (indices into ``parameter_names``) with
+    their derivatives, and six columns with no parameter derivative, zero old derivatives and
+    the unit strain increments. Inputs: strain_increment, stress_old (n, 6), state_old
+    (n, n_state), the ``update`` of them, dstress_old (n, k, 6), dstate_old (n, k, n_state),
+    dstrain_known (n, k, 6) for the k columns (MPa, 1 per parameter unit). Returns
+    (c (n, k, 6) MPa per unit, h (n, k, n_state) per unit, T (n, 6 + n_state, 6) MPa and -);
+    failed points carry NaN like ``sensitivity``. Same arithmetic per column as
+    ``DruckerPrager.sensitivity`` (tested against it to round-off).
+    """
+    from problems.materials.drucker_prager import DruckerPrager
+
+    if not isinstance(material, DruckerPrager):
+        return None
+    n = len(strain_increment)
+    k, n_st = len(columns), np.shape(state_old)[1]
+    de, sig_n, st_n = (
+        np.ascontiguousarray(a, dtype=float) for a in (strain_increment, stress_old, state_old)
+    )
+    dth = np.zeros((_K.TH_SIZE, k + 6))
+    dth[:, :k] = kernel_parameter_jacobian(material)[:, columns]
+    dsig = np.zeros((n, k + 6, 6))
+    dsig[:, :k] = dstress_old
+    dst = np.zeros((n, k + 6, n_st))
+    dst[:, :k] = dstate_old
+    dde = np.zeros((n, k + 6, 6))
+    dde[:, :k] = dstrain_known
+    dde[:, k:] = np.eye(6)
+    sig_tr, _, plastic = material._elastic_trial(de, sig_n, np.ascontiguousarray(st_n[:, 0]))
+    ds, dq = _K.update_sensitivities(
+        material._kernel_params,
+        material.yield_function.kernel_params,
+        material.potential.kernel_params,
+        dth,
+        de,
+        sig_n,
+        st_n,
+        sig_tr,
+        plastic,
+        np.ascontiguousarray(update.stress),
+        np.ascontiguousarray(update.state),
+        np.ascontiguousarray(update.ok),
+        dsig,
+        dst,
+        dde,
+    )
+    T = np.concatenate([ds[:, k:], dq[:, k:]], axis=2).transpose(0, 2, 1)
+    return ds[:, :k], dq[:, :k], np.ascontiguousarray(T)
 
 
 # --------------------------------------------------------------------------------------------
