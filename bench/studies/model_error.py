@@ -153,13 +153,19 @@ def one_row(
     }
 
 
+#: the DIC-route rows (on the first inverse mesh): no treatment on the full face, and the default
+#: treatment (:func:`problems.inverse.cases.default_treatment`: BAE, 30 mm plate margin)
+DIC_ROWS = (("none", 0.0), ("bae", 30.0))
+
+
 def configurations(meshes, treatments, margins, dic: bool) -> list[Configuration]:
-    """The study's grid (and one DIC-route row on the first mesh, no treatment, no margin)."""
+    """The study's grid, and with ``dic`` the DIC-route rows of :data:`DIC_ROWS` whose treatment
+    is asked for."""
     grid = [
         Configuration(m, t, float(g)) for m, t, g in itertools.product(meshes, treatments, margins)
     ]
     if dic:
-        grid.append(Configuration(meshes[0], "none", 0.0, "dic"))
+        grid += [Configuration(meshes[0], t, g, "dic") for t, g in DIC_ROWS if t in treatments]
     return grid
 
 
@@ -210,11 +216,25 @@ def run_model_error(
             tmp = path.with_suffix(".json.tmp")
             tmp.write_text(jsonio.dumps(row, indent=1, sort_keys=True))
             tmp.replace(path)
+            if cfg.route == "dic":
+                _keep_dic_data(case, d)
         run.rows.append(row)
         if progress is not None:
             progress(cfg, row)
     write_csv(d / "summary.csv", [_flat(r) for r in run.rows])
     return run
+
+
+def _keep_dic_data(case: str, folder: Path) -> None:
+    """Copy the DIC-route data set (made in the data cache) beside the rows, ``dic_data.json``
+    (the images stay in the cache: their settings and seed regenerate them)."""
+    import shutil
+
+    from problems.inverse.data import cached_path, tier_settings
+
+    src = cached_path(case, tier_settings("model-error", route="dic"))
+    if src.exists() and not (folder / "dic_data.json").exists():
+        shutil.copyfile(src, folder / "dic_data.json")
 
 
 def _data_hash(case: str, mesh: str, data) -> str:
