@@ -77,3 +77,29 @@ def test_rows_made_with_other_data_are_recomputed(tmp_path, data):
         data=other,
     )
     assert run.rows[0]["provenance"]["data_hash"] == other.hash != data.hash
+
+
+def test_overview_over_the_case_folders(tmp_path):
+    from bench.studies.model_error import render_overview
+
+    for case, err in (("linear-compression", 3.0), ("linear-shear", 40.0)):
+        d = tmp_path / case
+        d.mkdir()
+        for t, g, fe in (("none", 0.0, 30.0), ("bae", 30.0, 900.0)):
+            row = {
+                "case": case,
+                "mesh": "coarse",
+                "route": "fe",
+                "treatment": t,
+                "plate_margin_mm": g,
+                "lm_error_percent": {"E": err / (1 + (t == "bae")), "beta": 0.5},
+                "linearised_bias_percent": {"E": err, "beta": 0.4},
+                "max_abs_error_percent": err / (1 + (t == "bae")),
+                "total_forward_equivalents": fe,
+            }
+            (d / f"coarse__{t}__margin{g:g}__fe.json").write_text(json.dumps(row))
+    md, png = render_overview(tmp_path)
+    text = md.read_text()
+    assert "| case | mesh | none | BAE + 30 mm |" in text
+    assert "| linear-shear | coarse | 40.0 % (E) [40.0], 30 | 20.0 % (E) [40.0], 900 |" in text
+    assert png.stat().st_size > 1000

@@ -82,8 +82,8 @@ def main(args) -> int:
     from pathlib import Path
 
     from bench.parallel import mapper
-    from bench.studies import case_names, existing_dir
-    from bench.studies.model_error import render_model_error, run_model_error
+    from bench.studies import case_names, default_output_dir, existing_dir
+    from bench.studies.model_error import render_model_error, render_overview, run_model_error
     from problems.inverse.cases import get_case
 
     cases = case_names(args.cases)
@@ -94,9 +94,20 @@ def main(args) -> int:
         name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name
         for name in cases
     }
+
+    def overview():
+        # every case folder under the study's root: overview.md and the all-cases figure
+        if args.out is None or len(cases) > 1:
+            root = (
+                Path(args.out) if args.out else default_output_dir("model_error", cases[0]).parent
+            )
+            for path in render_overview(root):
+                print(f"wrote {path}")
+
     if args.render:
         for name in cases:
             print(f"wrote {render_model_error(existing_dir('model_error', name, outs[name]))}")
+        overview()
         return 0
 
     def report(cfg, row):
@@ -125,4 +136,6 @@ def main(args) -> int:
             if not args.no_figures:
                 print(f"wrote {render_model_error(run.dir)}")
             print(f"{name}: {len(run.rows)} rows in {run.dir}")
+    if not args.no_figures:
+        overview()
     return 0

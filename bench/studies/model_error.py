@@ -303,3 +303,106 @@ def render_model_error(folder) -> Path:
     ax.set_title(rows[0]["case"])
     ax.legend(fontsize="x-small", ncol=1)
     return plotting.save(fig, folder / "bias_vs_cost.png")
+
+
+def _rows_of(folder: Path) -> list[dict]:
+    return [json.loads(p.read_text()) for p in sorted(Path(folder).glob("*__*.json"))]
+
+
+def _label(row: dict) -> str:
+    t = {"bae": "BAE", "one-point": "one-point", "iterated": "iterated", "none": "none"}
+    text = t.get(row["treatment"], row["treatment"])
+    if row["plate_margin_mm"]:
+        text += f" + {row['plate_margin_mm']:g} mm"
+    return text + (" (DIC)" if row.get("route") == "dic" else "")
+
+
+def overview_table(root) -> str:
+    """A markdown table over every case folder under ``root``: per case and inverse mesh, the max
+    |LM error| (%) with the worst parameter, and the total forward-equivalents of each row
+    (the linearised perfect-optimiser bias in brackets)."""
+    root = Path(root)
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and any(p.glob("*__*.json")))
+    rows = [r for f in folders for r in _rows_of(f)]
+    order = sorted(
+        {(r["mesh"], r["route"], r["treatment"], r["plate_margin_mm"]) for r in rows},
+        key=lambda k: (k[0] != "coarse", k[1] != "fe", TREATMENT_ORDER.index(k[2]), k[3]),
+    )
+    fields = ("mesh", "route", "treatment", "plate_margin_mm")
+    head = ["case", "mesh"] + [_label(dict(zip(fields, k))) for k in order]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for f in folders:
+        by = {(r["mesh"], r["route"], r["treatment"], r["plate_margin_mm"]): r for r in _rows_of(f)}
+        for mesh in sorted({k[0] for k in by}, key=lambda m: m != "coarse"):
+            cells = [f.name, mesh]
+            for k in order:
+                r = by.get(k) if k[0] == mesh else None
+                if r is None:
+                    cells.append("")
+                    continue
+                worst = max(r["lm_error_percent"], key=lambda n: abs(r["lm_error_percent"][n]))
+                bias = max(abs(v) for v in r["linearised_bias_percent"].values())
+                cells.append(
+                    f"{r['max_abs_error_percent']:.1f} % ({worst}) [{bias:.1f}], "
+                    f"{r['total_forward_equivalents']:.0f}"
+                )
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def render_overview(root) -> list[Path]:
+    """``overview.md`` (:func:`overview_table`) and ``bias_vs_cost.png`` over all cases under
+    ``root`` (one marker per treatment, filled without and open with a plate margin)."""
+    from bench import plotting
+
+    root = Path(root)
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and any(p.glob("*__*.json")))
+    if not folders:
+        raise FileNotFoundError(f"{root}: no study folders; run the study first")
+    md = root / "overview.md"
+    md.write_text(
+        "# Model-error study: max |parameter error| of LM (worst parameter) [linearised "
+        "perfect-optimiser bias], total forward-equivalents\n\n" + overview_table(root)
+    )
+    plt = plotting.pyplot()
+    fig, ax = plt.subplots(figsize=plotting.DOUBLE)
+    markers = dict(zip(TREATMENT_ORDER, "osD^"))
+    seen = set()
+    for f in folders:
+        for r in _rows_of(f):
+            err = r["max_abs_error_percent"]
+            key = (r["treatment"], bool(r["plate_margin_mm"]), r.get("route", "fe"), r["mesh"])
+            label = None
+            if key not in seen:
+                seen.add(key)
+                label = (r["mesh"] + ", " if r["mesh"] != "coarse" else "") + _label(r)
+            ax.plot(
+                r["total_forward_equivalents"],
+                float(err),
+                "*" if r.get("route") == "dic" else markers.get(r["treatment"], "x"),
+                mfc="none" if r["plate_margin_mm"] else None,
+                color="k" if r["mesh"] == "coarse" else "0.5",
+                label=label,
+            )
+    ax.axhline(2.0, **plotting.REFERENCE_LINE)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    plotting.log_axis(ax, "x")
+    plotting.log_axis(ax, "y")
+    ax.set_xlabel("cost: forward-equivalents (identification + corrections)")
+    ax.set_ylabel("max |parameter error| of LM, %")
+    ax.set_title(f"model-error study, {len(folders)} cases (dotted: the 2 % target)")
+    handles, labels = ax.get_legend_handles_labels()
+    rank = {t: i for i, t in enumerate(("none", "one-point", "iterated", "BAE"))}
+    pairs = sorted(
+        zip(labels, handles),
+        key=lambda p: ("DIC" in p[0], rank.get(p[0].split(" ")[0].rstrip(","), 9), p[0]),
+    )
+    ax.legend(
+        [h for _, h in pairs],
+        [lab for lab, _ in pairs],
+        fontsize="x-small",
+        loc="center left",
+        bbox_to_anchor=(1.0, 0.5),
+    )
+    return [md, plotting.save(fig, root / "bias_vs_cost.png")]
