@@ -35,6 +35,11 @@ class Identification:
     start, start_index : ``default`` or ``random`` (the ``start_index``-th seeded LHS point)
     options          : solver options
     bae_samples, bae_seed : prior samples and seed of the BAE statistics
+    surrogate        : a stored surrogate (path or name; ``default``: the shipped surrogate of
+                       (case, mesh) in results/surrogates/) used as the forward model of the
+                       solver's run; its training runs are charged (``surrogate-training``)
+    polish, polish_budget : after the run on the surrogate, an FE ``lm`` (exact Jacobians) from
+                       its optimum with at most ``polish_budget`` FE evaluations
     """
 
     case: str
@@ -52,6 +57,9 @@ class Identification:
     options: dict = field(default_factory=dict)
     bae_samples: int = 32
     bae_seed: int = 0
+    surrogate: str | None = None
+    polish: bool = False
+    polish_budget: int = 60
 
     def __post_init__(self):
         if self.treatment not in TREATMENTS:
@@ -60,6 +68,12 @@ class Identification:
             )
         if int(self.budget) < 1:
             raise ValueError(f"budget = {self.budget!r} is out of range: a whole number >= 1")
+        if self.polish and not self.surrogate:
+            raise ValueError("polish = True needs a surrogate (the polish follows its run)")
+        if int(self.polish_budget) < 1:
+            raise ValueError(
+                f"polish_budget = {self.polish_budget!r} is out of range: a whole number >= 1"
+            )
         if int(self.bae_samples) < 2:
             raise ValueError(
                 f"bae_samples = {self.bae_samples!r} is out of range: a whole number >= 2"
@@ -139,6 +153,13 @@ def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, ma
     return corr
 
 
+def vectorised_mapper():
+    """The mapper of objectives on a surrogate: whole batches in one vectorised call."""
+    from problems.surrogate.model import VectorisedMapper
+
+    return VectorisedMapper()
+
+
 def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     """Run the identification ``spec``; returns the solver's RunResult with totals and provenance.
 
@@ -163,6 +184,8 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     case = get_case(spec.case)
     x0 = start_point(case, kind=spec.start, seed=spec.seed, index=spec.start_index)
     if case.is_analytic:
+        if spec.surrogate:
+            raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
         objective = build_objective(case, mapper=mapper)
         objective.observers.extend(observers)
         return solve(
@@ -176,55 +199,79 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     if spec.treatment != "none":
         hifi_mesh = spec.hifi_mesh or hifi_mesh_for(spec.mesh)
 
-    def objective_with(correction):
-        obj = build_objective(
-            case,
-            mesh=spec.mesh,
-            data=data,
-            region=region,
-            correction=correction,
-            hifi_mesh=hifi_mesh,
-            mapper=mapper,
-        )
-        obj.observers.extend(observers)
-        return obj
+    surrogate = None
+    if spec.surrogate:
+        from bench.surrogate_run import load_for
 
-    if spec.treatment == "none":
-        result = solve(
-            objective_with(None),
-            spec.method,
-            budget=spec.budget,
-            seed=spec.seed,
-            x0=x0,
-            **spec.options,
-        )
-    else:
+        surrogate = load_for(spec.surrogate, case.name, spec.mesh)
+    built = []  # the objectives on the surrogate (their logs give its evaluations' wall time)
+    fixed = {}  # the one-point or BAE correction, made once for both phases
+
+    def run_phase(method, budget, start, options, forward):
+        def objective_with(correction):
+            obj = build_objective(
+                case,
+                mesh=spec.mesh,
+                data=data,
+                region=region,
+                correction=correction,
+                hifi_mesh=hifi_mesh,
+                mapper=mapper if forward is None else vectorised_mapper(),
+                forward=forward,
+            )
+            obj.observers.extend(observers)
+            if forward is not None:
+                built.append(obj)
+            return obj
+
+        if spec.treatment == "none":
+            return solve(
+                objective_with(None), method, budget=budget, seed=spec.seed, x0=start, **options
+            )
         objective_with(None)  # checks the honesty rule before any high-fidelity run
+        if forward is not None:
+            built.pop()
         hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
         if spec.treatment == "iterated":
-            result = solve_iterated(
+            return solve_iterated(
                 objective_with,
                 lambda x: one_point(hifi, inverse, x, mapper=mapper),
-                spec.method,
-                budget=spec.budget,
+                method,
+                budget=budget,
                 seed=spec.seed,
-                x0=x0,
-                **spec.options,
+                x0=start,
+                **options,
             )
-        else:
-            corr = (
+        if "corr" not in fixed:
+            fixed["corr"] = (
                 one_point(hifi, inverse, x0, mapper=mapper)
                 if spec.treatment == "one-point"
                 else bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
             )
-            result = solve(
-                objective_with(corr),
-                spec.method,
-                budget=spec.budget,
-                seed=spec.seed,
-                x0=x0,
-                **spec.options,
-            )
+        return solve(
+            objective_with(fixed["corr"]),
+            method,
+            budget=budget,
+            seed=spec.seed,
+            x0=start,
+            **options,
+        )
+
+    result = run_phase(spec.method, spec.budget, x0, spec.options, surrogate)
+    if surrogate is not None:
+        from bench.surrogate_run import combine
+
+        polished = None
+        if spec.polish:
+            polished = run_phase("lm", spec.polish_budget, list(result.x), {}, None)
+        result = combine(
+            result,
+            built,
+            surrogate,
+            spec.surrogate,
+            polished,
+            polish_charges_repeat=spec.treatment in ("one-point", "bae"),
+        )
     provenance = {
         **result.provenance,
         "start": spec.start,

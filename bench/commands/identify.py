@@ -76,6 +76,24 @@ def add_arguments(p) -> None:
         metavar="NAME=VALUE",
         help="solver option (value parsed as JSON, else a string), e.g. --option scheme=central",
     )
+    p.add_argument(
+        "--surrogate",
+        metavar="PATH_OR_NAME",
+        help="run the solver on a stored surrogate (a folder, a name under results/surrogates, or "
+        "'default': the shipped one of the case and mesh); its training runs are charged",
+    )
+    p.add_argument(
+        "--polish",
+        action="store_true",
+        help="after the run on the surrogate, an FE lm (exact Jacobians) from its optimum",
+    )
+    p.add_argument(
+        "--polish-budget",
+        type=int,
+        default=60,
+        metavar="N",
+        help="FE evaluations of the polish (default 60)",
+    )
     p.add_argument("--json", metavar="FILE", help="write the RunResult plus errors_percent as JSON")
     p.add_argument(
         "--quiet",
@@ -128,6 +146,26 @@ def format_identification(case, result) -> str:
         ),
     ]
     prov = result.provenance
+    if prov.get("surrogate"):
+        sur, pol = result.extra.get("surrogate", {}), result.extra.get("polish")
+        train = result.charges.get("surrogate-training", {})
+        lines.append(
+            f"  surrogate {prov['surrogate']} (hash {str(prov.get('surrogate_hash'))[:12]}): "
+            f"{sur.get('n_evals')} evaluations = {sur.get('forward_equivalents', 0):.3g} fe, "
+            f"cost there {sur.get('cost', float('nan')):.6g}"
+            + (
+                f"; FE polish {pol['method']}: {pol['n_evals']} evaluations = "
+                f"{pol['forward_equivalents']:.1f} fe"
+                if pol
+                else "; no FE polish (cost is the surrogate's)"
+            )
+        )
+        lines.append(
+            f"  cost per identification {result.forward_equivalents:.1f} fe + training "
+            f"{train.get('n', 0)} FE runs = "
+            f"{result.forward_equivalents + train.get('forward_equivalents', 0):.1f} fe; "
+            f"amortised (training shared) {sur.get('amortised_forward_equivalents', 0):.1f} fe"
+        )
     if prov.get("data_tier"):
         lines.append(
             f"  data: {prov['data_tier']} tier, mesh {prov.get('data_mesh')}, hash "
@@ -186,6 +224,9 @@ def main(args) -> int:
         seed=args.seed,
         start=args.start,
         options=parse_options(args.option),
+        surrogate=args.surrogate,
+        polish=args.polish,
+        polish_budget=args.polish_budget,
     )
     from bench.progress import EvaluationProgress, enabled, warn_if_long
 

@@ -106,6 +106,9 @@ def build_objective(
     mapper=None,
     sigma_force_kN: float = 1.0,
     cache: bool = True,
+    forward=None,
+    exact_jacobian: bool = True,
+    budget_unit: str = "evaluations",
 ) -> Evaluator:
     """The evaluator (a solver's objective) of ``case`` with the FE model on ``mesh``.
 
@@ -116,6 +119,15 @@ def build_objective(
                  high-fidelity model on ``hifi_mesh``: its mean shifts the data, its low-rank
                  covariance is added to the noise's; its runs are charged to the evaluator
     sigma_force_kN : standard deviation of the plate force, kN
+    forward    : a surrogate of the FE model on ``mesh`` (a ``problems.surrogate.SurrogateModel``)
+                 used in its place, restricted to the region's points; refused when it was
+                 trained on another discretisation than ``mesh``, or on the one that made
+                 model-error data (the honesty rule)
+    exact_jacobian : the model's exact Jacobians where it provides them (False: finite
+                 differences with the solver's ``scheme``, as for models without them)
+    budget_unit : ``"evaluations"`` or ``"forward-equivalents"``: what a solver's budget counts
+                 (:class:`~problems.inverse.evaluator.Evaluator`; forward-equivalents charge a
+                 response + exact Jacobian the model's declared ``jacobian_cost``)
     """
     from problems.inverse.forward import FEForwardModel
 
@@ -123,7 +135,14 @@ def build_objective(
     if case.is_analytic:
         from problems.inverse.analytic import analytic_objective
 
-        return analytic_objective(case.name, mapper=mapper)
+        evaluator = analytic_objective(case.name, mapper=mapper)
+        return Evaluator(
+            evaluator.problem,
+            mapper=mapper,
+            cache=evaluator.cache,
+            exact_jacobian=exact_jacobian,
+            budget_unit=budget_unit,
+        )
     ds = resolve_data(case, mesh, tier, data)
     if ds.case != case.name:
         raise ValueError(f"data set is for case {ds.case!r}, not {case.name!r}")
@@ -136,11 +155,28 @@ def build_objective(
         )
     hifi_key = discretisation_key(hifi_mesh) if (correction is not None and hifi_mesh) else None
     check_honest(data_key, tier, forward=inverse_key, hifi=hifi_key)
+    if forward is not None:
+        from problems.surrogate.model import discretisation_of
+
+        trained_on = discretisation_of(forward)
+        if trained_on is None:
+            raise ValueError("the surrogate does not say which discretisation it was trained on")
+        check_honest(data_key, tier, surrogate=trained_on)
+        if trained_on != inverse_key:
+            raise ValueError(
+                f"the surrogate was trained on discretisation {trained_on}; the inverse mesh "
+                f"{mesh} is {inverse_key}: use a surrogate of the inverse mesh"
+            )
     points, values, std = subset(ds, region)
     sigma = np.concatenate([std.ravel(), np.full(len(ds.reaction_kN), sigma_force_kN)])
     if not sigma_force_kN > 0:
         raise ValueError(f"sigma_force_kN = {sigma_force_kN!r} is out of range: must be > 0 kN")
-    model = FEForwardModel(case, mesh, ds.settings.loading, points)
+    if forward is None:
+        model = FEForwardModel(case, mesh, ds.settings.loading, points)
+    else:
+        from problems.surrogate.model import restricted
+
+        model = restricted(forward, case, points, ds.settings.loading)
     shift = 0.0 if correction is None or correction.shift is None else correction.shift
     problem = LeastSquaresProblem(
         model,
@@ -162,9 +198,20 @@ def build_objective(
             "treatment": "none" if correction is None else correction.treatment,
             "hifi_mesh": hifi_mesh if correction is not None else None,
             "correction_hash": None if correction is None else correction.hash,
+            **(
+                {}
+                if forward is None
+                else {"forward": "surrogate", "surrogate_hash": getattr(forward, "hash", None)}
+            ),
         },
     )
-    evaluator = Evaluator(problem, mapper=mapper, cache=cache)
+    evaluator = Evaluator(
+        problem,
+        mapper=mapper,
+        cache=cache,
+        exact_jacobian=exact_jacobian,
+        budget_unit=budget_unit,
+    )
     if correction is not None:
         evaluator.charge("hifi", correction.n_hifi, correction.hifi_wall_s)
         evaluator.charge("inverse-for-correction", correction.n_inverse, correction.inverse_wall_s)

@@ -217,3 +217,102 @@ def in_hull(points: np.ndarray, z: np.ndarray) -> bool:
     b_eq = np.concatenate([z, [1.0]])
     res = linprog(np.zeros(n), A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs")
     return bool(res.status == 0)
+
+
+# --- use inside an identification -------------------------------------------------------------
+
+
+def discretisation_of(model) -> str | None:
+    """Canonical discretisation key (``"NX,NY,NZ"``) of the FE model a surrogate was trained on,
+    or None when it is not known."""
+    info = getattr(model, "info", None) or {}
+    key = (info.get("description") or {}).get("discretisation")
+    if key:
+        return str(key)
+    mesh = getattr(getattr(model, "checker", None), "mesh", None)
+    if mesh is None:
+        return None
+    from problems.fe.mesh import discretisation_key
+
+    return discretisation_key(mesh)
+
+
+def restricted(model: SurrogateModel, case, points, loading) -> SurrogateModel:
+    """The surrogate restricted to the measurement points ``points`` (a subset of its own, e.g. a
+    measurement region) for ``case`` and ``loading``; refuses a surrogate of another case, loading
+    or measurement grid. The result is a :class:`SurrogateModel` whose POD rows are those of the
+    kept points (same regression, same cost per evaluation)."""
+    import dataclasses
+
+    from problems.inverse import layout
+
+    checker = model.checker
+    if tuple(model.names) != tuple(case.names):
+        raise ValueError(
+            f"surrogate parameters {tuple(model.names)} are not those of case {case.name} "
+            f"{tuple(case.names)}"
+        )
+    desc = (model.info.get("description") or {}) if model.info else {}
+    if desc.get("case") not in (None, case.name):
+        raise ValueError(f"surrogate is of case {desc.get('case')!r}, not {case.name!r}")
+    own = getattr(checker, "points", None)
+    if own is None:
+        raise ValueError("surrogate has no measurement points (no FE checker): cannot match data")
+    own_loading = getattr(checker, "loading", None)
+    if own_loading is not None and own_loading != loading:
+        raise ValueError(f"surrogate was trained for loading {own_loading}, the data use {loading}")
+    own, points = np.asarray(own, float), np.asarray(points, float)
+    N = int(desc.get("n_snapshots") or (model.n_values // (2 * len(own) + 1)))
+    if layout.size(N, len(own)) != model.n_values:
+        raise ValueError("surrogate size does not match its measurement grid")
+    match = [np.flatnonzero(np.all(np.abs(own - p) < 1e-9, axis=1)) for p in points]
+    if any(len(k) != 1 for k in match):
+        raise ValueError("the data's measurement points are not among the surrogate's")
+    keep = np.array([k[0] for k in match])
+    if len(keep) == len(own) and np.array_equal(keep, np.arange(len(own))):
+        return model
+    m = len(own)
+    idx = np.arange(model.n_values)
+    rows = layout.stack(
+        idx[: N * m].reshape(N, m)[:, keep],
+        idx[N * m : 2 * N * m].reshape(N, m)[:, keep],
+        idx[2 * N * m :],
+    ).astype(int)
+    pod = dataclasses.replace(
+        model.pod,
+        mean=model.pod.mean[rows],
+        scale=model.pod.scale[rows],
+        modes=np.ascontiguousarray(model.pod.modes[rows]),
+    )
+    hv = None if model.hold_out_variance is None else model.hold_out_variance[rows]
+    new_checker = checker
+    if hasattr(checker, "points"):
+        try:
+            new_checker = dataclasses.replace(checker, points=points)
+        except TypeError:
+            new_checker = checker
+    info = dict(model.info, restricted_rows=len(rows))
+    return dataclasses.replace(model, pod=pod, hold_out_variance=hv, checker=new_checker, info=info)
+
+
+class VectorisedMapper:
+    """A mapper (``mapper(fn, items) -> list``) that evaluates a whole batch of a model offering
+    ``evaluate_batch`` (the surrogate) in one vectorised call; any other callable goes to
+    ``fallback`` (default: in-process). Population methods and emcee's vectorised moves send
+    their batches through :meth:`Evaluator.evaluate_many`, so they profit without change."""
+
+    def __init__(self, fallback=None):
+        self.fallback = fallback
+
+    def __call__(self, fn, items):
+        from problems.inverse.evaluator import sequential_map
+        from problems.inverse.protocol import RunModel
+
+        items = list(items)
+        model = getattr(fn, "model", None)
+        if isinstance(fn, RunModel) and hasattr(model, "evaluate_batch") and items:
+            try:
+                return model.evaluate_batch(np.array(items, float), jacobian=fn.with_jacobian)
+            except Exception:  # fall back to one call per point (each failure said by RunModel)
+                pass
+        return (self.fallback or sequential_map)(fn, items)

@@ -417,13 +417,13 @@ class GPFit:
             k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (n, C)
             return (np.einsum("nr,nr->r", k[:, comp], alpha) * y_std + y_mean)[None]
         out = np.empty((len(Z), self.n_outputs))
-        x2w = (X * X) @ inv_ls2  # (n, C)
-        z2w = (Z * Z) @ inv_ls2  # (q, C)
         cols = [np.flatnonzero(comp == c) for c in range(len(amp))]
-        for c in range(len(amp)):  # squared distances by one GEMM per component: (q, n)
-            d2 = z2w[:, c : c + 1] + x2w[None, :, c] - 2.0 * ((Z * inv_ls2[:, c]) @ X.T)
-            k, _ = self._kernel(np.sqrt(np.maximum(d2, 0.0)), amp[c])
-            out[:, cols[c]] = k @ alpha[:, cols[c]]
+        step = max(1, 4_000_000 // (len(X) * max(len(amp), X.shape[1])))
+        for i in range(0, len(Z), step):  # chunks bound the (q, n, C) temporaries
+            diff = Z[i : i + step, None, :] - X[None]  # (q, n, d): no cancellation
+            k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (q, n, C)
+            for c in range(len(amp)):
+                out[i : i + step, cols[c]] = k[:, :, c] @ alpha[:, cols[c]]
         return out * y_std + y_mean
 
     def gradient(self, z) -> np.ndarray:

@@ -1,0 +1,174 @@
+"""An identification on a stored surrogate, optionally polished on the FE model: loading the
+surrogate by name and the honest accounting of the combined run (see docs/surrogate.md, "Identifying
+on a surrogate").
+
+Accounting of the returned :class:`~solvers.result.RunResult`:
+
+* ``n_evals`` = surrogate evaluations + FE polish evaluations (both counted, cache hits apart);
+* ``forward_equivalents`` = the surrogate evaluations' wall time over the median FE run time of
+  the surrogate's own validation (``fe_eval_s``: tiny, e.g. 1e-4 per evaluation) + the polish's
+  FE forward-equivalents;
+* ``charges["surrogate-training"]`` = the FE runs that built the surrogate (training, enrichment
+  and hold-out: ``n``, their FE ``wall_s``, ``forward_equivalents = n``), charged in full to every
+  identification; ``extra["surrogate"]["amortised_forward_equivalents"]`` is the run's cost when
+  the training is shared by many identifications (the training left out);
+* a model-error correction's runs are charged once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+#: the name that stands for the shipped surrogate of (case, mesh)
+DEFAULT = "default"
+
+
+def load_for(name: str, case: str, mesh: str):
+    """The stored surrogate ``name`` (a path, a name under the surrogate root, or ``default`` =
+    ``<case>__<mesh>`` there), checked to be a surrogate of ``case``."""
+    from bench.commands.surrogate import surrogate_root
+    from problems.surrogate.store import default_name, load
+
+    root = surrogate_root()
+    key = default_name(case, mesh) if name == DEFAULT else name
+    try:
+        sur = load(key, root=root)
+    except FileNotFoundError:
+        if name == DEFAULT:
+            raise FileNotFoundError(
+                f"no default surrogate of {case} on mesh {mesh} in {root} (build it with "
+                f"`femubench surrogate {case} --mesh {mesh}`)"
+            ) from None
+        raise
+    got = (sur.info.get("description") or {}).get("case")
+    if got is not None and got != case:
+        raise ValueError(f"surrogate {name!r} is of case {got!r}, not {case!r}")
+    sur.info["path"] = str(root / key) if name == DEFAULT else str(key)
+    return sur
+
+
+def fe_unit_s(sur) -> float:
+    """Median FE run time measured when the surrogate was built, s (its forward-equivalent)."""
+    val = sur.info.get("validation") or {}
+    unit = val.get("fe_eval_s") or (sur.info.get("cost") or {}).get("training", {}).get(
+        "median_run_s"
+    )
+    return float(unit) if unit else float("nan")
+
+
+def training_charge(sur) -> dict:
+    """``{"n", "wall_s", "forward_equivalents"}`` of the FE runs that built the surrogate."""
+    cost = sur.info.get("cost") or {}
+    parts = [cost.get("training") or {}, cost.get("holdout") or {}]
+    n = sum(int(p.get("n_runs", 0)) for p in parts)
+    wall = sum(float(p.get("fe_wall_s", 0.0)) for p in parts)
+    return {"n": n, "wall_s": wall, "forward_equivalents": float(n)}
+
+
+def combine(result, objectives, sur, name, polished=None, *, polish_charges_repeat=False):
+    """The RunResult of an identification on ``sur`` (``result``, its evaluators
+    ``objectives``), followed by the FE polish ``polished`` (or None); see the module docstring."""
+    unit = fe_unit_s(sur)
+    new = [e for obj in objectives for e in obj.log if not e["cached"]]
+    sur_wall = sum(float(e["wall_s"]) for e in new)
+    sur_fe = sur_wall / unit if unit == unit and unit > 0 else float(len(new))
+    train = training_charge(sur)
+    charges = {k: dict(v) for k, v in result.charges.items()}
+    if polished is not None and not polish_charges_repeat:
+        for kind, c in polished.charges.items():
+            total = charges.setdefault(kind, {"n": 0, "wall_s": 0.0, "forward_equivalents": 0.0})
+            for key in total:
+                total[key] += c.get(key, 0.0)
+    charges["surrogate-training"] = train
+    surrogate_info = {
+        "name": name,
+        "path": sur.info.get("path"),
+        "hash": sur.hash,
+        "training_hash": sur.info.get("training_hash"),
+        "n_evals": result.n_evals,
+        "wall_s": result.wall_s,
+        "model_wall_s": sur_wall,
+        "forward_equivalents": sur_fe,
+        "fe_unit_s": unit,
+        "x": result.x,
+        "cost": result.cost,
+        "status": result.status,
+        "message": result.message,
+        "training_runs": train["n"],
+        "holdout": {
+            k: (v or {}).get("rms_sigma")
+            for k, v in ((sur.info.get("validation") or {}).get("blocks") or {}).items()
+        },
+    }
+    prov = {
+        **result.provenance,
+        "forward": "surrogate",
+        "surrogate": name,
+        "surrogate_hash": sur.hash,
+        "surrogate_training_hash": sur.info.get("training_hash"),
+        "surrogate_mesh": (sur.info.get("description") or {}).get("mesh"),
+        "polish": polished is not None,
+    }
+    if polished is None:
+        surrogate_info["amortised_forward_equivalents"] = sur_fe + sum(
+            c["forward_equivalents"] for k, c in charges.items() if k != "surrogate-training"
+        )
+        return replace(
+            result,
+            forward_equivalents=sur_fe,
+            charges=charges,
+            provenance=prov,
+            message=f"on the surrogate: {result.message}",
+            extra={**result.extra, "surrogate": surrogate_info},
+        )
+    p = polished
+    surrogate_info["amortised_forward_equivalents"] = (
+        sur_fe
+        + p.forward_equivalents
+        + sum(c["forward_equivalents"] for k, c in charges.items() if k != "surrogate-training")
+    )
+    history = [{**row, "phase": "surrogate"} for row in result.history] + [
+        {**row, "phase": "polish", "n_evals": row.get("n_evals", 0) + result.n_evals}
+        for row in p.history
+    ]
+    polish_info = {
+        "method": p.method,
+        "budget": p.budget,
+        "n_evals": p.n_evals,
+        "forward_equivalents": p.forward_equivalents,
+        "wall_s": p.wall_s,
+        "x0": p.x0,
+        "x": p.x,
+        "cost": p.cost,
+        "status": p.status,
+        "message": p.message,
+    }
+    prov.update(
+        {
+            k: v
+            for k, v in p.provenance.items()
+            if k not in ("forward", "surrogate_hash")  # the polish's data side is the same
+        }
+    )
+    prov.update({"forward": "surrogate+fe-polish", "polish_method": p.method})
+    return replace(
+        result,
+        budget=result.budget + p.budget,
+        x=p.x,
+        x_normalised=p.x_normalised,
+        cost=p.cost,
+        status=p.status,
+        success=p.success,
+        message=f"surrogate: {result.message}; FE polish: {p.message}",
+        n_evals=result.n_evals + p.n_evals,
+        n_failed=result.n_failed + p.n_failed,
+        n_infeasible=result.n_infeasible + p.n_infeasible,
+        n_cache_hits=result.n_cache_hits + p.n_cache_hits,
+        n_iterations=result.n_iterations + p.n_iterations,
+        wall_s=result.wall_s + p.wall_s,
+        forward_equivalents=sur_fe + p.forward_equivalents,
+        charges=charges,
+        provenance=prov,
+        history=history,
+        extra={**result.extra, "surrogate": surrogate_info, "polish": polish_info},
+    )
