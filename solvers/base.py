@@ -212,7 +212,8 @@ class Run:
         options: dict[str, Any] | None = None,
         phase: str | None = None,
     ) -> Outcome:
-        """Run another registered method as a phase, capped at ``budget`` more evaluations.
+        """Run another registered method as a phase, capped at ``budget`` more evaluations (in the
+        objective's ``budget_unit``: evaluations or nominal forward-equivalents).
 
         The phase shares the objective, the history and the iteration counter. If the phase uses
         up its share, it ends with status ``"budget"``; if the *whole* budget is spent,
@@ -222,7 +223,8 @@ class Run:
         opts = resolve_options(info, options or {}, strict=False)
         obj = self.objective
         outer = obj.budget
-        cap = obj.n_evals + max(0, int(budget))
+        share = max(0, int(budget)) if obj.budget_unit == "evaluations" else max(0.0, budget)
+        cap = obj.spent + share  # in the objective's budget unit
         obj.set_budget(cap if outer is None else min(outer, cap))
         child = Run(
             obj,
@@ -238,7 +240,7 @@ class Run:
         try:
             out = info.run(child)
         except BudgetExhausted as exc:
-            if outer is not None and obj.n_evals >= outer:
+            if outer is not None and outer - obj.spent < 1.0 - 1e-9:  # not one more run fits
                 raise
             out = Outcome("budget", str(exc))
         finally:
@@ -464,6 +466,9 @@ def solve(
     extra = {k: jsonio.plain(v) for k, v in out.extra.items()}
     if obj.n_jacobian_failures:
         extra["n_jacobian_failures"] = obj.n_jacobian_failures
+    if obj.n_jacobian_runs:
+        extra["n_jacobian_runs"] = obj.n_jacobian_runs
+        extra["jacobian_cost"] = obj.jacobian_cost
     return RunResult(
         method=run.method,
         options={k: jsonio.plain(v) for k, v in opts.items()},
@@ -485,6 +490,8 @@ def solve(
         n_iterations=int(out.n_iterations if out.n_iterations is not None else run.n_iterations),
         wall_s=wall,
         forward_equivalents=obj.forward_equivalents(),
+        forward_equivalents_nominal=obj.nominal_equivalents(),
+        budget_unit=obj.budget_unit,
         charges={
             k: {**c, "forward_equivalents": obj.charged_equivalents()[k]}
             for k, c in obj.charges.items()

@@ -53,7 +53,7 @@ def run_multistart(r: Run) -> Outcome:
     lm_opts = {key: o[key] for key in _LM_KEYS}
     summary, statuses = [], []
     for i, z0 in enumerate(starts):
-        share = int((r.budget - obj.n_evals) // (k - i))
+        share = int((r.budget - obj.spent) // (k - i))
         if share < 1:
             break
         log0, n0 = len(obj.log), obj.n_evals
@@ -105,7 +105,7 @@ def run_pso_lm(r: Run) -> Outcome:
     out_g = r.sub("pso", r.z0, n_global, pso_opts, phase="pso")
     n_pso = obj.n_evals
     z_best = obj.best_z if obj.best is not None else r.z0
-    out_l = r.sub("lm", z_best, r.budget - obj.n_evals, {k: o[k] for k in _LM_KEYS}, phase="lm")
+    out_l = r.sub("lm", z_best, r.budget - obj.spent, {k: o[k] for k in _LM_KEYS}, phase="lm")
     return Outcome(
         out_l.status,
         f"pso: {out_g.status}; lm: {out_l.message}",

@@ -19,10 +19,14 @@ class RunResult:
     ``n_evals`` counts *every* forward-model evaluation the run triggered (Jacobian columns,
     failed and infeasible points included); cache hits are counted apart in ``n_cache_hits``.
     ``forward_equivalents`` is ``n_evals`` in plain-forward-run units (a run with exact
-    sensitivities weighs its measured wall time over the median plain run); ``charges`` holds the
-    runs made on the run's behalf outside the objective (``{kind: {"n", "wall_s",
-    "forward_equivalents"}}``: high-fidelity corrections, surrogate training); ``provenance`` says
-    which case, data (tier, hash, discretisation), inverse model and treatment were used.
+    sensitivities weighs its measured wall time over the median plain run);
+    ``forward_equivalents_nominal`` the same with the declared price of such a run (the model's
+    ``jacobian_cost``, ``extra["jacobian_cost"]``; deterministic), the unit of the budget when
+    ``budget_unit`` is ``"forward-equivalents"`` (else ``budget`` counts ``n_evals``);
+    ``charges`` holds the runs made on the run's behalf outside the objective (``{kind: {"n",
+    "wall_s", "forward_equivalents"}}``: high-fidelity corrections, surrogate training);
+    ``provenance`` says which case, data (tier, hash, discretisation), inverse model and
+    treatment were used.
     ``history`` has one row per iteration or generation: ``{"iteration", "n_evals",
     "best_cost", "cost", "x"}``.
     """
@@ -47,6 +51,8 @@ class RunResult:
     n_iterations: int = 0
     wall_s: float = 0.0
     forward_equivalents: float = 0.0
+    forward_equivalents_nominal: float = 0.0
+    budget_unit: str = "evaluations"
     charges: dict[str, Any] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
     history: list[dict[str, Any]] = field(default_factory=list)

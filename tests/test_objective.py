@@ -9,7 +9,7 @@ import pickle
 import numpy as np
 import pytest
 
-from problems.inverse.evaluator import BudgetExhausted
+from problems.inverse.evaluator import DEFAULT_JACOBIAN_COST, BudgetExhausted, Evaluator
 from problems.inverse.problem import FAILURE_COST, LeastSquaresProblem
 from problems.inverse.protocol import ForwardResult, RunModel
 from tests.support import evaluator
@@ -366,3 +366,88 @@ def test_observers_see_every_recorded_evaluation():
     obj.observers.append(lambda ev_, e: seen.append((ev_.n_evals, e.cached)))
     obj.costs([[1.0, 1.0], [1.1, 1.0], [1.0, 1.0]])
     assert seen == [(1, False), (2, False), (2, True)]
+
+
+def exact_objective(**kw):
+    model = ExactQuadratic()
+    data = model.values(np.array([1.0, 1.0])) + np.array([0.01, -0.02, 0.03, 0.0])
+    problem = LeastSquaresProblem(
+        model, data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0]
+    )
+    return Evaluator(problem, **kw), model
+
+
+def test_nominal_forward_equivalents_charge_the_declared_jacobian_cost():
+    """Deterministic: plain and infeasible runs 1, a run with sensitivities jacobian_cost, cache
+    hits 0 -- whatever the measured wall times (3 s against 1 s here)."""
+    obj, model = exact_objective()
+    assert obj.jacobian_cost == DEFAULT_JACOBIAN_COST  # ExactQuadratic declares none
+    ExactQuadratic.jacobian_cost = 1.6
+    try:
+        obj, _ = exact_objective()
+        obj2, _ = exact_objective(jacobian_cost=2.5)
+    finally:
+        del ExactQuadratic.jacobian_cost
+    assert obj.jacobian_cost == 1.6 and obj2.jacobian_cost == 2.5
+    obj.cost([1.0, 1.0])
+    obj.jacobian([1.1, 1.0])
+    obj.jacobian([1.1, 1.0])  # cache hit with its Jacobian
+    obj.cost([1.0, 1.9])  # infeasible: not run, charged 1
+    obj.jacobian([1.2, 1.0])
+    assert obj.n_evals == 4 and obj.n_cache_hits == 1 and obj.n_jacobian_runs == 2
+    assert obj.nominal_equivalents() == pytest.approx(1 + 1.6 + 1 + 1.6)
+    assert obj.forward_equivalents() == pytest.approx(1 + 3 + 1 + 3)  # measured, as before
+    assert obj.counters()["nominal_equivalents"] == pytest.approx(5.2)
+    for bad in (0.5, float("nan")):
+        with pytest.raises(ValueError, match="jacobian_cost"):
+            exact_objective(jacobian_cost=bad)
+    with pytest.raises(ValueError, match="budget_unit = 'runs' is unknown; allowed: evaluations"):
+        exact_objective(budget_unit="runs")
+
+
+def test_budget_in_forward_equivalents_caps_the_nominal_charge():
+    ExactQuadratic.jacobian_cost = 1.6
+    try:
+        obj, _ = exact_objective(budget_unit="forward-equivalents")
+    finally:
+        del ExactQuadratic.jacobian_cost
+    obj.set_budget(4.5)
+    obj.jacobian([1.0, 1.0])  # 1.6
+    obj.jacobian([1.1, 1.0])  # 3.2
+    assert obj.spent == pytest.approx(3.2) and obj.remaining == 1  # one plain run still fits
+    with pytest.raises(BudgetExhausted, match="4.5 forward-equivalents"):
+        obj.jacobian([1.2, 1.0])  # 4.8 > 4.5: not run
+    assert obj.n_evals == 2
+    obj.cost([1.2, 1.0])  # a plain run fits: 4.2
+    assert obj.remaining == 0 and obj.spent == pytest.approx(4.2)
+    # a batch: the points that fit are evaluated first
+    obj.set_budget(6.2)
+    with pytest.raises(BudgetExhausted):
+        obj.costs(np.array([[0.6, 0.6], [0.7, 0.7], [0.8, 0.8]]))
+    assert obj.n_evals == 5 and obj.spent == pytest.approx(6.2)
+    # the same sequence counted in evaluations
+    ev, _ = exact_objective()
+    ev.set_budget(3)
+    ev.jacobian([1.0, 1.0])
+    ev.jacobian([1.1, 1.0])
+    ev.cost([1.2, 1.0])
+    assert ev.spent == 3 and ev.remaining == 0
+
+
+def test_finite_difference_jacobians_when_exact_ones_are_declined():
+    obj, model = exact_objective(exact_jacobian=False)
+    assert not obj.exact_jacobian
+    J = obj.jacobian([1.0, 1.0], scheme="central", rel_step=1e-6)
+    assert obj.n_evals == 5 and obj.n_jacobian_runs == 0  # 1 + 2 n plain runs
+    assert obj.nominal_equivalents() == 5.0
+    exact, _ = exact_objective()
+    np.testing.assert_allclose(J, exact.jacobian([1.0, 1.0]), rtol=1e-7, atol=1e-9)
+
+
+def test_measured_forward_equivalents_without_a_plain_run_use_the_nominal_price():
+    obj, _ = exact_objective(jacobian_cost=1.7)
+    obj.evaluate([1.0, 1.0], with_jacobian=True)
+    obj.evaluate([1.1, 1.0], with_jacobian=True)
+    assert obj.forward_equivalents() == pytest.approx(3.4)  # no plain run measured
+    obj.cost([1.2, 1.0])  # 1 s: the unit; the runs with sensitivities took 3 s
+    assert obj.forward_equivalents() == pytest.approx(3 + 3 + 1)

@@ -15,7 +15,13 @@ Accounting (honest: what a user pays for)
   ``n_cache_hits`` and are *not* in ``n_evals``, nor charged to the budget.
 * :meth:`forward_equivalents` converts the evaluations into plain forward runs by measured wall
   time: a plain or infeasible evaluation is one, a run with sensitivities is its wall time over
-  the median wall time of the plain runs of the same evaluator.
+  the median wall time of the plain runs of the same evaluator (its nominal ``jacobian_cost``
+  when the evaluator made no successful plain run).
+* :meth:`nominal_equivalents` does the same with a fixed, declared price: a run with
+  sensitivities (response + exact Jacobian) counts ``jacobian_cost`` forward-equivalents (the
+  model's declared ``jacobian_cost``, the measured ratio rounded up; see ``FEForwardModel``),
+  every other evaluation one. It depends only on which evaluations were made, so it is the same
+  on every machine and every run: the unit of budgets in forward-equivalents.
 * :meth:`charge` records runs made on the identification's behalf outside the evaluator
   (high-fidelity runs of a model-error correction, surrogate training runs); they survive
   :meth:`reset` (they belong to how the objective was set up) and are converted to
@@ -23,9 +29,13 @@ Accounting (honest: what a user pays for)
 * ``log`` holds one dict per evaluation, cache hits included (``cached=True``):
   ``{"x", "cost", "ok", "feasible", "wall_s", "cached", "n_evals", "kind"}``, ``kind`` being
   ``"plain"`` or ``"jacobian"``.
-* ``set_budget(n)``: an evaluation that would make ``n_evals`` exceed ``n`` raises
+* ``set_budget(n)``: an evaluation that would make the spent budget exceed ``n`` raises
   :class:`BudgetExhausted`; for a batch, the points that fit are evaluated and recorded first.
-  ``best`` (the lowest-cost successful point so far) lets any solver return a result then.
+  ``best`` (the lowest-cost successful point so far) lets any solver return a result then. The
+  spent budget (:attr:`spent`) is ``n_evals`` when ``budget_unit = "evaluations"`` (the default)
+  and :meth:`nominal_equivalents` when ``budget_unit = "forward-equivalents"``: then an exact
+  Jacobian costs ``jacobian_cost`` of the budget and a finite-difference Jacobian its n (forward)
+  or 2n (central) runs, so that methods with and without exact Jacobians get the same budget.
 
 Failure policy (never raise into a solver)
 ------------------------------------------
@@ -66,15 +76,28 @@ def sequential_map(fn, items) -> list:
     return [fn(x) for x in items]
 
 
+#: the units a budget can be given in (``Evaluator(budget_unit=...)``)
+BUDGET_UNITS = ("evaluations", "forward-equivalents")
+
+#: nominal price, in forward-equivalents, of a response + exact Jacobian of a model that provides
+#: Jacobians but declares no ``jacobian_cost``
+DEFAULT_JACOBIAN_COST = 2.0
+
+
 class BudgetExhausted(Exception):
     """Raised by the evaluator when an evaluation would exceed the budget."""
 
-    def __init__(self, budget: int, n_evals: int):
-        super().__init__(
-            f"evaluation budget of {budget} forward evaluations exhausted ({n_evals} used)"
-        )
+    def __init__(self, budget: float, n_evals: int, unit: str = "evaluations"):
+        if unit == "evaluations":
+            text = f"evaluation budget of {budget} forward evaluations exhausted ({n_evals} used)"
+        else:
+            text = (
+                f"budget of {budget:g} forward-equivalents exhausted ({n_evals} evaluations used)"
+            )
+        super().__init__(text)
         self.budget = budget
         self.n_evals = n_evals
+        self.unit = unit
 
 
 @dataclass(frozen=True)
@@ -107,6 +130,10 @@ class Evaluator:
     mapper   : ``mapper(fn, items) -> iterable`` used for every batch; ``None`` = sequential
     cache    : True (unbounded), False, or an int (keep the most recent ``cache`` points)
     exact_jacobian : use the model's exact Jacobian when it provides one (else finite differences)
+    budget_unit : what :meth:`set_budget` caps: ``"evaluations"`` (``n_evals``) or
+                  ``"forward-equivalents"`` (:meth:`nominal_equivalents`)
+    jacobian_cost : nominal forward-equivalents of one response + exact Jacobian (default: the
+                  model's declared ``jacobian_cost``, else DEFAULT_JACOBIAN_COST); >= 1
 
     ``observers`` (a list) holds callables ``observer(evaluator, evaluation)`` called after each
     recorded evaluation (progress bars, live logs); they must not raise.
@@ -119,11 +146,26 @@ class Evaluator:
         mapper: Mapper | None = None,
         cache: bool | int = True,
         exact_jacobian: bool = True,
+        budget_unit: str = "evaluations",
+        jacobian_cost: float | None = None,
     ):
+        if budget_unit not in BUDGET_UNITS:
+            raise ValueError(
+                f"budget_unit = {budget_unit!r} is unknown; allowed: {', '.join(BUDGET_UNITS)}"
+            )
+        if jacobian_cost is None:
+            jacobian_cost = getattr(problem.model, "jacobian_cost", None) or DEFAULT_JACOBIAN_COST
+        if not (math.isfinite(float(jacobian_cost)) and float(jacobian_cost) >= 1.0):
+            raise ValueError(
+                f"jacobian_cost = {jacobian_cost!r} is out of range: a number >= 1 "
+                "(forward-equivalents of a response + Jacobian)"
+            )
         self.problem = problem
         self.mapper = mapper
         self.cache = cache
         self.exact_jacobian = exact_jacobian and provides_jacobian(problem.model)
+        self.budget_unit = budget_unit
+        self.jacobian_cost = float(jacobian_cost)
         self._warned = False
         self.charges: dict[str, dict[str, float]] = {}
         self.observers: list = []
@@ -161,21 +203,43 @@ class Evaluator:
         self.n_infeasible = 0
         self.n_cache_hits = 0
         self.n_jacobian_failures = 0
+        self.n_jacobian_runs = 0  # new evaluations run with exact sensitivities
+        self._nominal = 0.0
         self.log: list[dict[str, Any]] = []
         self.best: Evaluation | None = None
         self._cache: OrderedDict[bytes, Evaluation] = OrderedDict()
-        self.budget: int | None = None
+        self.budget: float | None = None
 
-    def set_budget(self, n: int | None) -> None:
-        """Cap ``n_evals`` at ``n`` (``None``: no cap)."""
-        if n is not None and int(n) < 0:
+    def set_budget(self, n: float | None) -> None:
+        """Cap the spent budget (:attr:`spent`, in ``budget_unit``) at ``n`` (``None``: no cap).
+        In evaluations the cap is a whole number; in forward-equivalents any number >= 0."""
+        if n is not None and not float(n) >= 0:
             raise ValueError(f"budget = {n} is out of range: must be >= 0")
-        self.budget = None if n is None else int(n)
+        if n is None:
+            self.budget = None
+        else:
+            self.budget = int(n) if self.budget_unit == "evaluations" else float(n)
+
+    @property
+    def spent(self) -> float:
+        """The budget used so far, in ``budget_unit``: ``n_evals`` or the nominal
+        forward-equivalents."""
+        return self.n_evals if self.budget_unit == "evaluations" else self._nominal
 
     @property
     def remaining(self) -> float:
-        """Forward evaluations left in the budget (``inf`` without budget)."""
-        return math.inf if self.budget is None else max(0, self.budget - self.n_evals)
+        """Plain forward evaluations that still fit in the budget (``inf`` without budget); in
+        forward-equivalents the whole number of them (a Jacobian run needs ``jacobian_cost``)."""
+        if self.budget is None:
+            return math.inf
+        if self.budget_unit == "evaluations":
+            return max(0, self.budget - self.n_evals)
+        return max(0, math.floor(self.budget - self._nominal + 1e-9))
+
+    def charge_of(self, kind: str, feasible: bool = True) -> float:
+        """Nominal forward-equivalents of one new evaluation: ``jacobian_cost`` for a feasible
+        run with sensitivities (``kind = "jacobian"``), 1 for everything else."""
+        return self.jacobian_cost if (kind == "jacobian" and feasible) else 1.0
 
     def counters(self) -> dict[str, float]:
         return {
@@ -184,6 +248,8 @@ class Evaluator:
             "n_infeasible": self.n_infeasible,
             "n_cache_hits": self.n_cache_hits,
             "forward_equivalents": self.forward_equivalents(),
+            "nominal_equivalents": self.nominal_equivalents(),
+            "n_jacobian_runs": self.n_jacobian_runs,
         }
 
     def charge(self, kind: str, n: int, wall_s: float) -> None:
@@ -210,16 +276,22 @@ class Evaluator:
 
     def forward_equivalents(self) -> float:
         """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall
-        time)."""
+        time). Without a successful plain run to measure against (a method that only ever asks
+        for Jacobians), a run with sensitivities counts its nominal ``jacobian_cost``."""
         new = [e for e in self.log if not e["cached"]]
         unit = self._unit_s()
         total = 0.0
         for e in new:
-            if e["kind"] == "jacobian" and e["ok"] and unit:
-                total += e["wall_s"] / unit
+            if e["kind"] == "jacobian" and e["ok"]:
+                total += e["wall_s"] / unit if unit else self.jacobian_cost
             else:
                 total += 1.0
         return total
+
+    def nominal_equivalents(self) -> float:
+        """Evaluations in nominal forward-equivalents: ``jacobian_cost`` per feasible run with
+        exact sensitivities, 1 per other evaluation (cache hits are free). Deterministic."""
+        return self._nominal
 
     @property
     def best_z(self) -> np.ndarray | None:
@@ -259,6 +331,9 @@ class Evaluator:
             self.n_cache_hits += 1
         else:
             self.n_evals += 1
+            self._nominal += self.charge_of(kind, ev.feasible)
+            if kind == "jacobian" and ev.feasible:
+                self.n_jacobian_runs += 1
             if not ev.feasible:
                 self.n_infeasible += 1
             elif not ev.ok:
@@ -311,7 +386,7 @@ class Evaluator:
             else:
                 new.append(i)
                 first[key] = i
-        allowed = len(new) if self.budget is None else max(0, self.budget - self.n_evals)
+        allowed = self._fitting([self.charge_of(kind, prepared[i][1] is None) for i in new])
         todo = new[:allowed]
         run_idx = [i for i in todo if prepared[i][1] is None]
         done: dict[int, Evaluation] = {}
@@ -346,8 +421,22 @@ class Evaluator:
                 continue  # left out by the budget
             out.append(ev)
         if len(new) > allowed:
-            raise BudgetExhausted(self.budget, self.n_evals)
+            raise BudgetExhausted(self.budget, self.n_evals, self.budget_unit)
         return out
+
+    def _fitting(self, charges: list[float]) -> int:
+        """How many of the next new evaluations, with these nominal charges, fit in the budget."""
+        if self.budget is None:
+            return len(charges)
+        if self.budget_unit == "evaluations":
+            return min(len(charges), max(0, self.budget - self.n_evals))
+        spent, k = self._nominal, 0
+        for c in charges:
+            if spent + c > self.budget + 1e-9:
+                break
+            spent += c
+            k += 1
+        return k
 
     def evaluate(self, z, *, with_jacobian: bool = False) -> Evaluation:
         """Evaluate one scaled point (cache first; counts and budget as documented)."""
