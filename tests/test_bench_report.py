@@ -179,19 +179,12 @@ def test_tiny_suite_report_end_to_end(tmp_path):
         ].iloc[0]
         assert float(t.loc[p, "analytic-smooth"]) == pytest.approx(want, abs=1e-12)
         assert t.loc[p, "analytic-linear"] == DASH
-    # figures: one history figure per case x method, across-method figures per case, overall ECDF
+    # figures: one convergence figure per case x method family (lm and gauss-newton are both
+    # local), a runtime ECDF per case, the overall ECDF
     figs = sorted(p.relative_to(rep).as_posix() for p in rep.rglob("*.png"))
     assert figs == sorted(
-        [
-            f"figures/history/{c}__{m}.png"
-            for c in ("analytic-smooth", "analytic-linear")
-            for m in ("lm", "gauss-newton")
-        ]
-        + [
-            f"figures/{c}__{k}.png"
-            for c in ("analytic-smooth", "analytic-linear")
-            for k in ("convergence", "ecdf")
-        ]
+        [f"figures/convergence/{c}__local.png" for c in ("analytic-smooth", "analytic-linear")]
+        + [f"figures/{c}__ecdf.png" for c in ("analytic-smooth", "analytic-linear")]
         + ["figures/all__ecdf.png"]
     )
     assert len(list(rep.rglob("*.pdf"))) == len(figs)

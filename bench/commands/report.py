@@ -22,9 +22,30 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--tol",
         type=float_in(0.0, low_open=True, unit="%"),
-        default=1.0,
+        default=2.0,
         metavar="PERCENT",
-        help="a run succeeds when every |parameter error| <= PERCENT, > 0 (default 1)",
+        help="a run succeeds when every identified |parameter error| <= PERCENT, > 0 (default 2)",
+    )
+    parser.add_argument(
+        "--tol-a",
+        type=float_in(0.0, low_open=True, unit="%"),
+        default=20.0,
+        metavar="PERCENT",
+        help="... and the exponent cases' derived |error of a| <= PERCENT (default 20)",
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        metavar="DEST",
+        help="write the report into DEST instead of DIR/report (replaced as a whole)",
+    )
+    parser.add_argument(
+        "--posterior",
+        action="append",
+        default=None,
+        metavar="FOLDER",
+        help="folder with the posterior study's <case>/summary.json (repeatable; default: "
+        "DIR/posterior, DIR/studies/posterior and DIR/../studies/posterior when present)",
     )
     parser.add_argument("--no-figures", action="store_true", help="tables only")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -48,7 +69,14 @@ def main(args) -> int:
     from bench.report import write_report
 
     out = write_report(
-        args.dir, formats, tol=args.tol, figures=not args.no_figures, progress=enabled(args.quiet)
+        args.dir,
+        formats,
+        tol=args.tol,
+        tol_a=args.tol_a,
+        figures=not args.no_figures,
+        progress=enabled(args.quiet),
+        dest=args.out,
+        posterior_dirs=args.posterior,
     )
     print(f"report: {out}")
     return 0

@@ -21,6 +21,7 @@ Layout::
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import sys
@@ -30,24 +31,46 @@ from pathlib import Path
 TABLE_FORMATS = ("md", "csv", "tex")
 
 
+def default_posterior_dirs(out_dir: Path) -> list[Path]:
+    """Where the posterior study's ``<case>/summary.json`` files are looked for: ``DIR/posterior``,
+    ``DIR/studies/posterior`` and the sibling ``DIR/../studies/posterior`` (the results root's
+    studies, for ``results/<suite>``)."""
+    out_dir = Path(out_dir)
+    cands = [
+        out_dir / "posterior",
+        out_dir / "studies" / "posterior",
+        out_dir.resolve().parent / "studies" / "posterior",
+    ]
+    return [p for p in dict.fromkeys(cands) if p.is_dir()]
+
+
 def write_report(
     out_dir: str | Path,
     formats=("md", "csv", "tex"),
     *,
-    tol: float = 1.0,
+    tol: float | None = None,
     figures: bool = True,
     progress: bool = False,
+    tol_a: float | None = None,
+    dest: str | Path | None = None,
+    posterior_dirs=None,
 ) -> Path:
-    """Write the report of ``out_dir`` into ``out_dir/report``; return the path of report.md.
+    """Write the report of ``out_dir`` into ``dest`` (default ``out_dir/report``); return the path
+    of report.md.
 
     ``formats``: any of md, csv, tex (tables), pdf (figures also as PDF), parquet (the tidy
-    DataFrames ``runs.parquet`` and ``history.parquet``). ``tol``: success tolerance in percent.
-    Every record file that could not be read is named on stderr and in report.md. ``progress``: a
-    progress bar (stderr) over the figures.
+    DataFrames ``runs.parquet`` and ``history.parquet``). ``tol``: success tolerance of the
+    identified parameters in percent (default :data:`bench.report.tables.SUCCESS_TOL`), ``tol_a``
+    that of the derived a (default :data:`bench.report.tables.DERIVED_TOL`). ``posterior_dirs``:
+    folders with the posterior study's ``<case>/summary.json`` (default
+    :func:`default_posterior_dirs`). Every record file that could not be read is named on stderr
+    and in report.md. ``progress``: a progress bar (stderr) over the figures.
     """
     from bench import store
+    from bench.report.tables import SUCCESS_TOL
 
     out_dir = Path(out_dir)
+    tol = SUCCESS_TOL if tol is None else tol
     formats = [f.lower() for f in formats]
     records, unreadable = store.scan_records(out_dir)
     set_aside = store.set_aside_files(out_dir)
@@ -60,8 +83,11 @@ def write_report(
             + (f" that could be read ({len(unreadable)} unreadable)" if unreadable else "")
             + f"; run 'femubench run SUITE --out {out_dir}' first"
         )
-    final = out_dir / "report"
-    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".report-"))
+    final = out_dir / "report" if dest is None else Path(dest)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    if posterior_dirs is None:
+        posterior_dirs = default_posterior_dirs(out_dir)
+    tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=".report-"))
     try:
         build_report(
             runs,
@@ -69,15 +95,18 @@ def write_report(
             tmp,
             formats,
             tol=tol,
+            tol_a=tol_a,
             figures=figures,
             source=out_dir,
             unreadable=unreadable,
             set_aside=set_aside,
             progress=progress,
+            records=records,
+            posterior_dirs=posterior_dirs,
         )
         old = None
         if final.exists():
-            old = out_dir / f".report-old-{os.getpid()}"
+            old = final.parent / f".report-old-{os.getpid()}"
             os.replace(final, old)
         os.replace(tmp, final)
         if old is not None:
@@ -116,22 +145,40 @@ def build_report(
     unreadable=(),
     set_aside=(),
     progress: bool = False,
+    tol_a: float | None = None,
+    records=(),
+    posterior_dirs=(),
 ) -> Path:
     """Write the tables, figures and report.md of ``runs``/``history`` into ``dest``.
 
     ``unreadable``: ``(path, reason)`` of the record files that could not be read; ``set_aside``:
-    the files moved into ``runs/corrupt/``; both are listed in report.md."""
+    the files moved into ``runs/corrupt/``; both are listed in report.md. ``records``: the records
+    themselves (MCMC posteriors); ``posterior_dirs``: folders holding the posterior study's
+    ``<case>/summary.json``."""
+    from bench.report import metrics as M
     from bench.report import tables as T
+    from bench.report.findings import findings
+    from bench.report.posterior import posterior_frame, width_table
 
+    runs, history = M.prepare(runs, history)
+    dtol = dict(T.DERIVED_TOL) if tol_a is None else {**T.DERIVED_TOL, "a": float(tol_a)}
+    rule = T.success_rule(tol, dtol)
+    ok = T.success(runs, tol, dtol)
     dest.mkdir(parents=True, exist_ok=True)
     tdir = dest / "tables"
     tfmt = [f for f in formats if f in TABLE_FORMATS]
     methods = T.method_order(runs["method"].unique())
     cases = T.case_order(runs["case"].unique())
     budgets = sorted(int(b) for b in runs["budget"].unique())
+    ert_df = M.ert_table(runs, tol, dtol)
+    post = posterior_frame(records, posterior_dirs)
+    if len(post):
+        post = post[post["case"].isin(cases)].reset_index(drop=True)
+    jac = M.jacobian_table(runs)
+
     md: list[str] = []
     md.append(f"# femubench report: `{source.resolve().name}`\n")
-    md += _overview(runs, history, cases, methods, budgets, tol)
+    md += _overview(runs, history, cases, methods, budgets, rule)
     if unreadable or set_aside:
         md.append("## Unreadable records\n")
         md.append(
@@ -141,15 +188,116 @@ def build_report(
         )
         lines = unreadable_lines(unreadable, set_aside, base=source)
         md.append("".join(f"- {line}\n" for line in lines))
+    md += findings(runs, ert_df, ok, post=post, jac=jac, rule=rule)
 
-    # --- Table 1 per method (x budget) ------------------------------------------------------
+    def table(stem, display, raw, caption, label, raw_kw=None, **kw):
+        ri = (raw_kw or {}).get("index")
+        paths = T.write_table(
+            tdir / stem,
+            tfmt,
+            display=display,
+            raw=raw,
+            caption=caption,
+            label=label,
+            raw_index=ri,
+            **kw,
+        )
+        md.append(caption + "\n")
+        md.append(
+            T.to_markdown(display, index=kw.get("index", True), index_label=kw.get("index_label"))
+        )
+        md.append(_links(paths, dest) + "\n")
+
+    # --- success, targets, ERT per track and tier ------------------------------------------------
+    from bench.report.figures import COST_KS, ERR_TARGETS, facets
+
+    tgt = M.target_table(runs, history)
+    md.append("## Success rates, cost targets and expected running time\n")
+    md.append(
+        f"Success: {rule}. Cost targets (COCO style, relative to the best known cost of the "
+        "objective: case, data tier and model-error treatment): J_best + 10^−k (J_init − J_best) "
+        f"for k = {', '.join(map(str, COST_KS))}, J_best the best final cost any run reached, "
+        "J_init the median cost at the start points. ERT: the forward-equivalents of all runs of "
+        "a method on a case (successful or not; charges such as high-fidelity corrections, BAE "
+        "statistics or surrogate training included) over its number of successes, ∞ when none; "
+        "in brackets the 95 % percentile-bootstrap interval (runs resampled 1000 times, seeded).\n"
+    )
+    sm_all = T.success_matrix(runs, tol, dtol)
+    paths = T.write_table(
+        tdir / "success",
+        tfmt,
+        display=T.success_display(sm_all),
+        raw=sm_all,
+        caption=f"Success rate in percent, every method (all tracks and tiers): {rule}.",
+        label="tab:success",
+        index_label="method",
+    )
+    md.append("All methods in one table: " + _links(paths, dest) + "\n")
+    for track, tier in facets(runs):
+        key = f"{_safe(track)}__{_safe(tier)}"
+        sel = ert_df[(ert_df["track"] == track) & (ert_df["tier"] == tier)]
+        if not len(sel):
+            continue
+        md.append(f"### {track} track, {tier} data\n")
+        sm = T.pivot(sel, "success_pct")
+        table(
+            f"success__{key}",
+            T.success_display(sm),
+            sm,
+            f"Success rate in percent ({track} track, {tier} data): {rule}.",
+            f"tab:success-{key}",
+            index_label="method",
+        )
+        disp = T.pivot(sel, lambda r: T.fmt_ert(r["ert"], r["ert_lo"], r["ert_hi"]))
+        table(
+            f"ert__{key}",
+            disp,
+            sel.reset_index(drop=True),
+            f"ERT to success in forward-equivalents [bootstrap 95 % interval] ({track} track, "
+            f"{tier} data); ∞ = no success.",
+            f"tab:ert-{key}",
+            index_label="method",
+            raw_kw={"index": False},
+        )
+        ts = tgt[(tgt["track"] == track) & (tgt["tier"] == tier)]
+        if len(ts):
+            kcols = [f"k{k}" for k in COST_KS]
+            ts = ts.assign(reached=ts[kcols].mean(axis=1))
+            disp = T.pivot(ts, lambda r: DASH_IF_NAN(r["reached"], lambda v: f"{v:.0f}"))
+            table(
+                f"targets__{key}",
+                disp,
+                ts.reset_index(drop=True),
+                f"Cost targets reached ({track} track, {tier} data): percentage of (run, target) "
+                f"pairs whose final cost reaches the target, over k = "
+                f"{', '.join(map(str, COST_KS))} (per k in the CSV).",
+                f"tab:targets-{key}",
+                index_label="method",
+                raw_kw={"index": False},
+            )
+
+    # --- Table 1 per method (x budget) ----------------------------------------------------------
     md.append("## Table 1: residual error of the identified parameters\n")
     md.append(
         "Signed error of each identified parameter with respect to its reference value, "
         "100 (x/x_REF − 1) in percent; median over seeds and starts where a case has several "
-        f"runs; `{T.DASH}` marks a parameter that is not active in the case. Crashed runs are "
-        "left out (see the comparison table).\n"
+        f"runs; `{T.DASH}` marks a parameter that is not active in the case. The row `a` of the "
+        "exponent cases is derived from the identified pt0, sigma0 and b through the case's "
+        "exponent surface (the cases identify pt0 in place of a); the success criterion allows it "
+        f"{dtol.get('a', math.nan):g} %. Crashed runs are left out (see the comparison table).\n"
     )
+    at = T.a_table(runs)
+    if len(at):
+        table(
+            "a_exponent",
+            T.a_display(at),
+            at,
+            "The exponent coefficient a (MPa^(1−b)) derived from each method's identified "
+            "parameters, median over runs, with its signed error against the reference a in "
+            "percent.",
+            "tab:a-exponent",
+            index_label="method",
+        )
     for method in methods:
         for budget in budgets if len(budgets) > 1 else [None]:
             t = T.table1(runs, method, budget=budget)
@@ -185,51 +333,62 @@ def build_report(
             md.append(_links(paths, dest) + "\n")
 
     # --- comparison -------------------------------------------------------------------------
-    comp = T.comparison(runs, tol)
+    comp = T.comparison(runs, tol, dtol)
     cdisp = T.comparison_display(comp)
-    ccap = (
-        "Comparison per case and method (with its data tier and model-error treatment): success = "
-        f"every |parameter error| ≤ {tol:g} %; forward evaluations (median and interquartile "
-        "range) and forward-equivalents (a run with exact sensitivities weighs its wall time over "
-        "a plain run's; high-fidelity runs of a correction included), median final cost, median "
-        "max |error|, median wall time per run."
-    )
-    paths = T.write_table(
-        tdir / "comparison",
-        tfmt,
-        display=cdisp,
-        raw=comp,
-        caption=ccap,
-        label="tab:comparison",
+    md.append("## Comparison per case and method\n")
+    table(
+        "comparison",
+        cdisp,
+        comp,
+        "Comparison per case and method (with its data tier, model-error treatment and, when not "
+        f"the defaults, track and Jacobian): success = {rule}; forward evaluations (median and "
+        "interquartile range) and forward-equivalents (measured; charges included), median "
+        "final cost, median max |error| of the identified parameters, median wall time per run.",
+        "tab:comparison",
         index=False,
     )
-    md.append("## Comparison per case and method\n")
-    md.append(ccap + "\n")
-    md.append(T.to_markdown(cdisp, index=False))
-    md.append(_links(paths, dest) + "\n")
 
-    sm = T.success_matrix(runs, tol)
-    scap = f"Success rate in percent (every |parameter error| ≤ {tol:g} %), all budgets pooled."
-    paths = T.write_table(
-        tdir / "success",
-        tfmt,
-        display=T.success_display(sm),
-        raw=sm,
-        caption=scap,
-        label="tab:success",
-        index_label="method",
-    )
-    md.append("## Success rate\n")
-    md.append(scap + "\n")
-    md.append(T.to_markdown(T.success_display(sm), index_label="method"))
-    md.append(_links(paths, dest) + "\n")
+    # --- FD versus exact Jacobians ------------------------------------------------------------
+    if len(jac):
+        md.append("## Finite-difference against exact Jacobians\n")
+        table(
+            "jacobian",
+            _jacobian_display(jac),
+            jac,
+            "Runs that differ only in their Jacobian, side by side: iterations, forward "
+            "evaluations, forward-equivalents (measured) and final max |parameter error| (%).",
+            "tab:jacobian",
+            index=False,
+        )
+
+    # --- posterior ------------------------------------------------------------------------------
+    if len(post):
+        md.append("## Posterior (MCMC)\n")
+        wt = width_table(post)
+        table(
+            "posterior_widths",
+            wt,
+            post,
+            "Posterior 95 % interval width in percent of the reference per parameter (in "
+            "brackets the Laplace approximation's mean ± 2 sd width), the chain length in "
+            "autocorrelation times (smallest over the parameters), and the paper's Table-1 error "
+            "of a for comparison.",
+            "tab:posterior",
+            index=False,
+            raw_kw={"index": False},
+        )
 
     # --- figures ----------------------------------------------------------------------------
     if figures:
-        from bench.report.figures import COST_KS, ERR_TARGETS, write_figures
+        from bench.report.figures import write_figures
 
         figs = write_figures(
-            runs, history, dest / "figures", pdf="pdf" in formats, progress=progress
+            runs,
+            history,
+            dest / "figures",
+            pdf="pdf" in formats,
+            progress=progress,
+            posterior=post,
         )
         md.append("## Figures\n")
         md.append(
@@ -237,50 +396,72 @@ def build_report(
             + (" PDF versions sit next to the PNGs." if "pdf" in formats else "")
             + "\n"
         )
-        md.append("### Across methods\n")
+        md.append("### Runtime ECDFs and best cost\n")
         md.append(
-            "*Convergence*: best cost so far against forward evaluations, median over the runs of "
-            "each method (number of runs in the legend). *Runtime ECDF* (COCO style): fraction of "
-            "(run, target) pairs reached within a number of forward evaluations; (a) cost targets "
-            f"J − J_best ≤ 10^−k (J_init − J_best), k = {', '.join(map(str, COST_KS))}, with "
-            "J_best the best cost any run reached on the case and J_init the median initial cost; "
-            "(b) parameter targets max_i |x_i/x_i^REF − 1| ≤ "
-            f"{', '.join(f'{t:g}' for t in ERR_TARGETS)} %.\n"
+            "*Runtime ECDF* (COCO style), one column per track and data tier: fraction of (run, "
+            "target) pairs reached within a number of forward-equivalents; (a) the cost targets "
+            f"above (k = {', '.join(map(str, COST_KS))}), (b) parameter targets max_i "
+            f"|x_i/x_i^REF − 1| ≤ {', '.join(f'{t:g}' for t in ERR_TARGETS)} %. Per case, the same "
+            "figure over that case's runs.\n"
         )
         if figs["ecdf_all"] is not None:
             md.append(f"![runtime ECDF, all cases]({_rel(figs['ecdf_all'], dest)})\n")
-        for case in cases:
-            if case in figs["convergence"]:
-                md.append(f"#### {case}\n")
-                md.append(f"![{case}: convergence]({_rel(figs['convergence'][case], dest)})\n")
-                md.append(f"![{case}: runtime ECDF]({_rel(figs['ecdf'][case], dest)})\n")
-        md.append("### Iteration histories (like the paper's Figs 6–14)\n")
-        md.append(
-            "For each case and method, the run with the median final cost: (a) normalised "
-            "parameters x_i/x_i^REF against iteration, with each parameter's box [lower, "
-            "upper]/x_i^REF as a bracket of the same line style right of the last iteration and a "
-            "ring where a final parameter lies on a bound, (b) cost against iteration (log "
-            "scale).\n"
-        )
-        hist = figs["history"]
-        cols = [(m, b) for m in methods for b in budgets if any((c, m, b) in hist for c in cases)]
-        head = ["case"] + [m + (f" (b{b})" if len(budgets) > 1 else "") for m, b in cols]
+        kinds = [k for k in ("ecdf", "convergence") if figs[k]]
+        head = {"ecdf": "runtime ECDF", "convergence": "best cost"}
         rows = []
         for c in cases:
-            cells = [
-                f"[fig]({_rel(hist[(c, m, b)], dest)})" if (c, m, b) in hist else T.DASH
-                for m, b in cols
-            ]
-            rows.append([c] + cells)
-        if cols:
+            cells = [f"[fig]({_rel(figs[k][c], dest)})" if c in figs[k] else T.DASH for k in kinds]
+            rows.append(f"| {c} | " + " | ".join(cells) + " |")
+        if kinds:
             md.append(
-                "| "
-                + " | ".join(head)
+                "| case | "
+                + " | ".join(head[k] for k in kinds)
                 + " |\n|"
-                + "|".join(["---"] * len(head))
+                + "|".join([":---"] * (1 + len(kinds)))
                 + "|\n"
-                + "".join("| " + " | ".join(r) + " |\n" for r in rows)
+                + "\n".join(rows)
+                + "\n"
             )
+        md.append("### Convergence per method family (like the paper's Figs 6–14)\n")
+        md.append(
+            "For each case and method family (local, global, sampling), one row per method: (a) "
+            "normalised parameters x_i/x_i^REF against iteration of the run with the median "
+            "final cost (a, derived, as a thin line), a ring and a note "
+            f"({T.BOUND_MARK}) at every final value on a bound of the case's box; (b) cost "
+            "against iteration (dots: iterates; line: best so far; band: range of the best cost "
+            "over all runs of the method).\n"
+        )
+        fams = [f for f in M.FAMILIES if any(k[1] == f for k in figs["family"])]
+        fams += sorted({k[1] for k in figs["family"]} - set(fams))
+        if fams:
+            lines = [
+                "| case | " + " | ".join(fams) + " |",
+                "|" + "|".join([":---"] * (1 + len(fams))) + "|",
+            ]
+            for c in cases:
+                cells = []
+                for f in fams:
+                    ps = figs["family"].get((c, f), [])
+                    cells.append(
+                        ", ".join(
+                            f"[{'fig' if i == 0 else f'p{i + 1}'}]({_rel(p, dest)})"
+                            for i, p in enumerate(ps)
+                        )
+                        or T.DASH
+                    )
+                lines.append(f"| {c} | " + " | ".join(cells) + " |")
+            md.append("\n".join(lines) + "\n")
+            first = next(iter(figs["family"].values()))[0]
+            md.append(f"![convergence, first case and family]({_rel(first, dest)})\n")
+        if figs["posterior"]:
+            md.append("### Posterior panels\n")
+            md.append(
+                "Per parameter: the posterior 95 % interval (line) and mean (marker) divided by "
+                "the reference, for each source; dashed beside it the Laplace approximation's "
+                "mean ± 2 sd where known.\n"
+            )
+            for c, p in figs["posterior"].items():
+                md.append(f"![{c}: posterior]({_rel(p, dest)})\n")
 
     if "parquet" in formats:
         store_paths = _parquet(runs, history, dest)
@@ -296,27 +477,75 @@ def build_report(
     return dest / "report.md"
 
 
-def _overview(runs, history, cases, methods, budgets, tol) -> list[str]:
+def DASH_IF_NAN(v, fmt):  # noqa: N802
+    from bench.report.tables import DASH
+
+    return DASH if v is None or (isinstance(v, float) and math.isnan(v)) else fmt(v)
+
+
+def _jacobian_display(jac):
+    import pandas as pd
+
+    from bench.report.tables import fmt_num, fmt_pct
+
+    js = sorted({c.split(".", 1)[1] for c in jac.columns if c.startswith("fe.")})
+    js = (["exact"] if "exact" in js else []) + [j for j in js if j != "exact"]
+    out = pd.DataFrame(
+        {
+            "case": jac["case"],
+            "method": jac["method"],
+            "seed": jac["seed"].astype(str) if "seed" in jac else "",
+            "start": jac["start"] if "start" in jac else "",
+        }
+    )
+    for what, col, f in (
+        ("iterations", "iterations", lambda v: DASH_IF_NAN(v, lambda x: f"{x:.0f}")),
+        ("evaluations", "evals", lambda v: DASH_IF_NAN(v, lambda x: f"{x:.0f}")),
+        ("forward-equivalents", "fe", lambda v: DASH_IF_NAN(v, fmt_num)),
+        ("max |err| (%)", "max_err", lambda v: DASH_IF_NAN(v, fmt_pct)),
+    ):
+        for j in js:
+            c = f"{col}.{j}"
+            out[f"{what} {j}"] = jac[c].map(f) if c in jac else "–"
+    return out
+
+
+def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
     from bench.report import tables as T
 
     n_crashed = int(runs["crashed"].sum())
     seeds = sorted(int(s) for s in runs["seed"].unique())
     starts = sorted(runs["start"].unique())
-    suites = sorted(s for s in runs["suite"].dropna().unique())
-    hashes = sorted(str(h) for h in runs["data_hash"].dropna().unique())
-    meshes = sorted(str(m) for m in runs["mesh"].dropna().unique())
+    suites = sorted(s for s in runs["suite"].dropna().unique()) if "suite" in runs else []
+    hashes = (
+        sorted(str(h) for h in runs["data_hash"].dropna().unique()) if "data_hash" in runs else []
+    )
+    meshes = sorted(str(m) for m in runs["mesh"].dropna().unique()) if "mesh" in runs else []
+
+    def counts(col):
+        if col not in runs:
+            return T.DASH
+        vc = runs[col].astype(str).value_counts()
+        return ", ".join(f"{k} ({v})" for k, v in vc.items())
+
+    hshow = ", ".join(f"`{h[:16]}`" for h in hashes[:6]) + (
+        f" and {len(hashes) - 6} more" if len(hashes) > 6 else ""
+    )
+    wall = runs["wall_s"].sum() / 3600.0 if "wall_s" in runs else math.nan
     lines = [
         f"- **{len(runs)} runs** ({n_crashed} crashed) from suite(s) "
         f"{', '.join(f'`{s}`' for s in suites) or T.DASH}",
         f"- cases ({len(cases)}): {', '.join(cases)}",
         f"- methods ({len(methods)}): {', '.join(methods)}",
-        f"- budgets (forward evaluations): {', '.join(map(str, budgets))}; seeds: "
+        f"- tracks: {counts('track')}; data tiers: {counts('tier')}; Jacobians: "
+        f"{counts('jacobian')}; starts: {counts('start')}",
+        f"- budgets: {', '.join(map(str, budgets))}; seeds: "
         f"{', '.join(map(str, seeds))}; starts: {', '.join(starts)}; mesh: "
         f"{', '.join(meshes) or T.DASH}",
-        f"- data file hash(es): {', '.join(f'`{h[:16]}`' for h in hashes) or T.DASH}",
-        f"- success criterion: every identified parameter within **{tol:g} %** of its reference "
-        "value",
-        f"- total wall time of the runs: {runs['wall_s'].sum() / 3600.0:.2f} h",
+        f"- data file hash(es): {hshow or T.DASH}",
+        f"- success criterion: **{rule}**",
+        f"- total cost of the runs: {runs['fe_total'].sum():.0f} forward-equivalents; wall time "
+        f"{wall:.2f} h",
         "",
     ]
     return lines

@@ -30,7 +30,6 @@ import pandas as pd
 from bench.plotting import (
     DOUBLE,
     REFERENCE_LINE,
-    SINGLE,
     integer_axis,
     line_style,
     log_axis,
@@ -38,7 +37,14 @@ from bench.plotting import (
     pyplot,
     save,
 )
-from bench.report.tables import bound_side, case_order, identified, method_order, normalised_box
+from bench.report.tables import (
+    BOUND_MARK,
+    bound_side,
+    case_order,
+    identified,
+    method_order,
+    normalised_box,
+)
 
 COST_KS = (1, 2, 3, 4, 6, 8)
 ERR_TARGETS = (10.0, 1.0, 0.1)
@@ -48,6 +54,83 @@ COST_LABEL = "cost $J$ (-)"
 def _save(fig, path: Path, pdf: bool) -> list[Path]:
     png = save(fig, path.with_suffix(".png"), pdf=pdf)
     return [png] + ([png.with_suffix(".pdf")] if pdf else [])
+
+
+#: resolution of the report's many-panel figures (PNG): they are drawn once, without a tight
+#: bounding box or constrained layout, so that a folder of hundreds of runs reports in a minute
+REPORT_DPI = 110
+
+
+def grid(
+    nrows: int,
+    ncols: int,
+    *,
+    panel: tuple[float, float],
+    top: float = 0.5,
+    bottom: float = 0.55,
+    left: float = 0.75,
+    right: float = 0.25,
+    hgap: float = 0.55,
+    wgap: float = 0.6,
+    **kw,
+):
+    """``(fig, axes)``: an ``nrows`` x ``ncols`` grid of ``panel``-sized axes (inches) with fixed
+    margins and gaps (inches); no layout engine (cheap to draw)."""
+    plt = pyplot()
+    w = left + right + ncols * panel[0] + (ncols - 1) * wgap
+    h = top + bottom + nrows * panel[1] + (nrows - 1) * hgap
+    fig, axes = plt.subplots(nrows, ncols, figsize=(w, h), squeeze=False, **kw)
+    fig.subplots_adjust(
+        left=left / w,
+        right=1 - right / w,
+        bottom=bottom / h,
+        top=1 - top / h,
+        hspace=hgap / panel[1],
+        wspace=wgap / panel[0],
+    )
+    return fig, axes
+
+
+def _save_fast(fig, path: Path, pdf: bool) -> list[Path]:
+    """Save a :func:`grid` figure: PNG at :data:`REPORT_DPI` (and PDF), one draw, no tight box."""
+    plt = pyplot()
+    png = Path(path).with_suffix(".png")
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=REPORT_DPI, metadata={"Software": None})
+    out = [png]
+    if pdf:
+        fig.savefig(
+            png.with_suffix(".pdf"),
+            metadata={"Creator": None, "Producer": None, "CreationDate": None},
+        )
+        out.append(png.with_suffix(".pdf"))
+    plt.close(fig)
+    return out
+
+
+def light_log(ax, axis: str = "y") -> None:
+    """A log axis that is cheap to draw (decades only, no minor ticks): for many-panel figures."""
+    from matplotlib.ticker import LogLocator, NullLocator
+
+    getattr(ax, f"set_{axis}scale")("log")
+    a = getattr(ax, f"{axis}axis")
+    lim = ax.dataLim.intervaly if axis == "y" else ax.dataLim.intervalx
+    lo, hi = float(min(lim)), float(max(lim))
+    narrow = lo > 0 and np.isfinite(hi) and hi / lo < 30.0  # less than 1.5 decades: 1, 2, 5
+    subs = (1.0, 2.0, 5.0) if narrow else (1.0,)
+    a.set_major_locator(LogLocator(base=10.0, subs=subs, numticks=4 if not narrow else 8))
+    a.set_minor_locator(NullLocator())
+    if narrow:
+        from matplotlib.ticker import LogFormatterSciNotation
+
+        a.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False))
+
+
+def light_int(ax, axis: str = "x") -> None:
+    """At most five integer ticks."""
+    from matplotlib.ticker import MaxNLocator
+
+    getattr(ax, f"{axis}axis").set_major_locator(MaxNLocator(nbins=4, integer=True))
 
 
 def safe(name: str) -> str:
@@ -222,46 +305,58 @@ def convergence_figure(
     methods: list[str],
     pdf: bool = False,
 ) -> list[Path]:
-    """Best cost so far against forward evaluations, median over the runs of each method."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=SINGLE, constrained_layout=True)
+    """Best cost so far against forward-equivalents (forward evaluations for unprepared frames),
+    median over the runs of each method; one panel per (track, tier)."""
+    from bench.report.metrics import fe_at
+
+    fcs = facets(runs)
+    nc = len(fcs)
+    n_leg = max((runs[_facet_mask(runs, *f)]["method"].nunique() for f in fcs), default=1)
+    fig, axes = grid(1, nc, panel=(3.6, 3.0), bottom=0.75 + 0.13 * n_leg, top=0.6)
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
-    emax = max(
-        2.0, float(runs["n_evals"].max()), float(history["n_evals"].max()) if len(history) else 0.0
-    )
-    grid = np.unique(np.round(np.geomspace(1.0, emax, 80)))
-    for i, m in enumerate(methods):
-        rm = identified(runs[runs["method"] == m])
-        curves = []
-        for _, r in rm.iterrows():
-            h = hist_by.get(r["config_hash"])
-            ev, bc = _best_curve(h if h is not None else history.iloc[0:0], r)
-            idx = np.searchsorted(ev, grid, side="right") - 1
-            y = np.where(idx >= 0, bc[np.clip(idx, 0, None)], np.nan)
-            curves.append(np.where(np.isfinite(y), y, np.nan))
-        if not curves:
-            continue
-        arr = np.array(curves)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns before the first row
-            med = np.nanmedian(arr, axis=0)
-        med = np.where(med > 0, med, np.nan)
-        if np.isfinite(med).any():
-            ax.plot(
-                grid,
-                med,
-                label=f"{m} ({len(curves)})",
-                markevery=_markevery(len(grid)),
-                **line_style(i),
-            )
-    log_axis(ax, "x")
-    if any(line.get_ydata().size for line in ax.get_lines()):
-        log_axis(ax, "y")
-    ax.set_xlabel("forward evaluations (-)")
-    ax.set_ylabel("best " + COST_LABEL)
-    ax.set_title(f"{case}: best cost, median over runs", fontsize=9)
-    ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5))
-    return _save(fig, path, pdf)
+    use_fe = "fe_total" in runs
+    xcol = "fe_total" if use_fe else "n_evals"
+    emax = max(2.0, float(np.nanmax(runs[xcol].to_numpy(float))) if len(runs) else 2.0)
+    xs = np.unique(np.round(np.geomspace(1.0, emax, 80)))
+    for j, (track, tier) in enumerate(fcs):
+        ax = axes[0, j]
+        rf = _facet(runs, track, tier)
+        for m in [m for m in methods if m in set(rf["method"])]:
+            rm = identified(rf[rf["method"] == m])
+            curves = []
+            for _, r in rm.iterrows():
+                h = hist_by.get(r["config_hash"])
+                ev, bc = _best_curve(h if h is not None else history.iloc[0:0], r)
+                if use_fe:
+                    ev = fe_at(r, ev)
+                idx = np.searchsorted(ev, xs, side="right") - 1
+                y = np.where(idx >= 0, bc[np.clip(idx, 0, None)], np.nan)
+                curves.append(np.where(np.isfinite(y), y, np.nan))
+            if not curves:
+                continue
+            arr = np.array(curves)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN before the first row
+                med = np.nanmedian(arr, axis=0)
+            med = np.where(med > 0, med, np.nan)
+            if np.isfinite(med).any():
+                ax.plot(
+                    xs,
+                    med,
+                    label=f"{m} ({len(curves)})",
+                    markevery=_markevery(len(xs)),
+                    **line_style(methods.index(m)),
+                )
+        log_axis(ax, "x")
+        if any(line.get_ydata().size for line in ax.get_lines()):
+            log_axis(ax, "y")
+        ax.set_xlabel("forward-equivalents (-)" if use_fe else "forward evaluations (-)")
+        ax.set_title(f"{track} track, {tier} data", loc="left", fontsize=8)
+        if ax.get_lines():
+            ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.16), ncols=1, fontsize=6)
+    axes[0, 0].set_ylabel("best " + COST_LABEL)
+    fig.suptitle(f"{case}: best cost, median over runs (number of runs)", fontsize=9)
+    return _save_fast(fig, path, pdf)
 
 
 def cost_targets(runs_case: pd.DataFrame, hist_case: pd.DataFrame) -> np.ndarray:
@@ -286,13 +381,24 @@ def cost_targets(runs_case: pd.DataFrame, hist_case: pd.DataFrame) -> np.ndarray
 
 
 def runtimes(runs: pd.DataFrame, history: pd.DataFrame) -> dict[str, dict[str, list]]:
-    """Per method: evaluations to reach each (run, target) pair (inf if never) for the cost and
-    parameter targets, pooled over the cases present in ``runs``."""
+    """Per method: the runtime to reach each (run, target) pair (inf if never) for the cost and
+    parameter targets, pooled over the objectives present in ``runs``.
+
+    With the report's prepared frames (:func:`bench.report.metrics.prepare`) the targets are those
+    of each objective (case | tier | treatment: runs on different data never share a best known
+    cost) and the runtime is in forward-equivalents (:func:`bench.report.metrics.fe_at`: charges
+    up front, then the run's measured forward-equivalents per evaluation); otherwise per case and
+    in forward evaluations."""
+    from bench.report.metrics import fe_at, objective_targets
+
     out: dict[str, dict[str, list]] = {}
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
-    for case, rc in runs.groupby("case", sort=False):
-        hc = history[history["case"] == case] if len(history) else history
-        targets = cost_targets(rc, hc)
+    by = "objective" if "objective" in runs else "case"
+    use_fe = "fe_solver" in runs
+    hist_obj = dict(tuple(history.groupby(by))) if len(history) and by in history else {}
+    for key, rc in runs.groupby(by, sort=False):
+        hc = hist_obj.get(key, history.iloc[0:0])
+        targets = objective_targets(rc, hc) if use_fe else cost_targets(rc, hc)
         for _, r in rc.iterrows():
             d = out.setdefault(r["method"], {"cost": [], "err": []})
             h = hist_by.get(r["config_hash"])
@@ -301,6 +407,8 @@ def runtimes(runs: pd.DataFrame, history: pd.DataFrame) -> dict[str, dict[str, l
                 d["err"] += [math.inf] * len(ERR_TARGETS)
                 continue
             ev, bc = _best_curve(h if h is not None else history.iloc[0:0], r)
+            if use_fe:
+                ev = fe_at(r, ev)
             for t in targets:
                 hit = np.nonzero(bc <= t)[0]
                 d["cost"].append(float(ev[hit[0]]) if len(hit) else math.inf)
@@ -309,6 +417,8 @@ def runtimes(runs: pd.DataFrame, history: pd.DataFrame) -> dict[str, dict[str, l
                 herr = np.append(h["max_abs_err"].to_numpy(float), float(r["max_abs_err"]))
             else:
                 hev, herr = np.array([float(r["n_evals"])]), np.array([float(r["max_abs_err"])])
+            if use_fe:
+                hev = fe_at(r, hev)
             for t in ERR_TARGETS:
                 hit = np.nonzero(herr <= t)[0]
                 d["err"].append(float(hev[hit[0]]) if len(hit) else math.inf)
@@ -327,6 +437,28 @@ def _ecdf(ax, hits: list[float], xmax: float, **kw) -> None:
     ax.step(x, y, where="post", markevery=_markevery(len(x)), **kw)
 
 
+def facets(runs: pd.DataFrame) -> list[tuple[str, str]]:
+    """The (track, tier) combinations present, FE track first (``("fe", tier)`` when the frame
+    has no track column)."""
+    tracks = runs["track"] if "track" in runs else pd.Series("fe", index=runs.index)
+    tiers = runs["tier"] if "tier" in runs else pd.Series("model-error", index=runs.index)
+    pairs = set(zip(tracks.astype(str), tiers.astype(str)))
+    return sorted(pairs, key=lambda p: (p[0] != "fe", p[0], p[1]))
+
+
+def _facet_mask(runs: pd.DataFrame, track: str, tier: str) -> pd.Series:
+    sel = pd.Series(True, index=runs.index)
+    if "track" in runs:
+        sel &= runs["track"].astype(str) == track
+    if "tier" in runs:
+        sel &= runs["tier"].astype(str) == tier
+    return sel
+
+
+def _facet(runs: pd.DataFrame, track: str, tier: str) -> pd.DataFrame:
+    return runs[_facet_mask(runs, track, tier)]
+
+
 def ecdf_figure(
     title: str,
     runs: pd.DataFrame,
@@ -336,39 +468,251 @@ def ecdf_figure(
     methods: list[str],
     pdf: bool = False,
 ) -> list[Path]:
-    """Runtime ECDFs: (a) cost targets, (b) parameter-error targets, one line per method."""
-    plt = pyplot()
-    rt = runtimes(runs, history)
-    xmax = max(2.0, float(runs["budget"].max()), float(runs["n_evals"].max()))
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=DOUBLE, sharey=True, constrained_layout=True)
-    for i, m in enumerate(methods):
-        if m not in rt:
-            continue
-        _ecdf(ax1, rt[m]["cost"], xmax, label=m, **line_style(i))
-        _ecdf(ax2, rt[m]["err"], xmax, label=m, **line_style(i))
+    """Runtime ECDFs, one column per (track, tier): (a) cost targets, (b) parameter-error targets,
+    one line per method (the same style for a method in every figure: its index in
+    ``methods``)."""
+    use_fe = "fe_total" in runs
+    xcol = "fe_total" if use_fe else "n_evals"
+    xmax = max(2.0, float(np.nanmax(runs[xcol].to_numpy(float))) if len(runs) else 2.0)
+    if not use_fe:
+        xmax = max(xmax, float(runs["budget"].max()))
+    fcs = facets(runs)
+    nc = len(fcs)
+    n_leg = max((runs[_facet_mask(runs, *f)]["method"].nunique() for f in fcs), default=1)
+    fig, axes = grid(
+        2, nc, panel=(3.6, 2.6), bottom=0.75 + 0.13 * n_leg, top=0.95, hgap=0.75, sharey=True
+    )
     ks = ", ".join(str(k) for k in COST_KS)
-    ax1.set_title(
-        rf"(a) $J - J_\mathrm{{best}} \leq 10^{{-k}}(J_\mathrm{{init}} - J_\mathrm{{best}})$, k = "
-        rf"{ks}",
-        loc="left",
-        fontsize=8,
-    )
-    ax2.set_title(
-        "(b) max$_i$ |x$_i$/x$_i^\\mathrm{REF}$ − 1| ≤ "
-        + ", ".join(f"{t:g}" for t in ERR_TARGETS)
-        + " %",
-        loc="left",
-        fontsize=8,
-    )
-    for ax in (ax1, ax2):
-        log_axis(ax, "x")
-        ax.set_xlim(1.0, xmax * 1.05)
-        ax.set_ylim(-0.02, 1.02)
-        ax.set_xlabel("forward evaluations (-)")
-    ax1.set_ylabel("fraction of (run, target) pairs reached (-)")
-    ax2.legend(loc="center left", bbox_to_anchor=(1.01, 0.5))
+    for j, (track, tier) in enumerate(fcs):
+        rf = _facet(runs, track, tier)
+        hf = history[history["config_hash"].isin(rf["config_hash"])] if len(history) else history
+        rt = runtimes(rf, hf)
+        ax1, ax2 = axes[0, j], axes[1, j]
+        for m in [m for m in methods if m in rt]:
+            st = line_style(methods.index(m))
+            _ecdf(ax1, rt[m]["cost"], xmax, label=m, **st)
+            _ecdf(ax2, rt[m]["err"], xmax, **st)
+        head = f"{track} track, {tier} data" if nc > 1 or "track" in runs else ""
+        ax1.set_title(
+            (head + "\n" if head else "")
+            + r"(a) $J - J_\mathrm{best} \leq 10^{-k}(J_\mathrm{init} - J_\mathrm{best})$,"
+            + f" k = {ks}",
+            loc="left",
+            fontsize=7,
+        )
+        ax2.set_title(
+            "(b) max$_i$ |x$_i$/x$_i^\\mathrm{REF}$ − 1| ≤ "
+            + ", ".join(f"{t:g}" for t in ERR_TARGETS)
+            + " %",
+            loc="left",
+            fontsize=7,
+        )
+        for ax in (ax1, ax2):
+            light_log(ax, "x")
+            ax.set_xlim(1.0, xmax * 1.05)
+            ax.set_ylim(-0.02, 1.02)
+        ax2.set_xlabel("forward-equivalents (-)" if use_fe else "forward evaluations (-)")
+        if ax1.get_lines():
+            ax2.legend(
+                *ax1.get_legend_handles_labels(),
+                loc="upper left",
+                bbox_to_anchor=(0.0, -0.2),
+                ncols=1,
+                fontsize=6,
+            )
+    for i in range(2):
+        axes[i, 0].set_ylabel("fraction of pairs reached (-)")
     fig.suptitle(title, fontsize=9)
-    return _save(fig, path, pdf)
+    return _save_fast(fig, path, pdf)
+
+
+FAMILY_ROWS = 8  # method rows per convergence figure (more go onto a second page)
+
+
+def _final_bound_hits(case: str, hist: pd.DataFrame, params: list[str]) -> list[tuple[str, int]]:
+    """``(parameter, side)`` of the final history values that lie on a bound of the case's box."""
+    box = case_box_normalised(case)
+    out = []
+    for p in params:
+        col = f"xn.{p}"
+        if p not in box or col not in hist:
+            continue
+        y = hist[col].to_numpy(float)
+        fin = y[np.isfinite(y)]
+        if len(fin):
+            side = bound_side(float(fin[-1]), *box[p])
+            if side:
+                out.append((p, side))
+    return out
+
+
+def case_box_normalised(case: str) -> dict[str, tuple[float, float]]:
+    return normalised_box(case)
+
+
+def family_figures(
+    case: str,
+    fam: str,
+    runs: pd.DataFrame,
+    history: pd.DataFrame,
+    path: Path,
+    *,
+    methods: list[str],
+    params: list[str],
+    pdf: bool = False,
+) -> list[Path]:
+    """Like the paper's Figs 6–14 for one case and one method family: one row per method, (a)
+    normalised parameters x_i/x_i^REF (and the derived a, thin) against iteration of the method's
+    representative run (median final cost), a ring and a note at every final value on a bound of
+    the case's box; (b) cost against iteration: the representative run's iterates and best cost,
+    and the range of the best cost over all runs of the method (band). More than
+    :data:`FAMILY_ROWS` methods go onto further pages (``path__2`` ...). Returns the PNG paths."""
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
+
+    from problems.inverse.cases import LABELS
+
+    hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
+    rows = []
+    for m in methods:
+        g = runs[runs["method"] == m]
+        rep = representative(g)
+        if rep is None:
+            continue
+        h = hist_by.get(rep["config_hash"])
+        if h is None or not len(h):
+            continue
+        rows.append((m, g, rep, h))
+    if not rows:
+        return []
+    active = [
+        p for p in params if any(f"xn.{p}" in h and h[f"xn.{p}"].notna().any() for *_, h in rows)
+    ]
+    styles = {p: line_style(i) for i, p in enumerate(active)}
+    out = []
+    pages = [rows[i : i + FAMILY_ROWS] for i in range(0, len(rows), FAMILY_ROWS)]
+    for k, page in enumerate(pages):
+        fig, axes = grid(len(page), 2, panel=(3.9, 1.55), top=1.0, bottom=0.5, hgap=0.5)
+        for i, (m, g, rep, h) in enumerate(page):
+            ax1, ax2 = axes[i]
+            it = h["iteration"].to_numpy(float)
+            for p in active:
+                col = f"xn.{p}"
+                if col not in h or not h[col].notna().any():
+                    continue
+                st = dict(styles[p])
+                if p == "a":  # derived, not identified: thinner
+                    st = st | {"linewidth": 0.7}
+                ax1.plot(it, h[col].to_numpy(float), markevery=_markevery(len(it)), **st)
+            hits = _final_bound_hits(case, h, active)
+            notes = []
+            for p, side in hits:
+                y = h[f"xn.{p}"].to_numpy(float)
+                j = np.flatnonzero(np.isfinite(y))[-1]
+                ax1.plot(
+                    [it[j]],
+                    [y[j]],
+                    linestyle="none",
+                    marker="o",
+                    markersize=10,
+                    markerfacecolor="none",
+                    markeredgecolor="0.0",
+                    markeredgewidth=0.9,
+                )
+                notes.append(f"{p} on {'upper' if side > 0 else 'lower'} bound")
+            ax1.axhline(1.0, **REFERENCE_LINE)
+            ax1.yaxis.set_major_locator(MaxNLocator(nbins=4))
+            ax1.set_ylabel(r"$x_i/x_i^{\mathrm{REF}}$ (-)")
+            light_int(ax1)
+            start = "default" if rep["start"] == "default" else f"random {int(rep['start_index'])}"
+            note = f" — {BOUND_MARK} " + "; ".join(notes) if notes else ""
+            ax1.set_title(
+                f"{m}: run of median cost of {len(g)} (seed {int(rep['seed'])}, {start} start)"
+                + note,
+                loc="left",
+                fontsize=7,
+            )
+            _cost_panel(ax2, g, h, hist_by)
+            light_int(ax2)
+            ax2.set_ylabel(COST_LABEL)
+            if i == len(page) - 1:
+                ax1.set_xlabel("iteration (-)")
+                ax2.set_xlabel("iteration (-)")
+        handles = [Line2D([], [], **styles[p], label=LABELS.get(p, p)) for p in active]
+        handles.append(
+            Line2D(
+                [],
+                [],
+                linestyle="none",
+                marker="o",
+                markersize=8,
+                markerfacecolor="none",
+                markeredgecolor="0.0",
+                label="final value on a bound",
+            )
+        )
+        handles += [
+            Line2D(
+                [],
+                [],
+                color="0.55",
+                linestyle="none",
+                marker="o",
+                markersize=3,
+                label="cost of iterate",
+            ),
+            Line2D([], [], color="0.0", linestyle="-", label="best cost so far"),
+            Line2D([], [], color="0.85", linewidth=6, label="best cost, range over runs"),
+        ]
+        page_note = f" (page {k + 1} of {len(pages)})" if len(pages) > 1 else ""
+        fig.legend(
+            handles=handles,
+            loc="upper center",
+            ncols=min(6, len(handles)),
+            title=f"{case}: {fam} methods{page_note}",
+            title_fontsize=9,
+        )
+        name = path if k == 0 else path.with_name(f"{path.name}__{k + 1}")
+        out.append(_save_fast(fig, name, pdf)[0])
+    return out
+
+
+def _cost_panel(ax, g: pd.DataFrame, h: pd.DataFrame, hist_by: dict) -> None:
+    """Cost against iteration: the band of the best cost over the runs ``g``, the representative
+    run's iterate costs (dots) and best cost (line); log scale when positive."""
+    curves = []
+    for ch in g["config_hash"]:
+        hh = hist_by.get(ch)
+        if hh is not None and len(hh):
+            curves.append(hh[["iteration", "best_cost"]].to_numpy(float))
+    if len(curves) > 1:
+        n = int(max(c[:, 0].max() for c in curves)) + 1
+        n = min(n, 5000)
+        grid = np.arange(n, dtype=float)
+        arr = np.full((len(curves), n), np.nan)
+        for i, c in enumerate(curves):
+            idx = np.searchsorted(c[:, 0], grid, side="right") - 1
+            bc = np.fmin.accumulate(np.where(np.isfinite(c[:, 1]), c[:, 1], np.inf))
+            arr[i] = np.where(idx >= 0, bc[np.clip(idx, 0, None)], np.nan)
+        arr = np.where(np.isfinite(arr) & (arr > 0), arr, np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            lo, hi = np.nanmin(arr, axis=0), np.nanmax(arr, axis=0)
+        ax.fill_between(grid, lo, hi, color="0.85", linewidth=0, step="post")
+    it = h["iteration"].to_numpy(float)
+    cost = h["cost"].to_numpy(float)
+    best = h["best_cost"].to_numpy(float)
+    ax.plot(
+        it,
+        np.where(cost > 0, cost, np.nan),
+        color="0.55",
+        linestyle="none",
+        marker="o",
+        markersize=2.5,
+    )
+    ax.plot(it, np.where(best > 0, best, np.nan), color="0.0", linestyle="-")
+    if np.any(np.isfinite(best) & (best > 0)):
+        light_log(ax, "y")
 
 
 def write_figures(
@@ -378,53 +722,68 @@ def write_figures(
     *,
     pdf: bool = False,
     progress: bool = False,
+    posterior: pd.DataFrame | None = None,
+    best_cost: bool = False,
 ) -> dict:
-    """All figures; returns ``{"history": {(case, method, budget): path}, "convergence":
-    {case: path}, "ecdf": {case: path}, "ecdf_all": path}`` (PNG paths). ``progress``: a tqdm bar on
-    stderr."""
+    """All figures; returns ``{"family": {(case, family): [paths]}, "convergence": {case: path},
+    "ecdf": {case: path}, "ecdf_all": path, "posterior": {case: path}}`` (PNG paths).
+    ``posterior``: :func:`bench.report.posterior.posterior_frame` (a panel per case).
+    ``best_cost``: also the best-cost-against-forward-equivalents figure of each case.
+    ``progress``: a tqdm bar on stderr."""
     import sys
 
     from tqdm import tqdm
 
+    from bench.report.metrics import FAMILIES, family
+
     params = runs.attrs.get("parameters") or []
     cases, methods = case_order(runs["case"].unique()), method_order(runs["method"].unique())
-    hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
-    out: dict = {"history": {}, "convergence": {}, "ecdf": {}, "ecdf_all": None}
-    groups = list(runs.groupby(["case", "method", "budget"], sort=False))
+    fams = runs["family"] if "family" in runs else runs["method"].map(lambda m: family(m))
+    fam_list = [f for f in FAMILIES if f in set(fams)] + sorted(set(fams) - set(FAMILIES))
+    post_cases = [] if posterior is None or not len(posterior) else list(posterior["case"].unique())
+    out: dict = {"family": {}, "convergence": {}, "ecdf": {}, "ecdf_all": None, "posterior": {}}
     bar = tqdm(
-        total=len(groups) + 2 * len(cases) + (len(cases) > 1),
+        total=len(cases) * (2 + len(fam_list)) + (len(cases) > 1) + len(post_cases),
         desc="report figures",
         unit="fig",
         file=sys.stderr,
         disable=not progress,
         leave=False,
     )
-    for (case, method, budget), g in groups:
-        bar.update()
-        rep = representative(g)
-        if rep is None:
-            continue
-        h = hist_by.get(rep["config_hash"])
-        if h is None or not len(h):
-            continue
-        several = runs[(runs["case"] == case) & (runs["method"] == method)]["budget"].nunique() > 1
-        name = f"{safe(case)}__{safe(method)}" + (f"__b{int(budget)}" if several else "")
-        p = history_figure(rep, h, params, fig_dir / "history" / name, n_runs=len(g), pdf=pdf)
-        out["history"][(case, method, int(budget))] = p[0]
+    hist_case = dict(tuple(history.groupby("case"))) if len(history) else {}
     for case in cases:
-        bar.update(2)
         rc = runs[runs["case"] == case]
-        hc = history[history["case"] == case] if len(history) else history
+        hc = hist_case.get(case, history.iloc[0:0])
         ms = [m for m in methods if m in set(rc["method"])]
-        out["convergence"][case] = convergence_figure(
-            case, rc, hc, fig_dir / f"{safe(case)}__convergence", methods=ms, pdf=pdf
-        )[0]
+        for fam in fam_list:
+            bar.update()
+            rcf = rc[fams.loc[rc.index] == fam]
+            if not len(rcf):
+                continue
+            mf = [m for m in ms if m in set(rcf["method"])]
+            paths = family_figures(
+                case,
+                fam,
+                rcf,
+                hc[hc["config_hash"].isin(rcf["config_hash"])] if len(hc) else hc,
+                fig_dir / "convergence" / f"{safe(case)}__{safe(fam)}",
+                methods=mf,
+                params=params,
+                pdf=pdf,
+            )
+            if paths:
+                out["family"][(case, fam)] = paths
+        bar.update(2)
+        if best_cost:
+            out["convergence"][case] = convergence_figure(
+                case, rc, hc, fig_dir / f"{safe(case)}__best_cost", methods=methods, pdf=pdf
+            )[0]
         out["ecdf"][case] = ecdf_figure(
             f"{case}: runtime ECDF over {len(rc)} runs",
             rc,
             hc,
             fig_dir / f"{safe(case)}__ecdf",
-            methods=ms,
+            methods=methods,
             pdf=pdf,
         )[0]
     if len(cases) > 1:
@@ -437,5 +796,16 @@ def write_figures(
             methods=methods,
             pdf=pdf,
         )[0]
+    if post_cases:
+        from bench.report.posterior import posterior_figure
+
+        for case in case_order(post_cases):
+            bar.update()
+            out["posterior"][case] = posterior_figure(
+                case,
+                posterior[posterior["case"] == case],
+                fig_dir / "posterior" / safe(case),
+                pdf=pdf,
+            )
     bar.close()
     return out

@@ -194,10 +194,12 @@ def table1(runs: pd.DataFrame, method: str, *, budget: int | None = None) -> pd.
     return out
 
 
-def comparison(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
+def comparison(
+    runs: pd.DataFrame, tol: float = SUCCESS_TOL, derived_tol: dict | None = None
+) -> pd.DataFrame:
     """One row per case x method (x budget when there are several)."""
     extra = groups_key(runs)
-    ok = success(runs, tol)
+    ok = success(runs, tol, derived_tol)
     rows = []
     for (case, method, *rest), g in runs.groupby(["case", "method", *extra], sort=False):
         ev = g["n_evals"].astype(float)
@@ -231,9 +233,11 @@ def comparison(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
     return df
 
 
-def success_matrix(runs: pd.DataFrame, tol: float) -> pd.DataFrame:
+def success_matrix(
+    runs: pd.DataFrame, tol: float = SUCCESS_TOL, derived_tol: dict | None = None
+) -> pd.DataFrame:
     """Success rate in percent, rows = methods, columns = cases (all budgets pooled)."""
-    ok = success(runs, tol)
+    ok = success(runs, tol, derived_tol)
     tab = (
         pd.DataFrame(
             {"method": runs["method"], "case": runs["case"], "ok": ok.astype(float)}
@@ -398,8 +402,11 @@ def write_table(
     index_label: str | None = None,
     tex_display: pd.DataFrame | None = None,
     raw_index_tex: bool = False,
+    raw_index: bool | None = None,
 ) -> list[Path]:
-    """Write ``stem.{md,csv,tex}`` for the requested formats; return the paths written."""
+    """Write ``stem.{md,csv,tex}`` for the requested formats; return the paths written.
+    ``raw_index``: whether the CSV (``raw``) has an index column (default: ``index``)."""
+    raw_index = index if raw_index is None else raw_index
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     if "md" in formats:
@@ -411,7 +418,13 @@ def write_table(
         paths.append(p)
     if "csv" in formats:
         p = stem.with_suffix(".csv")
-        raw.to_csv(p, index=index, index_label=index_label, na_rep=DASH, float_format="%.10g")
+        raw.to_csv(
+            p,
+            index=raw_index,
+            index_label=index_label if raw_index else None,
+            na_rep=DASH,
+            float_format="%.10g",
+        )
         paths.append(p)
     if "tex" in formats:
         p = stem.with_suffix(".tex")
@@ -435,3 +448,75 @@ def tex_param_index(t: pd.DataFrame) -> pd.DataFrame:
     t = t.copy()
     t.index = [LABELS.get(p, tex_escape(p)) for p in t.index]
     return t
+
+
+# --- comparison tables of issue 16 -----------------------------------------------------------
+
+
+def a_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """The exponent cases' coefficient a (derived from pt0, sigma0 and b, see
+    :mod:`bench.report.derived`): rows = methods, per case ``<case>`` the median identified a and
+    ``<case> err`` its median signed error in percent; ``reference`` row first. Empty without
+    ``x.a``."""
+    if "x.a" not in runs or not runs["x.a"].notna().any():
+        return pd.DataFrame()
+    ok = identified(runs[runs["x.a"].notna()])
+    cases = case_order(ok["case"].unique())
+    methods = method_order(ok["method"].unique())
+    out = pd.DataFrame(index=pd.Index(["reference"] + methods, name="method"), dtype=float)
+    for c in cases:
+        part = ok[ok["case"] == c]
+        ref = float(part["ref.a"].dropna().iloc[0]) if "ref.a" in part else math.nan
+        out.loc["reference", c] = ref
+        out.loc["reference", f"{c} err"] = 0.0
+        for m, g in part.groupby("method"):
+            out.loc[m, c] = float(g["x.a"].median())
+            out.loc[m, f"{c} err"] = float(g["err.a"].median())
+    return out
+
+
+def a_display(t: pd.DataFrame) -> pd.DataFrame:
+    """:func:`a_table` as strings: ``a (error %)`` per case."""
+    cases = [c for c in t.columns if not str(c).endswith(" err")]
+    out = pd.DataFrame(index=t.index)
+    for c in cases:
+        cells = []
+        for m in t.index:
+            v, e = t.loc[m, c], t.loc[m, f"{c} err"]
+            if pd.isna(v):
+                cells.append(DASH)
+            elif m == "reference":
+                cells.append(f"{v:.4g}")
+            else:
+                cells.append(f"{v:.4g} ({fmt_pct(float(e))} %)")
+        out[c] = cells
+    return out
+
+
+def pivot(df: pd.DataFrame, value, *, index: str = "method", columns: str = "case") -> pd.DataFrame:
+    """``df`` (long) as a method x case matrix of ``value`` (a column name, or a function of a
+    row giving a string), in the study's orders; missing cells ``–``."""
+    if not len(df):
+        return pd.DataFrame()
+    vals = df.apply(value, axis=1) if callable(value) else df[value]
+    tab = pd.DataFrame({index: df[index], columns: df[columns], "v": vals}).pivot_table(
+        index=index, columns=columns, values="v", aggfunc="first"
+    )
+    rows = method_order(tab.index) if index == "method" else list(tab.index)
+    cols = case_order(tab.columns) if columns == "case" else list(tab.columns)
+    tab = tab.reindex(index=rows, columns=cols)
+    tab.index.name, tab.columns.name = index, None
+    return tab.fillna(DASH) if callable(value) else tab
+
+
+def fmt_ert(v: float, lo: float, hi: float) -> str:
+    """``ERT [lo, hi]`` in forward-equivalents; ∞ for no success."""
+
+    def f(x):
+        if x is None or (isinstance(x, float) and math.isnan(x)):
+            return DASH
+        return "∞" if math.isinf(x) else (f"{x:.0f}" if x >= 10 else f"{x:.2g}")
+
+    if math.isinf(v):
+        return "∞"
+    return f"{f(v)} [{f(lo)}, {f(hi)}]"

@@ -1,0 +1,246 @@
+"""The *Findings* section of report.md, computed from the frames (no number is typed in here except
+the paper's Table-1 range for a, :data:`bench.report.posterior.PAPER_A_ERROR`).
+
+Each finding quotes the numbers it rests on:
+
+1. which method wins each case (highest success rate, then lowest ERT), at what cost, per track
+   and data tier;
+2. what the global methods buy over Levenberg–Marquardt from the default start and from random
+   starts (success, median max error, median forward-equivalents, pooled over the cases);
+3. the worst-identified parameters (median |error| over the runs; a and pt0 for the exponent
+   cases) next to the posterior's 95 % width and the paper's Table-1 error of a;
+4. what finite-difference Jacobians cost against exact ones (when such pairs exist).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from bench.report.tables import DASH, case_order, fmt_ert, fmt_num, fmt_pct, method_order
+
+LM = "lm"
+
+
+def _pct(k: int, n: int) -> str:
+    return f"{k}/{n} ({100.0 * k / n:.0f} %)" if n else DASH
+
+
+def findings(
+    runs: pd.DataFrame,
+    ert_df: pd.DataFrame,
+    ok: pd.Series,
+    *,
+    post: pd.DataFrame | None = None,
+    jac: pd.DataFrame | None = None,
+    rule: str = "",
+) -> list[str]:
+    """Markdown lines of the findings (see the module docstring)."""
+    from bench.report.metrics import winners
+
+    md = ["## Findings\n"]
+    md.append(
+        "Computed from the records of this folder when the report was written"
+        + (f"; success = {rule}" if rule else "")
+        + ". ERT = expected running time to success in forward-equivalents (all runs' "
+        "forward-equivalents over the successes) with its bootstrap 95 % interval.\n"
+    )
+    # 1. winners ---------------------------------------------------------------------------------
+    w = winners(ert_df)
+    md.append("### Which method wins where, at what cost\n")
+    for (track, tier), g in w.groupby(["track", "tier"], sort=False):
+        sub = ert_df[(ert_df["track"] == track) & (ert_df["tier"] == tier)]
+        g = g.assign(_c=g["case"].map(case_order(g["case"]).index)).sort_values("_c")
+        solved = g[g["successes"] > 0]
+        counts = solved["method"].value_counts()
+        lead = ", ".join(f"{m} on {n}" for m, n in counts.items()) if len(counts) else "no method"
+        md.append(
+            f"- **{track} track, {tier} data** ({len(sub)} method × case cells, "
+            f"{int(sub['runs'].sum())} runs): a method succeeds on {len(solved)} of {len(g)} "
+            f"cases; the winners: {lead}."
+        )
+        lines = ["| case | winner | success | ERT [95 % CI] (fe) | runner-up (success, ERT) |"]
+        lines.append("|:---|:---|---:|---:|:---|")
+        for _, r in g.iterrows():
+            rest = sub[(sub["case"] == r["case"]) & (sub["method"] != r["method"])]
+            rest = rest.assign(_s=-rest["success_pct"], _e=rest["ert"]).sort_values(
+                ["_s", "_e", "fe_median"]
+            )
+            ru = DASH
+            if len(rest):
+                q = rest.iloc[0]
+                ru = (
+                    f"{q['method']} ({_pct(int(q['successes']), int(q['runs']))}, "
+                    f"{fmt_ert(q['ert'], q['ert_lo'], q['ert_hi'])})"
+                )
+            win = r["method"] if r["successes"] > 0 else f"none ({r['method']} closest)"
+            lines.append(
+                f"| {r['case']} | {win} | {_pct(int(r['successes']), int(r['runs']))} | "
+                f"{fmt_ert(r['ert'], r['ert_lo'], r['ert_hi'])} | {ru} |"
+            )
+        md.append("\n" + "\n".join(lines) + "\n")
+
+    # 2. global methods versus LM ----------------------------------------------------------------
+    md.append("### What the global methods buy over Levenberg–Marquardt\n")
+    md += _global_vs_lm(runs, ok)
+
+    # 3. worst-identified parameters -----------------------------------------------------------
+    md.append("### The worst-identified parameters\n")
+    md += _worst_parameters(runs, ok, post)
+
+    # 4. FD versus exact ------------------------------------------------------------------------
+    if jac is not None and len(jac):
+        md.append("### Finite-difference against exact Jacobians\n")
+        md += _jacobian_finding(jac)
+    return md
+
+
+def _global_vs_lm(runs: pd.DataFrame, ok: pd.Series) -> list[str]:
+    out = []
+    fam = runs["family"] if "family" in runs else pd.Series("other", index=runs.index)
+    glob = fam == "global"
+    lm = runs["solver"] == LM
+    if not glob.any():
+        return [
+            "No global method ran in these records: nothing to compare with "
+            f"Levenberg–Marquardt ({int(lm.sum())} lm runs).\n"
+        ]
+    if not lm.any():
+        return ["No Levenberg–Marquardt run in these records: nothing to compare with.\n"]
+    for (track, tier, treatment), g in runs.groupby(["track", "tier", "treatment"], sort=False):
+        for start in ("default", "random"):
+            gs = g[g["start"] == start]
+            gl = gs[gs["solver"] == LM]
+            gg = gs[fam.loc[gs.index] == "global"]
+            if not len(gl) and not len(gg):
+                continue
+            parts = []
+            for solver, gr in [(LM, gl)] + sorted(
+                gg.groupby("solver"), key=lambda kv: method_order([kv[0]])
+            ):
+                if not len(gr):
+                    parts.append(f"{solver}: no run")
+                    continue
+                k = int(ok.loc[gr.index].sum())
+                parts.append(
+                    f"{solver} {_pct(k, len(gr))}, median max |error| "
+                    f"{fmt_pct(float(gr['max_abs_err'].median()))} %, median "
+                    f"{fmt_num(float(gr['fe_total'].median()))} fe"
+                )
+            verdict = _verdict(gl, gg, ok)
+            tr = "" if treatment == "none" else f", {treatment} treatment"
+            out.append(
+                f"- **{track} track, {tier} data{tr}, {start} start(s)** (pooled over "
+                f"{gs['case'].nunique()} case(s)): " + "; ".join(parts) + f". {verdict}"
+            )
+    return out + [""] if out else ["No run from the default or random starts.\n"]
+
+
+def _verdict(gl: pd.DataFrame, gg: pd.DataFrame, ok: pd.Series) -> str:
+    if not len(gl) or not len(gg):
+        return ""
+    s_l = float(ok.loc[gl.index].mean())
+    best = max(
+        ((s, float(ok.loc[g.index].mean()), g) for s, g in gg.groupby("solver")),
+        key=lambda t: (t[1], -float(t[2]["fe_total"].median())),
+    )
+    solver, s_g, g = best
+    fe_l, fe_g = float(gl["fe_total"].median()), float(g["fe_total"].median())
+    ratio = fe_g / fe_l if fe_l > 0 else math.inf
+    if s_g > s_l:
+        return (
+            f"The best global method, {solver}, succeeds more often than lm "
+            f"({100 * s_g:.0f} % against {100 * s_l:.0f} %) at {fmt_num(ratio, 2)} × its median "
+            "cost."
+        )
+    if s_g == s_l:
+        return (
+            f"No global method succeeds more often than lm ({100 * s_l:.0f} %); the best, "
+            f"{solver}, costs {fmt_num(ratio, 2)} × as much (median fe)."
+        )
+    return (
+        f"lm succeeds more often ({100 * s_l:.0f} %) than every global method (best: {solver}, "
+        f"{100 * s_g:.0f} %), which costs {fmt_num(ratio, 2)} × as much (median fe)."
+    )
+
+
+def _worst_parameters(runs: pd.DataFrame, ok: pd.Series, post: pd.DataFrame | None) -> list[str]:
+    from bench.report.posterior import PAPER_A_ERROR
+
+    params = runs.attrs.get("parameters") or [c[4:] for c in runs.columns if c.startswith("err.")]
+    params = [p for p in params if f"err.{p}" in runs and runs[f"err.{p}"].notna().any()]
+    out = []
+    for (track, tier), g in runs.groupby(["track", "tier"], sort=False):
+        g = g[~g["crashed"].astype(bool)]
+        med = {
+            p: float(g[f"err.{p}"].abs().median()) for p in params if g[f"err.{p}"].notna().any()
+        }
+        med = {p: v for p, v in med.items() if math.isfinite(v)}
+        if not med:
+            continue
+        rank = sorted(med.items(), key=lambda kv: -kv[1])
+        worst = ", ".join(f"{p} {fmt_pct(v)} %" for p, v in rank[:3])
+        line = (
+            f"- **{track} track, {tier} data**: median |error| over all {len(g)} runs, worst "
+            f"first: {worst} (best identified: {rank[-1][0]} {fmt_pct(rank[-1][1])} %)."
+        )
+        exp = g[g["err.a"].notna()] if "err.a" in g else g.iloc[0:0]
+        if len(exp):
+            a_med = float(exp["err.a"].abs().median())
+            a_ok = exp[ok.loc[exp.index]]
+            pt = float(exp["err.pt0"].abs().median()) if "err.pt0" in exp else math.nan
+            line += (
+                f" On the exponent cases ({len(exp)} runs) |error of a| has median "
+                f"{fmt_pct(a_med)} % (range {fmt_pct(float(exp['err.a'].abs().min()))}–"
+                f"{fmt_pct(float(exp['err.a'].abs().max()))} %; the paper's Table 1: "
+                f"{PAPER_A_ERROR[0]:g}–{PAPER_A_ERROR[1]:g} %), |error of pt0| median "
+                f"{fmt_pct(pt)} %; {len(a_ok)} of these runs meet the success criterion."
+            )
+        out.append(line)
+    if post is not None and len(post):
+        rows = post[post["parameter"].isin(["a", "pt0"])]
+        for (case, tier, source), g in rows.groupby(["case", "tier", "source"], sort=False):
+            gi = g.set_index("parameter")
+            parts = []
+            for p in ("a", "pt0"):
+                if p in gi.index and np.isfinite(gi.loc[p, "width95_pct"]):
+                    r = gi.loc[p]
+                    lap = (
+                        f", Laplace ±2 sd {fmt_num(float(r['laplace_width_pct']), 2)} %"
+                        if np.isfinite(r["laplace_width_pct"])
+                        else ""
+                    )
+                    parts.append(
+                        f"{p}: 95 % interval {fmt_num(float(r['q025_n']), 3)}–"
+                        f"{fmt_num(float(r['q975_n']), 3)} × reference (width "
+                        f"{fmt_num(float(r['width95_pct']), 2)} %{lap})"
+                    )
+            if parts:
+                out.append(f"- posterior, {case} ({tier}, {source}): " + "; ".join(parts) + ".")
+    else:
+        out.append("- no posterior (no MCMC record and no posterior study summary) to compare.")
+    return out + [""]
+
+
+def _jacobian_finding(jac: pd.DataFrame) -> list[str]:
+    js = sorted({c.split(".", 1)[1] for c in jac.columns if c.startswith("fe.")})
+    if "exact" not in js:
+        return ["No exact-Jacobian run to compare with.\n"]
+    out = []
+    for j in [j for j in js if j != "exact"]:
+        sub = jac[jac[f"fe.{j}"].notna() & jac["fe.exact"].notna()]
+        if not len(sub):
+            continue
+        ratio = (sub[f"fe.{j}"] / sub["fe.exact"]).replace([np.inf, -np.inf], np.nan).dropna()
+        it = (sub[f"iterations.{j}"] - sub["iterations.exact"]).astype(float)
+        derr = (sub[f"max_err.{j}"] - sub["max_err.exact"]).abs().astype(float)
+        out.append(
+            f"- {j} differences against exact Jacobians ({len(sub)} pairs of runs): "
+            f"forward-equivalents × {fmt_num(float(ratio.median()), 3)} (median; range "
+            f"{fmt_num(float(ratio.min()), 3)}–{fmt_num(float(ratio.max()), 3)}), iterations "
+            f"{float(it.median()):+.0f} (median), final max |error| differing by "
+            f"{fmt_pct(float(derr.median()))} percentage points (median)."
+        )
+    return out + [""]
