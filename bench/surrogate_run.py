@@ -65,6 +65,19 @@ def training_charge(sur) -> dict:
     return {"n": n, "wall_s": wall, "forward_equivalents": float(n)}
 
 
+def nominal_equivalents(sur, log) -> float:
+    """Deterministic forward-equivalents of surrogate evaluations (log entries): each plain
+    evaluation priced at the surrogate's stored median evaluation time over the FE run time of
+    its validation, each one with a Jacobian at its stored Jacobian time over that."""
+    val = sur.info.get("validation") or {}
+    unit = val.get("fe_eval_s")
+    if not unit:
+        return float(len(log))
+    plain = float(val.get("surrogate_eval_s") or 0.0) / unit
+    jac = float(val.get("surrogate_jacobian_s") or val.get("surrogate_eval_s") or 0.0) / unit
+    return sum(jac if e.get("kind") == "jacobian" else plain for e in log)
+
+
 def combine(result, objectives, sur, name, polished=None, *, polish_charges_repeat=False):
     """The RunResult of an identification on ``sur`` (``result``, its evaluators
     ``objectives``), followed by the FE polish ``polished`` (or None); see the module docstring."""
@@ -72,6 +85,7 @@ def combine(result, objectives, sur, name, polished=None, *, polish_charges_repe
     new = [e for obj in objectives for e in obj.log if not e["cached"]]
     sur_wall = sum(float(e["wall_s"]) for e in new)
     sur_fe = sur_wall / unit if unit == unit and unit > 0 else float(len(new))
+    sur_nominal = nominal_equivalents(sur, new)
     train = training_charge(sur)
     charges = {k: dict(v) for k, v in result.charges.items()}
     if polished is not None and not polish_charges_repeat:
@@ -89,6 +103,7 @@ def combine(result, objectives, sur, name, polished=None, *, polish_charges_repe
         "wall_s": result.wall_s,
         "model_wall_s": sur_wall,
         "forward_equivalents": sur_fe,
+        "forward_equivalents_nominal": sur_nominal,
         "fe_unit_s": unit,
         "x": result.x,
         "cost": result.cost,
@@ -116,6 +131,7 @@ def combine(result, objectives, sur, name, polished=None, *, polish_charges_repe
         return replace(
             result,
             forward_equivalents=sur_fe,
+            forward_equivalents_nominal=sur_nominal,
             charges=charges,
             provenance=prov,
             message=f"on the surrogate: {result.message}",
@@ -167,6 +183,7 @@ def combine(result, objectives, sur, name, polished=None, *, polish_charges_repe
         n_iterations=result.n_iterations + p.n_iterations,
         wall_s=result.wall_s + p.wall_s,
         forward_equivalents=sur_fe + p.forward_equivalents,
+        forward_equivalents_nominal=sur_nominal + p.forward_equivalents_nominal,
         charges=charges,
         provenance=prov,
         history=history,
