@@ -129,3 +129,28 @@ def test_posterior_figure_is_written(tmp_path):
     assert set(post["source"]) == {"posterior study", "mcmc run (fe, seed 0, 1 of 1)"}
     p = P.posterior_figure(EXP, post, tmp_path / "fig")
     assert p.is_file() and p.stat().st_size > 5000
+
+
+def test_summary_laplace_at_the_fe_optimum_and_a_beyond_names(tmp_path):
+    c = get_case(EXP)
+    names = list(c.names)
+    ref = dict(zip(names, c.reference))
+    a_ref = c.material_parameters(c.reference)["a"]
+    s = {
+        "case": EXP,
+        "tier": "model-error",
+        "names": names,
+        "mean": {**{n: ref[n] for n in names}, "a": 1.1 * a_ref},
+        "q025": {**{n: 0.9 * ref[n] for n in names}, "a": 0.8 * a_ref},
+        "q975": {**{n: 1.1 * ref[n] for n in names}, "a": 1.4 * a_ref},
+        "laplace_sd": {**{n: 0.01 * ref[n] for n in names}, "a": 0.1 * a_ref},
+        "fe_optimum": {**{n: 1.02 * ref[n] for n in names}, "a": 1.2 * a_ref},
+        "surrogate": {"name": "default"},
+    }
+    (tmp_path / EXP).mkdir()
+    (tmp_path / EXP / "summary.json").write_text(json.dumps(s))
+    post = P.posterior_frame(folders=[tmp_path]).set_index("parameter")
+    assert post.loc["E", "laplace_lo_n"] == pytest.approx(1.0)  # 1.02 - 2 x 0.01
+    assert post.loc["a", "width95_pct"] == pytest.approx(60.0)
+    assert post.loc["a", "laplace_hi_n"] == pytest.approx(1.4)  # 1.2 + 2 x 0.1
+    assert post.loc["a", "source"] == "posterior study (surrogate)"

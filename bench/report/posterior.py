@@ -96,18 +96,21 @@ def rows_from_summary(path: Path) -> list[dict]:
         "q025": _per_param(_first(s, "q025", "q2.5"), names),
         "q975": _per_param(_first(s, "q975", "q97.5"), names),
         "laplace_sd": _per_param(s.get("laplace_sd"), names),
-        "laplace_mean": _per_param(_first(s, "laplace_mean", "map", "x_map", "optimum"), names),
+        "laplace_mean": _per_param(
+            _first(s, "laplace_mean", "fe_optimum", "optimum", "x_opt", "map", "x_map"), names
+        ),
+        "laplace_sd_inflated": _per_param(s.get("laplace_sd_inflated"), names),
         "tau": _per_param(s.get("tau"), names),
     }
     tm = s.get("tau_multiple")
     tau_mult = _per_param(tm, names) if isinstance(tm, (dict, list)) else {}
-    params = names or sorted({k for d in stats.values() for k in d})
+    params = list(names) + sorted({k for k in stats["mean"] if k not in names})
     out = []
     for p in params:
         row = {
             "case": case,
             "tier": str(s.get("tier") or "model-error"),
-            "source": "posterior study",
+            "source": "posterior study" + (" (surrogate)" if s.get("surrogate") else ""),
             "parameter": p,
             "n_samples": _num(s.get("n_samples")),
             "tau_multiple": tau_mult.get(p, _num(tm) if not isinstance(tm, (dict, list)) else 0),
@@ -232,6 +235,11 @@ def posterior_frame(records=(), folders=()) -> pd.DataFrame:
     df["laplace_hi_n"] = (lm + 2 * lsd) / ref
     df["width95_pct"] = 100.0 * (df["q975"] - df["q025"]).to_numpy(float) / np.abs(ref)
     df["laplace_width_pct"] = 100.0 * 4.0 * lsd / np.abs(ref)
+    if "laplace_sd_inflated" not in df:
+        df["laplace_sd_inflated"] = math.nan
+    df["laplace_inflated_width_pct"] = (
+        100.0 * 4.0 * df["laplace_sd_inflated"].to_numpy(float) / np.abs(ref)
+    )
     df = df.drop_duplicates(["case", "tier", "source", "parameter"], keep="last")
     return df.reset_index(drop=True)
 
