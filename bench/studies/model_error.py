@@ -271,13 +271,15 @@ def _flat(row: dict) -> dict:
 
 def render_model_error(folder) -> Path:
     """Draw ``bias_vs_cost.png``: max |LM error| (%) against total forward-equivalents, one marker
-    per treatment, filled for the full face and open with a plate margin."""
+    per treatment, filled for the full face and open with a plate margin; rewrite ``summary.csv``
+    with every row in the folder (a partial run writes only its own)."""
     from bench import plotting
 
     folder = Path(folder)
-    rows = [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))]
+    rows = _rows_of(folder)
     if not rows:
         raise FileNotFoundError(f"{folder}: no study files (*.json); run the study first")
+    write_csv(folder / "summary.csv", [_flat(r) for r in rows])  # every row in the folder
     plt = plotting.pyplot()
     fig, ax = plt.subplots(figsize=plotting.SINGLE)
     markers = dict(zip(TREATMENT_ORDER, "osD^"))
