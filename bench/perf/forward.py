@@ -15,6 +15,18 @@ assembly: ``NewtonSettings(linear_solver="superlu", assembly="numpy")``), its be
 the speed-up old / new and the largest relative difference of the plate forces. The runs of the
 two paths alternate, so both see the same machine load. Run it with ``OMP_NUM_THREADS=1`` for
 one-core figures.
+
+Where the ``crosscheck`` extra (openseespy) is installed (or with ``--opensees yes``), each mesh
+also gets the same run in OpenSees: the quarter model of the same mesh (``bbarBrick``, same nodes,
+``nDMaterial DruckerPrager``) with the linear form OpenSees has (K = 1) at the cross-check's
+reference with psi = 15 deg (``bench/crosscheck``), friction plates, 1.5 mm in 10 snapshots, the
+strategy that converges there (Newton with 5x smaller steps: its baseline of 10 steps diverges,
+``docs/crosscheck_opensees.md``), against femubench's default run of the same material on this
+mesh spec; printed: both wall times, the ratio OpenSees / femubench, and the largest relative
+difference of the plate forces (OpenSees integrates in 5x smaller increments, so the two answers
+differ by the step size, ~0.5 %; at equal increments they agree to the solvers' tolerances,
+``femubench crosscheck``). Give ``MESH:quarter`` to compare the same quarter model.
+``--opensees no`` skips it (on ``coarse`` OpenSees takes minutes, on ``paper`` far longer).
 """
 
 from __future__ import annotations
@@ -56,7 +68,17 @@ def main(argv=None) -> None:
     )
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-baseline", action="store_true", help="skip the old code path")
+    ap.add_argument(
+        "--opensees",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="the same run in OpenSees (auto: where openseespy is installed)",
+    )
     args = ap.parse_args(argv)
+    if args.opensees == "auto":
+        from bench.crosscheck.loader import installed
+
+        args.opensees = "yes" if installed() else "no"
     names = ["elastic"] + list(CASES) if args.cases == "all" else args.cases.split(",")
     for name in names:
         if name != "elastic" and name not in CASES:
@@ -106,6 +128,40 @@ def main(argv=None) -> None:
                 line += f" | {o.wall_s:7.3f} {o.wall_s / r.wall_s:8.2f} {dF:8.1e}"
             print(line, flush=True)
         print(f"{spec:14} setup (B-bar, sparsity pattern): {setup:.3f} s")
+        if args.opensees == "yes":
+            print(opensees_line(spec, disc, args.repeat), flush=True)
+
+
+def opensees_line(spec: str, disc, repeat: int) -> str:
+    """The same run in OpenSees and in femubench on the mesh of ``disc`` (see the module
+    docstring), as one printed line."""
+    from bench.crosscheck.mapping import REFERENCE, opensees_parameters
+    from bench.crosscheck.opensees_box import CURES, opensees_box
+    from bench.crosscheck.reference import DELTA_MM, femubench_material, mapped
+
+    p = {**REFERENCE, "psi": 15.0}
+    mat = femubench_material(p)
+    ours = min(
+        (run(disc, mat, Loading(), FORWARD_SETTINGS) for _ in range(repeat)), key=lambda r: r.wall_s
+    )
+    strategy = next(c for c in CURES if c.substeps == 5)
+    theirs = opensees_box(
+        disc.full_mesh,
+        opensees_parameters(**mapped(p)),
+        DELTA_MM,
+        10,
+        "friction",
+        strategy=strategy,
+    )
+    n = min(len(theirs.reaction_kN), len(ours.reaction_kN))
+    dF = np.max(np.abs(theirs.reaction_kN[:n] / ours.reaction_kN[:n] - 1.0)) if n else float("nan")
+    return (
+        f"{spec:14} OpenSees, same mesh (quarter), linear DP K = 1, psi = 15: "
+        f"{'converged' if theirs.converged else 'FAILED'} ({strategy.name}, "
+        f"{sum(theirs.step_iterations)} iterations) in {theirs.wall_s:.2f} s; femubench "
+        f"{ours.wall_s:.3f} s ({ours.iterations} iterations): OpenSees / femubench = "
+        f"{theirs.wall_s / ours.wall_s:.1f}; max dF/F {dF:.1e} over {n} snapshots"
+    )
 
 
 if __name__ == "__main__":
