@@ -417,13 +417,12 @@ class GPFit:
             k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (n, C)
             return (np.einsum("nr,nr->r", k[:, comp], alpha) * y_std + y_mean)[None]
         out = np.empty((len(Z), self.n_outputs))
-        cols = [np.flatnonzero(comp == c) for c in range(len(amp))]
-        step = max(1, 4_000_000 // (len(X) * max(len(amp), X.shape[1])))
-        for i in range(0, len(Z), step):  # chunks bound the (q, n, C) temporaries
+        # small chunks: the (q, n, C) temporaries stay in cache
+        step = max(1, 200_000 // (len(X) * max(len(amp), X.shape[1])))
+        for i in range(0, len(Z), step):
             diff = Z[i : i + step, None, :] - X[None]  # (q, n, d): no cancellation
             k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (q, n, C)
-            for c in range(len(amp)):
-                out[i : i + step, cols[c]] = k[:, :, c] @ alpha[:, cols[c]]
+            out[i : i + step] = np.einsum("qnr,nr->qr", k[:, :, comp], alpha)
         return out * y_std + y_mean
 
     def gradient(self, z) -> np.ndarray:

@@ -1,0 +1,218 @@
+"""Surrogate benchmarks (not tests): speed of one evaluation and of a batch against one FE run,
+measured in the same run; surrogate search + FE polish against FE-only LM from random starts.
+
+    OMP_NUM_THREADS=1 python -m bench.perf.surrogate speed [--cases all] [--repeat 200]
+    OMP_NUM_THREADS=1 python -m bench.perf.surrogate polish [--cases all] [--starts 3]
+        [--tier consistent] [--out results/surrogates/polish_vs_lm.jsonl]
+
+``speed``: per case, the median wall time of one surrogate call (checks included), of one call
+with the Jacobian, the per-point time of batches of 32 and 1000 points (``evaluate_batch``, the
+path the vectorised mapper takes for populations and emcee), and the median of 3 plain FE runs on
+the coarse mesh, alternating so that both see the same load; the ratios FE / surrogate.
+
+``polish``: per case, the FE-only LM optimum ``x_LM`` (LM from the default start, budget 200), then
+from ``--starts`` seeded random starts (``start = random``, ``start_index = k``): FE-only LM
+(budget 100) and ``cma`` on the default surrogate (budget 3000) + FE polish (lm, exact Jacobians,
+budget 40); a run reaches the optimum when every parameter is within ``--tol`` (0.1 %) of
+``x_LM``. One JSON line per run (resumable: done runs are skipped).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _cases(spec: str) -> list[str]:
+    from problems.inverse.cases import CASES
+
+    if spec == "all":
+        return [n for n, c in CASES.items() if not c.is_analytic]
+    return spec.split(",")
+
+
+def speed(cases, repeat: int) -> list[dict]:
+    from bench.surrogate_run import load_for
+    from problems.inverse.data import get_data
+    from problems.inverse.forward import FEForwardModel
+
+    rows = []
+    for name in cases:
+        sur = load_for("default", name, "coarse")
+        data = get_data(name)
+        fe = FEForwardModel(sur.checker.case, "coarse", data.settings.loading, data.points)
+        rng = np.random.default_rng(0)
+        X = sur.lower + rng.random((1000, len(sur.names))) * (sur.upper - sur.lower)
+        sur(X[0]), sur(X[0], jacobian=True), sur.evaluate_batch(X[:32])  # warm-up
+        fe_t, one, jac, b32, b1000 = [], [], [], [], []
+        for k in range(3):
+            t0 = time.perf_counter()
+            fe(X[k])
+            fe_t.append(time.perf_counter() - t0)
+            for x in X[:repeat]:
+                t0 = time.perf_counter()
+                sur(x)
+                one.append(time.perf_counter() - t0)
+            for x in X[: max(1, repeat // 10)]:
+                t0 = time.perf_counter()
+                sur(x, jacobian=True)
+                jac.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            sur.evaluate_batch(X[32 * k : 32 * (k + 1)])
+            b32.append((time.perf_counter() - t0) / 32)
+            t0 = time.perf_counter()
+            sur.evaluate_batch(X)
+            b1000.append((time.perf_counter() - t0) / len(X))
+        row = {
+            "case": name,
+            "fe_s": statistics.median(fe_t),
+            "surrogate_s": statistics.median(one),
+            "surrogate_jacobian_s": statistics.median(jac),
+            "batch32_per_point_s": statistics.median(b32),
+            "batch1000_per_point_s": statistics.median(b1000),
+        }
+        for k in ("surrogate_s", "surrogate_jacobian_s", "batch32_per_point_s"):
+            row["ratio_" + k[:-2]] = row["fe_s"] / row[k]
+        row["ratio_batch1000_per_point"] = row["fe_s"] / row["batch1000_per_point_s"]
+        rows.append(row)
+        print(
+            f"{name:24} FE {row['fe_s']:.3f} s | one {1e6 * row['surrogate_s']:.0f} us "
+            f"(x{row['ratio_surrogate']:.3g}), +Jacobian {1e6 * row['surrogate_jacobian_s']:.0f} us"
+            f", batch 32: {1e6 * row['batch32_per_point_s']:.0f} us/point "
+            f"(x{row['ratio_batch32_per_point']:.3g}), batch 1000: "
+            f"{1e6 * row['batch1000_per_point_s']:.0f} us/point "
+            f"(x{row['ratio_batch1000_per_point']:.3g})",
+            flush=True,
+        )
+    return rows
+
+
+def _within(x, ref, tol) -> tuple[bool, float]:
+    dev = float(np.max(np.abs(np.asarray(x) / np.asarray(ref) - 1.0)))
+    return dev <= tol, dev
+
+
+def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
+    from bench.identification import Identification, identify
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = set()
+    if out.exists():
+        for line in out.read_text().splitlines():
+            d = json.loads(line)
+            done.add((d["case"], d["tier"], d["kind"], d["start_index"]))
+
+    def record(doc):
+        with out.open("a") as f:
+            f.write(json.dumps(doc) + "\n")
+
+    for name in cases:
+        ref_key = (name, tier, "lm-default", -1)
+        if ref_key in done:
+            x_lm = next(
+                json.loads(line)["x"]
+                for line in out.read_text().splitlines()
+                if (lambda d: (d["case"], d["tier"], d["kind"], d["start_index"]) == ref_key)(
+                    json.loads(line)
+                )
+            )
+        else:
+            r = identify(Identification(name, "lm", tier=tier, budget=200))
+            x_lm = r.x
+            record(
+                {
+                    "case": name,
+                    "tier": tier,
+                    "kind": "lm-default",
+                    "start_index": -1,
+                    "x": r.x,
+                    "cost": r.cost,
+                    "n_evals": r.n_evals,
+                    "forward_equivalents": r.forward_equivalents,
+                    "wall_s": r.wall_s,
+                    "status": r.status,
+                }
+            )
+            print(f"{name}: FE-only LM optimum cost {r.cost:.6g} ({r.n_evals} evaluations)")
+        for k in range(starts):
+            for kind in ("lm", "cma+polish"):
+                if (name, tier, kind, k) in done:
+                    continue
+                if kind == "lm":
+                    spec = Identification(
+                        name, "lm", tier=tier, budget=100, start="random", start_index=k
+                    )
+                else:
+                    spec = Identification(
+                        name,
+                        "cma",
+                        tier=tier,
+                        budget=3000,
+                        start="random",
+                        start_index=k,
+                        surrogate="default",
+                        polish=True,
+                        polish_budget=40,
+                    )
+                t0 = time.perf_counter()
+                r = identify(spec)
+                ok, dev = _within(r.x, x_lm, tol)
+                doc = {
+                    "case": name,
+                    "tier": tier,
+                    "kind": kind,
+                    "start_index": k,
+                    "x0": r.x0,
+                    "x": r.x,
+                    "cost": r.cost,
+                    "reached": ok,
+                    "max_rel_dev": dev,
+                    "n_evals": r.n_evals,
+                    "forward_equivalents": r.forward_equivalents,
+                    "training_runs": r.charges.get("surrogate-training", {}).get("n", 0),
+                    "fe_polish_evals": (r.extra.get("polish") or {}).get("n_evals"),
+                    "surrogate_evals": (r.extra.get("surrogate") or {}).get("n_evals"),
+                    "surrogate_x": (r.extra.get("surrogate") or {}).get("x"),
+                    "wall_s": time.perf_counter() - t0,
+                    "status": r.status,
+                }
+                record(doc)
+                print(
+                    f"{name} start {k} {kind:10}: {'REACHED' if ok else 'missed '} max dev "
+                    f"{100 * dev:.3g} %, cost {r.cost:.6g}, {r.n_evals} evaluations, "
+                    f"{r.forward_equivalents:.1f} fe, {doc['wall_s']:.0f} s",
+                    flush=True,
+                )
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("what", choices=["speed", "polish"])
+    p.add_argument("--cases", default="all")
+    p.add_argument("--repeat", type=int, default=200)
+    p.add_argument("--starts", type=int, default=3)
+    p.add_argument("--tier", default="consistent", choices=["consistent", "model-error"])
+    p.add_argument("--tol", type=float, default=1e-3)
+    p.add_argument("--out", default=None)
+    p.add_argument("--json", default=None, help="speed: write the rows as JSON")
+    a = p.parse_args(argv)
+    cases = _cases(a.cases)
+    if a.what == "speed":
+        rows = speed(cases, a.repeat)
+        if a.json:
+            Path(a.json).write_text(json.dumps(rows, indent=1))
+    else:
+        from bench.paths import results_root
+
+        out = Path(a.out) if a.out else results_root() / "surrogates" / "polish_vs_lm.jsonl"
+        polish(cases, a.starts, a.tier, out, a.tol)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
