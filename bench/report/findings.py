@@ -38,7 +38,7 @@ def findings(
     rule: str = "",
 ) -> list[str]:
     """Markdown lines of the findings (see the module docstring)."""
-    from bench.report.metrics import winners
+    from bench.report.metrics import rank, winners
 
     md = ["## Findings\n"]
     md.append(
@@ -54,8 +54,11 @@ def findings(
         sub = ert_df[(ert_df["track"] == track) & (ert_df["tier"] == tier)]
         g = g.assign(_c=g["case"].map(case_order(g["case"]).index)).sort_values("_c")
         solved = g[g["successes"] > 0]
-        counts = solved["method"].value_counts()
-        lead = ", ".join(f"{m} on {n}" for m, n in counts.items()) if len(counts) else "no method"
+        first = list(dict.fromkeys(solved["method"]))
+        counts = sorted(
+            ((m, int((solved["method"] == m).sum())) for m in first), key=lambda t: -t[1]
+        )
+        lead = ", ".join(f"{m} on {n}" for m, n in counts) if counts else "no method"
         md.append(
             f"- **{track} track, {tier} data** ({len(sub)} method × case cells, "
             f"{int(sub['runs'].sum())} runs): a method succeeds on {len(solved)} of {len(g)} "
@@ -64,10 +67,7 @@ def findings(
         lines = ["| case | winner | success | ERT [95 % CI] (fe) | runner-up (success, ERT) |"]
         lines.append("|:---|:---|---:|---:|:---|")
         for _, r in g.iterrows():
-            rest = sub[(sub["case"] == r["case"]) & (sub["method"] != r["method"])]
-            rest = rest.assign(_s=-rest["success_pct"], _e=rest["ert"]).sort_values(
-                ["_s", "_e", "fe_median"]
-            )
+            rest = rank(sub[(sub["case"] == r["case"]) & (sub["method"] != r["method"])])
             ru = DASH
             if len(rest):
                 q = rest.iloc[0]
@@ -75,7 +75,12 @@ def findings(
                     f"{q['method']} ({_pct(int(q['successes']), int(q['runs']))}, "
                     f"{fmt_ert(q['ert'], q['ert_lo'], q['ert_hi'])})"
                 )
-            win = r["method"] if r["successes"] > 0 else f"none ({r['method']} closest)"
+            win = (
+                r["method"]
+                if r["successes"] > 0
+                else f"none; closest: {r['method']} (median max |error| "
+                f"{fmt_pct(float(r['max_err_median']))} %)"
+            )
             lines.append(
                 f"| {r['case']} | {win} | {_pct(int(r['successes']), int(r['runs']))} | "
                 f"{fmt_ert(r['ert'], r['ert_lo'], r['ert_hi'])} | {ru} |"
@@ -200,28 +205,44 @@ def _worst_parameters(runs: pd.DataFrame, ok: pd.Series, post: pd.DataFrame | No
             )
         out.append(line)
     if post is not None and len(post):
-        rows = post[post["parameter"].isin(["a", "pt0"])]
-        for (case, tier, source), g in rows.groupby(["case", "tier", "source"], sort=False):
-            gi = g.set_index("parameter")
-            parts = []
-            for p in ("a", "pt0"):
-                if p in gi.index and np.isfinite(gi.loc[p, "width95_pct"]):
-                    r = gi.loc[p]
-                    lap = (
-                        f", Laplace ±2 sd {fmt_num(float(r['laplace_width_pct']), 2)} %"
-                        if np.isfinite(r["laplace_width_pct"])
-                        else ""
-                    )
-                    parts.append(
-                        f"{p}: 95 % interval {fmt_num(float(r['q025_n']), 3)}–"
-                        f"{fmt_num(float(r['q975_n']), 3)} × reference (width "
-                        f"{fmt_num(float(r['width95_pct']), 2)} %{lap})"
-                    )
-            if parts:
-                out.append(f"- posterior, {case} ({tier}, {source}): " + "; ".join(parts) + ".")
+        out += _posterior_lines(post)
     else:
         out.append("- no posterior (no MCMC record and no posterior study summary) to compare.")
     return out + [""]
+
+
+def _posterior_lines(post: pd.DataFrame) -> list[str]:
+    """Per data tier, for a and pt0: the range of the 95 % posterior widths over the cases and
+    sources, and in how many of them the interval contains the reference."""
+    out = []
+    rows = post[post["parameter"].isin(["a", "pt0"]) & np.isfinite(post["width95_pct"])]
+    for tier, g in rows.groupby("tier", sort=True):
+        parts = []
+        for p in ("a", "pt0"):
+            gp = g[g["parameter"] == p]
+            if not len(gp):
+                continue
+            w = gp["width95_pct"].astype(float)
+            inside = int(((gp["q025_n"] <= 1.0) & (gp["q975_n"] >= 1.0)).sum())
+            lap = gp["laplace_width_pct"].astype(float).dropna()
+            lap_txt = (
+                f", Laplace ±2 sd {fmt_num(float(lap.min()), 2)}–{fmt_num(float(lap.max()), 2)} %"
+                if len(lap)
+                else ""
+            )
+            parts.append(
+                f"{p} 95 % width {fmt_num(float(w.min()), 2)}–{fmt_num(float(w.max()), 2)} % of "
+                f"the reference{lap_txt}, the interval contains the reference in {inside} of "
+                f"{len(gp)}"
+            )
+        if parts:
+            n_cases = g["case"].nunique()
+            n_src = g.groupby(["case", "source"]).ngroups
+            out.append(
+                f"- **posterior, {tier} data** ({n_src} posterior(s) over {n_cases} case(s), "
+                "see the posterior table): " + "; ".join(parts) + "."
+            )
+    return out
 
 
 def _jacobian_finding(jac: pd.DataFrame) -> list[str]:

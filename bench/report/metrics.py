@@ -88,6 +88,8 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
     runs = runs.copy()
     runs.attrs = attrs
     n = len(runs)
+    if "forward_equivalents_nominal" in runs:
+        runs["fe_nominal"] = pd.to_numeric(runs["forward_equivalents_nominal"], errors="coerce")
     for col, d in DEFAULTS.items():
         if col not in runs:
             runs[col] = [d] * n
@@ -200,6 +202,9 @@ def ert_table(
                 "success_pct": 100.0 * float(ok.mean()),
                 "fe_sum": float(fe.sum()),
                 "fe_median": float(np.median(fe)),
+                "max_err_median": float(g["max_abs_err"].median())
+                if "max_abs_err" in g
+                else math.nan,
                 "ert": ert(fe, ok),
                 "ert_lo": lo,
                 "ert_hi": hi,
@@ -215,14 +220,26 @@ def ert_table(
     return df
 
 
-def winners(ert_df: pd.DataFrame) -> pd.DataFrame:
-    """Per (track, tier, case): the method with the highest success rate, then the lowest ERT,
-    then the lowest median forward-equivalents."""
+def rank(ert_df: pd.DataFrame) -> pd.DataFrame:
+    """``ert_df`` sorted best first within each (track, tier, case): highest success rate, then
+    lowest ERT, then (for methods that never succeed) smallest median max |error|, then lowest
+    median forward-equivalents."""
     if not len(ert_df):
         return ert_df
-    d = ert_df.assign(_s=-ert_df["success_pct"], _e=ert_df["ert"].fillna(math.inf))
-    d = d.sort_values(["track", "tier", "case", "_s", "_e", "fe_median"], kind="stable")
-    return d.groupby(["track", "tier", "case"], sort=False).head(1).drop(columns=["_s", "_e"])
+    d = ert_df.assign(
+        _s=-ert_df["success_pct"],
+        _e=ert_df["ert"].fillna(math.inf),
+        _x=ert_df["max_err_median"].fillna(math.inf) if "max_err_median" in ert_df else 0.0,
+    )
+    d = d.sort_values(["track", "tier", "case", "_s", "_e", "_x", "fe_median"], kind="stable")
+    return d.drop(columns=["_s", "_e", "_x"])
+
+
+def winners(ert_df: pd.DataFrame) -> pd.DataFrame:
+    """Per (track, tier, case): the first method of :func:`rank`."""
+    if not len(ert_df):
+        return ert_df
+    return rank(ert_df).groupby(["track", "tier", "case"], sort=False).head(1)
 
 
 # --- cost targets ------------------------------------------------------------------------------
@@ -305,6 +322,8 @@ def jacobian_table(runs: pd.DataFrame) -> pd.DataFrame:
             row[f"iterations.{j}"] = int(r.get("n_iterations", 0) or 0)
             row[f"evals.{j}"] = int(r.get("n_evals", 0) or 0)
             row[f"fe.{j}"] = float(r["fe_solver"])
+            if "fe_nominal" in r:
+                row[f"fe_nominal.{j}"] = float(r["fe_nominal"])
             row[f"max_err.{j}"] = float(r.get("max_abs_err", math.nan))
         rows.append(row)
     return pd.DataFrame(rows)

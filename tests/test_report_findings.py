@@ -1,0 +1,103 @@
+"""The generated Findings section quotes numbers computed from the frames."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from bench.report import metrics as M
+from bench.report import tables as T
+from bench.report.findings import findings
+from tests.test_report_metrics import EXP, LIN, frame, run_row
+
+
+def _frames():
+    rows = []
+    # LM from the default start: succeeds on LIN (30 fe), fails on EXP (a off by 25 %)
+    rows.append(run_row(LIN, {"E": 0.5}, forward_equivalents=30.0))
+    rows.append(run_row(EXP, {"pt0": 25.0}, forward_equivalents=40.0))
+    # CMA from the default start: succeeds on both, 600 fe each (3 seeds on LIN, one fails)
+    for seed, e in enumerate([0.1, 0.2, 9.0]):
+        rows.append(
+            run_row(
+                LIN,
+                {"E": e},
+                method="cma (consistent)",
+                solver="cma",
+                seed=seed,
+                forward_equivalents=600.0,
+                n_evals=600,
+            )
+        )
+    rows.append(
+        run_row(
+            EXP,
+            {"pt0": 1.0},
+            method="cma (consistent)",
+            solver="cma",
+            forward_equivalents=600.0,
+            n_evals=600,
+        )
+    )
+    # LM from two random starts on LIN: one success, one failure
+    rows.append(run_row(LIN, {"E": 0.3}, start="random", start_index=0, forward_equivalents=20.0))
+    rows.append(run_row(LIN, {"E": 50.0}, start="random", start_index=1, forward_equivalents=25.0))
+    runs, _ = M.prepare(frame(rows))
+    return runs
+
+
+def test_findings_quote_winners_and_costs():
+    runs = _frames()
+    ok = T.success(runs)
+    e = M.ert_table(runs, n_boot=200)
+    text = "\n".join(findings(runs, e, ok, rule=T.success_rule()))
+    # LIN: lm wins (default and random pooled: 2 successes of 3, (30 + 20 + 25) / 2 = 37.5 fe)
+    assert "| linear-compression | lm (consistent) | 2/3 (67 %) | 38 [" in text
+    # EXP: only cma succeeds (600 fe); lm fails because a is 25 % off
+    assert "| exponent-shear | cma (consistent) | 1/1 (100 %) | 600 [600, 600] |" in text
+    assert "the winners: lm (consistent) on 1, cma (consistent) on 1" in text
+    # global vs lm from the default start: lm 1/2, cma 3/4 at 600 / 35 = 17 x the median cost
+    assert "default start(s)** (pooled over 2 case(s)): lm 1/2 (50 %)" in text
+    assert "cma 3/4 (75 %)" in text
+    assert "succeeds more often than lm (75 % against 50 %) at 17 × its median cost" in text
+    assert "random start(s)** (pooled over 1 case(s)): lm 1/2 (50 %)" in text
+    # worst-identified: a on the exponent cases; lm's a is 25 % off, cma's 1 %
+    assert "|error of a| has median 13 % (range 1–25 %; the paper's Table 1: 11–46 %)" in text
+    assert "no posterior" in text
+
+
+def test_findings_without_global_methods_or_lm():
+    runs, _ = M.prepare(frame([run_row(LIN, {"E": 0.5})]))
+    e = M.ert_table(runs, n_boot=50)
+    text = "\n".join(findings(runs, e, T.success(runs)))
+    assert "No global method ran in these records" in text
+    runs2, _ = M.prepare(frame([run_row(LIN, {"E": 0.5}, method="cma (consistent)", solver="cma")]))
+    text2 = "\n".join(findings(runs2, M.ert_table(runs2, n_boot=50), T.success(runs2)))
+    assert "No Levenberg–Marquardt run" in text2
+
+
+def test_findings_fd_versus_exact_and_posterior():
+    rows = [
+        run_row(LIN, {"E": 0.1}, jacobian="exact", n_iterations=5, forward_equivalents=10.0),
+        run_row(LIN, {"E": 0.1}, jacobian="forward", n_iterations=6, forward_equivalents=25.0),
+    ]
+    runs, _ = M.prepare(frame(rows))
+    jac = M.jacobian_table(runs)
+    post = pd.DataFrame(
+        {
+            "case": [EXP, EXP],
+            "tier": ["consistent"] * 2,
+            "source": ["s"] * 2,
+            "parameter": ["a", "pt0"],
+            "width95_pct": [30.0, 8.0],
+            "laplace_width_pct": [28.0, float("nan")],
+            "q025_n": [0.85, 0.96],
+            "q975_n": [1.15, 1.04],
+        }
+    )
+    text = "\n".join(
+        findings(runs, M.ert_table(runs, n_boot=50), T.success(runs), post=post, jac=jac)
+    )
+    assert "forward differences against exact Jacobians (1 pairs of runs): " in text
+    assert "forward-equivalents × 2.5 (median" in text and "iterations +1 (median)" in text
+    assert "a 95 % width 30–30 % of the reference, Laplace ±2 sd 28–28 %" in text
+    assert "contains the reference in 1 of 1" in text
