@@ -103,3 +103,37 @@ def test_overview_over_the_case_folders(tmp_path):
     assert "| case | mesh | none | BAE + 30 mm |" in text
     assert "| linear-shear | coarse | 40.0 % (E) [40.0], 30 | 20.0 % (E) [40.0], 900 |" in text
     assert png.stat().st_size > 1000
+
+
+def test_bias_only_rows(tmp_path, data):
+    run = run_model_error(
+        "linear-compression",
+        meshes=("1,1,2",),
+        treatments=("none", "one-point"),
+        margins=(0.0,),
+        bias_only=True,
+        out=tmp_path,
+        data=data,
+        hifi_mesh="1,1,4",
+    )
+    assert [p.name for p in sorted(tmp_path.glob("*__bias.json"))] == [
+        "1,1,2__none__margin0__fe__bias.json",
+        "1,1,2__one-point__margin0__fe__bias.json",
+    ]
+    none, point = run.rows
+    assert none["bias_only"] and none["lm_error_percent"] == {} and none["n_evals"] <= 2
+    assert np.isfinite(list(point["linearised_bias_percent"].values())).all()
+    assert point["charges"]["hifi"]["n"] == 1
+    assert point["total_forward_equivalents"] > point["forward_equivalents"]
+    with pytest.raises(ValueError, match="needs the LM solution"):
+        run_model_error(
+            "linear-compression",
+            meshes=("1,1,2",),
+            treatments=("iterated",),
+            margins=(0.0,),
+            bias_only=True,
+            out=tmp_path,
+            data=data,
+            hifi_mesh="1,1,4",
+        )
+    render_model_error(tmp_path)  # NaN LM errors are drawn as nothing, not an error
