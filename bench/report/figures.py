@@ -116,7 +116,7 @@ def light_log(ax, axis: str = "y") -> None:
     a = getattr(ax, f"{axis}axis")
     lim = ax.dataLim.intervaly if axis == "y" else ax.dataLim.intervalx
     lo, hi = float(min(lim)), float(max(lim))
-    narrow = lo > 0 and np.isfinite(hi) and hi / lo < 30.0  # less than 1.5 decades: 1, 2, 5
+    narrow = lo > 0 and np.isfinite(hi) and hi / lo < 100.0  # under 2 decades: 1, 2, 5
     subs = (1.0, 2.0, 5.0) if narrow else (1.0,)
     a.set_major_locator(LogLocator(base=10.0, subs=subs, numticks=4 if not narrow else 8))
     a.set_minor_locator(NullLocator())
@@ -321,7 +321,7 @@ def convergence_figure(
     for j, (track, tier) in enumerate(fcs):
         ax = axes[0, j]
         rf = _facet(runs, track, tier)
-        for m in [m for m in methods if m in set(rf["method"])]:
+        for i, m in enumerate([m for m in methods if m in set(rf["method"])]):
             rm = identified(rf[rf["method"] == m])
             curves = []
             for _, r in rm.iterrows():
@@ -345,7 +345,7 @@ def convergence_figure(
                     med,
                     label=f"{m} ({len(curves)})",
                     markevery=_markevery(len(xs)),
-                    **line_style(methods.index(m)),
+                    **line_style(i),
                 )
         log_axis(ax, "x")
         if any(line.get_ydata().size for line in ax.get_lines()):
@@ -488,8 +488,8 @@ def ecdf_figure(
         hf = history[history["config_hash"].isin(rf["config_hash"])] if len(history) else history
         rt = runtimes(rf, hf)
         ax1, ax2 = axes[0, j], axes[1, j]
-        for m in [m for m in methods if m in rt]:
-            st = line_style(methods.index(m))
+        for i, m in enumerate([m for m in methods if m in rt]):
+            st = line_style(i)  # distinct within the panel (each column has its own legend)
             _ecdf(ax1, rt[m]["cost"], xmax, label=m, **st)
             _ecdf(ax2, rt[m]["err"], xmax, **st)
         head = f"{track} track, {tier} data" if nc > 1 or "track" in runs else ""

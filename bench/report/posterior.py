@@ -276,60 +276,78 @@ def width_table(post: pd.DataFrame) -> pd.DataFrame:
 
 
 def posterior_figure(case: str, post_case: pd.DataFrame, path: Path, *, pdf: bool = False):
-    """Per parameter (rows) the posterior 95 % interval and mean divided by the reference, one line
-    per (tier, source), with the Laplace mean ± 2 sd beside it (dashed); one panel."""
-    from bench.plotting import REFERENCE_LINE, pyplot, save
+    """One panel per data tier; per parameter (rows) the posterior 95 % interval (line) and mean
+    (marker) divided by the reference, one line per source, with the Laplace mean ± 2 sd beside
+    it (dashed grey) where known. Returns the PNG path."""
+    from bench.plotting import REFERENCE_LINE
+    from bench.report.figures import _save_fast, grid
     from problems.inverse.cases import LABELS
 
-    plt = pyplot()
     params = parameter_order(post_case["parameter"].unique())
-    groups = list(post_case.groupby(["tier", "source"], sort=True))
-    ng = max(len(groups), 1)
-    fig, ax = plt.subplots(figsize=(6.2, 0.5 + 0.45 * len(params) * max(1, ng)))
-    step = 0.8 / ng
-    markers = ("o", "s", "^", "D", "v", "x")
-    laplace_labelled = False
-    for gi, ((tier, source), g) in enumerate(groups):
-        gp = g.set_index("parameter")
-        lbl = f"{source}, {tier}"
-        for pi, p in enumerate(params):
-            if p not in gp.index:
-                continue
-            r = gp.loc[p]
-            y = pi + 0.4 - (gi + 0.3) * step
-            if np.isfinite(r["q025_n"]) and np.isfinite(r["q975_n"]):
-                ax.plot([r["q025_n"], r["q975_n"]], [y, y], color="0.0", linewidth=1.6)
-                ax.plot(
-                    [r["mean_n"]],
-                    [y],
-                    linestyle="none",
-                    marker=markers[gi % len(markers)],
-                    color="0.0",
-                    markerfacecolor="white",
-                    label=f"95 % interval and mean: {lbl}" if lbl else None,
-                )
-                lbl = None
-            if np.isfinite(r["laplace_lo_n"]) and np.isfinite(r["laplace_hi_n"]):
-                yl = y - 0.35 * step
-                ax.plot(
-                    [r["laplace_lo_n"], r["laplace_hi_n"]],
-                    [yl, yl],
-                    color="0.45",
-                    linestyle="--",
-                    linewidth=1.2,
-                    marker="|",
-                    label=None if laplace_labelled else "Laplace mean ± 2 sd",
-                )
-                laplace_labelled = True
-    ax.axvline(1.0, **REFERENCE_LINE)
-    ax.set_yticks(range(len(params)))
-    ax.set_yticklabels([LABELS.get(p, p) for p in params])
-    ax.set_ylim(-0.6, len(params) - 0.4)
-    ax.invert_yaxis()
-    ax.set_xlabel(r"normalised parameter $x_i/x_i^{\mathrm{REF}}$ (-)")
-    ax.set_title(f"{case}: posterior (MCMC) against the Laplace approximation", fontsize=9)
-    handles, labels = ax.get_legend_handles_labels()
+    tiers = sorted(post_case["tier"].astype(str).unique())
+    sources = sorted(post_case["source"].astype(str).unique())
+    ns = max(1, max(post_case[post_case["tier"] == t]["source"].nunique() for t in tiers))
+    fig, axes = grid(
+        1,
+        len(tiers),
+        panel=(3.6, 0.3 + len(params) * (0.2 + 0.22 * ns)),
+        top=0.55,
+        bottom=0.75 + 0.14 * (len(sources) + 1),
+        left=0.55,
+        sharey=True,
+    )
+    markers = ("o", "s", "^", "D", "v", "x", "P", "*")
+    step = 0.8 / ns
+    for ti, tier in enumerate(tiers):
+        ax = axes[0, ti]
+        pt = post_case[post_case["tier"] == tier]
+        srcs = [x for x in sources if x in set(pt["source"])]
+        for gi, source in enumerate(srcs):
+            gp = pt[pt["source"] == source].set_index("parameter")
+            mk = markers[sources.index(source) % len(markers)]
+            labelled = False
+            for pi, p in enumerate(params):
+                if p not in gp.index:
+                    continue
+                r = gp.loc[p]
+                y = pi + (gi - (ns - 1) / 2.0) * step - 0.15 * step
+                if np.isfinite(r["q025_n"]) and np.isfinite(r["q975_n"]):
+                    ax.plot([r["q025_n"], r["q975_n"]], [y, y], color="0.0", linewidth=1.6)
+                    ax.plot(
+                        [r["mean_n"]],
+                        [y],
+                        linestyle="none",
+                        marker=mk,
+                        color="0.0",
+                        markerfacecolor="white",
+                        label=None if labelled else f"95 % interval and mean: {source}",
+                    )
+                    labelled = True
+                if np.isfinite(r["laplace_lo_n"]) and np.isfinite(r["laplace_hi_n"]):
+                    yl = y + 0.35 * step
+                    ax.plot(
+                        [r["laplace_lo_n"], r["laplace_hi_n"]],
+                        [yl, yl],
+                        color="0.45",
+                        linestyle="--",
+                        linewidth=1.2,
+                        marker="|",
+                        label="Laplace mean ± 2 sd",
+                    )
+        ax.axvline(1.0, **REFERENCE_LINE)
+        ax.set_title(f"{tier} data", loc="left", fontsize=8)
+        ax.set_xlabel(r"$x_i/x_i^{\mathrm{REF}}$ (-)")
+    ax0 = axes[0, 0]
+    ax0.set_yticks(range(len(params)))
+    ax0.set_yticklabels([LABELS.get(p, p) for p in params])
+    ax0.set_ylim(len(params) - 0.5, -0.5)
+    handles, labels = [], []
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
     if handles:
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncols=1)
-    p = save(fig, Path(path).with_suffix(".png"), pdf=pdf)
-    return p
+        fig.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.02, 0.0), fontsize=7)
+    fig.suptitle(f"{case}: posterior (MCMC) and Laplace approximation", fontsize=9)
+    return _save_fast(fig, Path(path), pdf)[0]
