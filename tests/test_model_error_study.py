@@ -136,4 +136,18 @@ def test_bias_only_rows(tmp_path, data):
             data=data,
             hifi_mesh="1,1,4",
         )
-    render_model_error(tmp_path)  # NaN LM errors are drawn as nothing, not an error
+    render_model_error(tmp_path)  # bias-only rows are drawn at their bias
+    from bench.studies.model_error import HIFI_LIMIT
+
+    limit = run_model_error(
+        "linear-compression",
+        meshes=("1,1,2",),
+        treatments=(HIFI_LIMIT,),
+        margins=(0.0,),
+        bias_only=True,
+        out=tmp_path,
+        data=data,
+        hifi_mesh="1,1,4",
+    ).rows[0]
+    assert limit["treatment"] == HIFI_LIMIT and limit["charges"]["hifi"]["n"] == 1
+    assert limit["provenance"]["treatment"] == HIFI_LIMIT

@@ -32,7 +32,9 @@ def add_arguments(p) -> None:
         "--treatments",
         type=comma_list(_treatment, what="treatment"),
         default=("none", "one-point", "iterated", "bae"),
-        help="treatments, comma-separated (default none,one-point,iterated,bae)",
+        help="treatments, comma-separated (default none,one-point,iterated,bae); with --bias-only "
+        "also hifi-at-reference: the one-point correction made at the reference, the floor of "
+        "every correction with that high-fidelity mesh",
     )
     p.add_argument(
         "--margins",
@@ -74,8 +76,11 @@ def add_arguments(p) -> None:
 
 def _treatment(text: str) -> str:
     from bench.commands._args import ArgumentTypeError
+    from bench.studies.model_error import HIFI_LIMIT
     from problems.inverse.model_error import CORRECTIONS
 
+    if text == HIFI_LIMIT:
+        return text  # the diagnostic (with --bias-only)
     if text not in CORRECTIONS:
         raise ArgumentTypeError(
             f"{text!r} is unknown; allowed: {', '.join(CORRECTIONS)} (the study compares the "
