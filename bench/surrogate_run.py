@@ -87,7 +87,12 @@ def combine(result, objectives, sur, name, polished=None, *, polish_charges_repe
     sur_fe = sur_wall / unit if unit == unit and unit > 0 else float(len(new))
     sur_nominal = nominal_equivalents(sur, new)
     train = training_charge(sur)
-    charges = {k: dict(v) for k, v in result.charges.items()}
+    # the surrogate-phase evaluator priced its charges in surrogate evaluations: reprice them in
+    # FE runs (their wall time over the FE run time of the surrogate's validation)
+    charges = {
+        k: {**v, "forward_equivalents": v["wall_s"] / unit if unit == unit and unit > 0 else v["n"]}
+        for k, v in result.charges.items()
+    }
     if polished is not None and not polish_charges_repeat:
         for kind, c in polished.charges.items():
             total = charges.setdefault(kind, {"n": 0, "wall_s": 0.0, "forward_equivalents": 0.0})
