@@ -74,13 +74,18 @@ def bound_hits(runs: pd.DataFrame) -> pd.DataFrame:
         c[2:] for c in runs.columns if c.startswith("x.")
     )
     out = pd.DataFrame(np.nan, index=runs.index, columns=list(params))
-    boxes: dict[str, dict] = {}
-    for idx, r in runs.iterrows():
-        box = boxes.setdefault(r["case"], case_box(r["case"]))
+    if not len(runs):
+        return out
+    for case, g in runs.groupby("case", sort=False):
+        box = case_box(case)
         for p in params:
-            x = r.get(f"x.{p}", math.nan)
-            if p in box and isinstance(x, (int, float)) and math.isfinite(x):
-                out.loc[idx, p] = bound_side(float(x), box[p][0], box[p][1])
+            col = f"x.{p}"
+            if p not in box or col not in g:
+                continue
+            x = pd.to_numeric(g[col], errors="coerce").to_numpy(float)
+            lo, hi = box[p][0], box[p][1]
+            side = np.array([bound_side(float(v), lo, hi) for v in x], float)
+            out.loc[g.index, p] = np.where(np.isfinite(x), side, np.nan)
     return out
 
 
@@ -177,17 +182,26 @@ def table1(runs: pd.DataFrame, method: str, *, budget: int | None = None) -> pd.
     ]
     ok = identified(sel)
     hits = bound_hits(ok) if len(ok) else pd.DataFrame()
-    out = pd.DataFrame(index=pd.Index(rows, name="parameter"), columns=cases, dtype=float)
+    vals = np.full((len(rows), len(cases)), math.nan)
     on_bound: dict[tuple[str, str], tuple[int, int]] = {}
-    for case in cases:
-        part = ok[ok["case"] == case]
-        for p in rows:
-            col = part[f"err.{p}"] if f"err.{p}" in part else pd.Series(dtype=float)
-            out.loc[p, case] = float(col.median()) if col.notna().any() else math.nan
-            if p in hits and col.notna().any():
-                h = hits.loc[part.index, p].dropna()
+    by_case = dict(tuple(ok.groupby("case", sort=False))) if len(ok) else {}
+    for j, case in enumerate(cases):
+        part = by_case.get(case)
+        if part is None:
+            continue
+        for i, p in enumerate(rows):
+            if f"err.{p}" not in part:
+                continue
+            col = part[f"err.{p}"].to_numpy(float)
+            if not np.isfinite(col).any():
+                continue
+            vals[i, j] = float(np.nanmedian(col))
+            if p in hits:
+                h = hits.loc[part.index, p].to_numpy(float)
+                h = h[np.isfinite(h) & np.isfinite(col)]
                 if (h != 0).any():
                     on_bound[(p, case)] = (int((h != 0).sum()), int(len(h)))
+    out = pd.DataFrame(vals, index=pd.Index(rows, name="parameter"), columns=cases)
     out.attrs["n_runs"] = {c: int((sel["case"] == c).sum()) for c in cases}
     out.attrs["n_identified"] = {c: int((ok["case"] == c).sum()) for c in cases}
     out.attrs["on_bound"] = on_bound  # (parameter, case) -> (runs on a bound, runs)
