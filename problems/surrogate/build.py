@@ -260,6 +260,30 @@ def fit_surrogate(
     )
 
 
+def runs_dir():
+    """Where the training and hold-out runs of built surrogates are kept (for refits without new
+    FE runs): ``<femubench cache>/surrogate_runs`` (next to the data cache, never shipped)."""
+    from problems.inverse.data import cache_dir
+
+    return cache_dir().parent / "surrogate_runs"
+
+
+def keep_runs(runs: Runs, hold: Runs | None, training_hash: str, description: dict) -> str | None:
+    """Save the snapshots (``X``, ``Y``, and the hold-out ``hold_X``, ``hold_Y``) as
+    ``<runs_dir>/<case>__<mesh>__<training hash[:12]>.npz``; returns the path (None when it
+    cannot be written)."""
+    try:
+        folder = runs_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        name = f"{description.get('case', 'model')}__{description.get('mesh', '')}"
+        path = folder / f"{name}__{training_hash[:12]}.npz"
+        extra = {} if hold is None else {"hold_X": hold.X, "hold_Y": hold.Y}
+        np.savez(path, X=runs.X, Y=runs.Y, wall_s=runs.wall_s, **extra)
+        return str(path)
+    except OSError:
+        return None
+
+
 def merge_runs(a: Runs, b: Runs) -> Runs:
     """The runs of ``a`` then ``b`` (counts and times added)."""
     return Runs(
@@ -431,6 +455,9 @@ def build_surrogate(
         variance = val.variance
     cost["build_wall_s"] = time.perf_counter() - t0
     info["cost"] = cost
+    info["runs_file"] = keep_runs(
+        runs, hold if s.n_holdout else None, info["training_hash"], description or {}
+    )
     return dataclasses.replace(sur, hold_out_variance=variance, info=info)
 
 
