@@ -56,10 +56,10 @@ def test_findings_quote_winners_and_costs():
     assert "| exponent-shear | cma (consistent) | 1/1 (100 %) | 600 [600, 600] |" in text
     assert "the winners: lm (consistent) on 1, cma (consistent) on 1" in text
     # global vs lm from the default start: lm 1/2, cma 3/4 at 600 / 35 = 17 x the median cost
-    assert "default start(s)** (pooled over 2 case(s)): lm 1/2 (50 %)" in text
-    assert "cma 3/4 (75 %)" in text
-    assert "succeeds more often than lm (75 % against 50 %) at 17 × its median cost" in text
-    assert "random start(s)** (pooled over 1 case(s)): lm 1/2 (50 %)" in text
+    assert "consistent data, default start(s)** (pooled over 2 case(s)): lm (FE) 1/2 (50 %)" in text
+    assert "cma (FE) 3/4 (75 %)" in text
+    assert "cma (FE), succeeds more often than lm (75 % against 50 %) at 17 × its median" in text
+    assert "random start(s)** (pooled over 1 case(s)): lm (FE) 1/2 (50 %)" in text
     # worst-identified: a on the exponent cases; lm's a is 25 % off, cma's 1 %
     assert "|error of a| has median 13 % (range 1–25 %; the paper's Table 1: 11–46 %)" in text
     assert "no posterior" in text
@@ -101,3 +101,24 @@ def test_findings_fd_versus_exact_and_posterior():
     assert "forward-equivalents × 2.5 (median" in text and "iterations +1 (median)" in text
     assert "a 95 % width 30–30 % of the reference, Laplace ±2 sd 28–28 %" in text
     assert "contains the reference in 1 of 1" in text
+
+
+def test_global_on_the_surrogate_track_is_compared_with_lm_on_fe():
+    rows = [
+        run_row(LIN, {"E": 0.5}, forward_equivalents=30.0),
+        run_row(LIN, {"E": 0.5}, jacobian="forward", forward_equivalents=90.0),  # not counted
+        run_row(
+            LIN,
+            {"E": 0.2},
+            method="ga (consistent, surrogate + FE polish)",
+            solver="ga",
+            track="surrogate",
+            forward_equivalents=15.0,
+            charged_equivalents=300.0,
+        ),
+    ]
+    runs, _ = M.prepare(frame(rows))
+    text = "\n".join(findings(runs, M.ert_table(runs, n_boot=50), T.success(runs)))
+    assert "lm (FE) 1/1 (100 %), median max |error| 0.5 %, median 30 fe" in text
+    assert "ga (surrogate) 1/1 (100 %), median max |error| 0.2 %, median 315 fe" in text
+    assert "the best, ga (surrogate), costs 10 × as much (median fe)" in text

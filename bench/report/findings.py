@@ -103,6 +103,9 @@ def findings(
 
 
 def _global_vs_lm(runs: pd.DataFrame, ok: pd.Series) -> list[str]:
+    """Per data tier and treatment, from the default and from random starts: lm on the FE track
+    (exact Jacobians when there are such runs) against each global method on each track (a
+    surrogate-track result counts after its FE polish)."""
     out = []
     fam = runs["family"] if "family" in runs else pd.Series("other", index=runs.index)
     glob = fam == "global"
@@ -114,59 +117,66 @@ def _global_vs_lm(runs: pd.DataFrame, ok: pd.Series) -> list[str]:
         ]
     if not lm.any():
         return ["No Levenberg–Marquardt run in these records: nothing to compare with.\n"]
-    for (track, tier, treatment), g in runs.groupby(["track", "tier", "treatment"], sort=False):
+    for (tier, treatment), g in runs.groupby(["tier", "treatment"], sort=False):
         for start in ("default", "random"):
             gs = g[g["start"] == start]
-            gl = gs[gs["solver"] == LM]
+            gl = gs[(gs["solver"] == LM) & (gs["track"] == "fe")]
+            if (gl["jacobian"] == "exact").any():
+                gl = gl[gl["jacobian"] == "exact"]
             gg = gs[fam.loc[gs.index] == "global"]
             if not len(gl) and not len(gg):
                 continue
+            groups = [(f"{LM} (FE)", gl)] + [
+                (f"{solver} ({'FE' if track == 'fe' else track})", gr)
+                for (solver, track), gr in sorted(
+                    gg.groupby(["solver", "track"]),
+                    key=lambda kv: (method_order([kv[0][0]]), kv[0][1] != "fe"),
+                )
+            ]
             parts = []
-            for solver, gr in [(LM, gl)] + sorted(
-                gg.groupby("solver"), key=lambda kv: method_order([kv[0]])
-            ):
+            for name, gr in groups:
                 if not len(gr):
-                    parts.append(f"{solver}: no run")
+                    parts.append(f"{name}: no run")
                     continue
                 k = int(ok.loc[gr.index].sum())
                 parts.append(
-                    f"{solver} {_pct(k, len(gr))}, median max |error| "
+                    f"{name} {_pct(k, len(gr))}, median max |error| "
                     f"{fmt_pct(float(gr['max_abs_err'].median()))} %, median "
                     f"{fmt_num(float(gr['fe_total'].median()))} fe"
                 )
-            verdict = _verdict(gl, gg, ok)
+            verdict = _verdict(gl, groups[1:], ok)
             tr = "" if treatment == "none" else f", {treatment} treatment"
             out.append(
-                f"- **{track} track, {tier} data{tr}, {start} start(s)** (pooled over "
+                f"- **{tier} data{tr}, {start} start(s)** (pooled over "
                 f"{gs['case'].nunique()} case(s)): " + "; ".join(parts) + f". {verdict}"
             )
     return out + [""] if out else ["No run from the default or random starts.\n"]
 
 
-def _verdict(gl: pd.DataFrame, gg: pd.DataFrame, ok: pd.Series) -> str:
-    if not len(gl) or not len(gg):
+def _verdict(gl: pd.DataFrame, groups: list, ok: pd.Series) -> str:
+    groups = [(n, g) for n, g in groups if len(g)]
+    if not len(gl) or not groups:
         return ""
     s_l = float(ok.loc[gl.index].mean())
-    best = max(
-        ((s, float(ok.loc[g.index].mean()), g) for s, g in gg.groupby("solver")),
+    name, s_g, g = max(
+        ((n, float(ok.loc[g.index].mean()), g) for n, g in groups),
         key=lambda t: (t[1], -float(t[2]["fe_total"].median())),
     )
-    solver, s_g, g = best
     fe_l, fe_g = float(gl["fe_total"].median()), float(g["fe_total"].median())
     ratio = fe_g / fe_l if fe_l > 0 else math.inf
     if s_g > s_l:
         return (
-            f"The best global method, {solver}, succeeds more often than lm "
+            f"The best global method, {name}, succeeds more often than lm "
             f"({100 * s_g:.0f} % against {100 * s_l:.0f} %) at {fmt_num(ratio, 2)} × its median "
             "cost."
         )
     if s_g == s_l:
         return (
             f"No global method succeeds more often than lm ({100 * s_l:.0f} %); the best, "
-            f"{solver}, costs {fmt_num(ratio, 2)} × as much (median fe)."
+            f"{name}, costs {fmt_num(ratio, 2)} × as much (median fe)."
         )
     return (
-        f"lm succeeds more often ({100 * s_l:.0f} %) than every global method (best: {solver}, "
+        f"lm succeeds more often ({100 * s_l:.0f} %) than every global method (best: {name}, "
         f"{100 * s_g:.0f} %), which costs {fmt_num(ratio, 2)} × as much (median fe)."
     )
 
