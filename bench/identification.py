@@ -13,7 +13,27 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from problems.inverse.evaluator import BUDGET_UNITS
 from problems.inverse.model_error import TREATMENTS
+
+#: the values of ``Identification.jacobian``: the model's exact Jacobians, or finite differences
+JACOBIANS = ("exact", "forward", "central")
+
+
+def jacobian_options(method: str, options: dict, jacobian: str) -> dict:
+    """``options`` of ``method`` with the finite-difference ``scheme`` that ``jacobian`` asks
+    (methods without a ``scheme`` option, and ``exact``, get them unchanged). A ``scheme`` given
+    in the options that contradicts ``jacobian`` raises ValueError."""
+    from solvers.base import get_method
+
+    if jacobian == "exact" or "scheme" not in get_method(method).options:
+        return dict(options)
+    given = options.get("scheme", jacobian)
+    if given != jacobian:
+        raise ValueError(
+            f"option scheme = {given!r} contradicts jacobian = {jacobian!r}; give one of them"
+        )
+    return {**options, "scheme": jacobian}
 
 
 @dataclass(frozen=True)
@@ -40,6 +60,13 @@ class Identification:
                        solver's run; its training runs are charged (``surrogate-training``)
     polish, polish_budget : after the run on the surrogate, an FE ``lm`` (exact Jacobians) from
                        its optimum with at most ``polish_budget`` FE evaluations
+    jacobian         : how gradient-based methods get Jacobians: ``exact`` (the forward model's
+                       own, by direct differentiation, where it offers them), ``forward`` or
+                       ``central`` (finite differences with that scheme: the solver option
+                       ``scheme`` is set to it)
+    budget_unit      : ``evaluations`` (budget counts forward evaluations, ``n_evals``) or
+                       ``forward-equivalents`` (nominal: a response + exact Jacobian counts the
+                       model's ``jacobian_cost``; see problems/inverse/evaluator.py)
     """
 
     case: str
@@ -60,6 +87,8 @@ class Identification:
     surrogate: str | None = None
     polish: bool = False
     polish_budget: int = 60
+    jacobian: str = "exact"
+    budget_unit: str = "evaluations"
 
     def __post_init__(self):
         if self.treatment not in TREATMENTS:
@@ -68,6 +97,14 @@ class Identification:
             )
         if int(self.budget) < 1:
             raise ValueError(f"budget = {self.budget!r} is out of range: a whole number >= 1")
+        if self.jacobian not in JACOBIANS:
+            raise ValueError(
+                f"jacobian = {self.jacobian!r} is unknown; allowed: {', '.join(JACOBIANS)}"
+            )
+        if self.budget_unit not in BUDGET_UNITS:
+            raise ValueError(
+                f"budget_unit = {self.budget_unit!r} is unknown; allowed: {', '.join(BUDGET_UNITS)}"
+            )
         if self.polish and not self.surrogate:
             raise ValueError("polish = True needs a surrogate (the polish follows its run)")
         if int(self.polish_budget) < 1:
@@ -186,10 +223,20 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     if case.is_analytic:
         if spec.surrogate:
             raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
-        objective = build_objective(case, mapper=mapper)
+        objective = build_objective(
+            case,
+            mapper=mapper,
+            exact_jacobian=spec.jacobian == "exact",
+            budget_unit=spec.budget_unit,
+        )
         objective.observers.extend(observers)
         return solve(
-            objective, spec.method, budget=spec.budget, seed=spec.seed, x0=x0, **spec.options
+            objective,
+            spec.method,
+            budget=spec.budget,
+            seed=spec.seed,
+            x0=x0,
+            **jacobian_options(spec.method, spec.options, spec.jacobian),
         )
     data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
     requested = spec.treatment
@@ -208,6 +255,8 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     fixed = {}  # the one-point or BAE correction, made once for both phases
 
     def run_phase(method, budget, start, options, forward):
+        options = jacobian_options(method, options, spec.jacobian)
+
         def objective_with(correction):
             obj = build_objective(
                 case,
@@ -218,6 +267,8 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
                 hifi_mesh=hifi_mesh,
                 mapper=mapper if forward is None else vectorised_mapper(),
                 forward=forward,
+                exact_jacobian=spec.jacobian == "exact",
+                budget_unit=spec.budget_unit,
             )
             obj.observers.extend(observers)
             if forward is not None:

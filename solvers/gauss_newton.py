@@ -1,7 +1,7 @@
 """``gauss-newton``: bounded Gauss-Newton with a projected Armijo line search (H = J^T J).
 
-Each iteration, at the current point z with whitened residual r and Jacobian J (one parallel
-batch of finite differences):
+Each iteration, at the current point z with whitened residual r and Jacobian J (the model's
+exact one, or one parallel batch of finite differences):
 
 1. gradient ``g = 2 J^T r``; variables at a bound whose gradient pushes outward are *active*
    and held fixed (projected Gauss-Newton);
@@ -10,6 +10,9 @@ batch of finite differences):
 3. projected Armijo backtracking: ``z(a) = P(z + a p)``, accept the first ``a = 1, 1/2, 1/4, ...``
    with ``cost(z(a)) <= cost(z) + c1 g.(z(a) - z)``. A failed point has cost FAILURE_COST and is
    rejected like any other bad step.
+
+With exact Jacobians the trial points of the line search are run with their Jacobians (the
+accepted point's is then at hand: one run per iteration when the full step is taken).
 
 Stops: relative cost decrease < ftol or relative step < xtol ("converged"), projected gradient
 < gtol ("converged"), no acceptable step after ``max_backtracks`` halvings ("stalled"),
@@ -45,7 +48,10 @@ def run_gauss_newton(r: Run) -> Outcome:
     obj, o = r.objective, r.options
     lo, hi = r.lower, r.upper
     z = np.clip(r.z0, lo, hi)
-    ev = obj.evaluate(z)
+    # with exact Jacobians every trial point is run with its Jacobian: the accepted one (usually
+    # the first, a = 1) then needs no second run
+    eager = obj.exact_jacobian
+    ev = obj.evaluate(z, with_jacobian=eager)
     if not ev.usable:
         return Outcome("failed", f"start point failed: {ev.message}")
     f, res = ev.cost, ev.residual
@@ -67,7 +73,7 @@ def run_gauss_newton(r: Run) -> Outcome:
             dz = zt - z
             if not np.any(dz):
                 break
-            evt = obj.evaluate(zt)
+            evt = obj.evaluate(zt, with_jacobian=eager)
             if evt.usable and evt.cost <= f + o["c1"] * float(g @ dz):
                 accepted = (zt, evt)
                 break

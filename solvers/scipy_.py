@@ -18,6 +18,11 @@ LM_OPTIONS = {
     "xtol": (1e-10, "stop when the relative step size is below xtol"),
     "gtol": (1e-10, "stop when the scaled gradient is below gtol"),
     "x_scale": (1.0, "least_squares x_scale in z (1.0 or 'jac')"),
+    "ls_method": (
+        "dogbox",
+        "least_squares method with bounds: dogbox (rectangular trust region, variables at a "
+        "bound leave the step) or trf (reflective trust region)",
+    ),
     "max_nfev": (None, "least_squares max_nfev (its own count, Jacobians excluded); None = budget"),
 }
 
@@ -36,32 +41,42 @@ _LS_STATUS = {
     library="scipy",
     family="local",
     options=LM_OPTIONS,
-    description="Levenberg-Marquardt-type trust region with bounds (least_squares 'trf'), "
-    "parallel finite-difference Jacobian of the objective",
+    description="Levenberg-Marquardt-type trust region with bounds (least_squares 'dogbox' or "
+    "'trf'), the model's exact Jacobian or a parallel finite-difference one",
 )
 def run_lm(r: Run) -> Outcome:
+    """least_squares on the whitened residual in z. With exact Jacobians every trial point is
+    evaluated with its Jacobian (one run with sensitivities, ``jacobian_cost`` forward-equivalents
+    nominal): an accepted point then needs no second run for its Jacobian, and most points are
+    accepted. Iterations = Jacobian evaluations."""
     obj, o = r.objective, r.options
+    if o["ls_method"] not in ("dogbox", "trf"):
+        raise ValueError(f"ls_method = {o['ls_method']!r} is unknown; allowed: dogbox, trf")
     lo, hi = r.lower, r.upper
-    # least_squares('trf') starts strictly inside the box; do the same here so its first call is a
+    # least_squares starts strictly inside the box; do the same here so its first call is a
     # cache hit
     z0 = np.clip(r.z0, lo + 1e-10 * (hi - lo), hi - 1e-10 * (hi - lo))
-    ev0 = obj.evaluate(z0)
+    eager = obj.exact_jacobian
+    ev0 = obj.evaluate(z0, with_jacobian=eager)
     if not ev0.usable:
         return Outcome("failed", f"start point failed: {ev0.message}")
     n_jac = [0]
 
+    def fun(z):
+        return obj.evaluate(z, with_jacobian=eager).residual.copy()
+
     def jac(z):
-        ev = obj.evaluate(z)  # the point least_squares just evaluated: a cache hit
+        ev = obj.evaluate(z, with_jacobian=eager)  # the point just evaluated: a cache hit
         r.record(z, ev.cost)
         n_jac[0] += 1
         return obj.jacobian(z, scheme=o["scheme"], rel_step=o["rel_step"], r0=ev.residual)
 
     res = least_squares(
-        obj.residual,
+        fun,
         z0,
         jac=jac,
         bounds=(lo, hi),
-        method="trf",
+        method=o["ls_method"],
         ftol=o["ftol"],
         xtol=o["xtol"],
         gtol=o["gtol"],

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -450,4 +451,26 @@ def test_measured_forward_equivalents_without_a_plain_run_use_the_nominal_price(
     obj.evaluate([1.1, 1.0], with_jacobian=True)
     assert obj.forward_equivalents() == pytest.approx(3.4)  # no plain run measured
     obj.cost([1.2, 1.0])  # 1 s: the unit; the runs with sensitivities took 3 s
+    assert obj.forward_equivalents() == pytest.approx(3 + 3 + 1)
+
+
+class TimedExactQuadratic(ExactQuadratic):
+    """Reports the plain part of its runs with sensitivities: 2 s of their 3 s."""
+
+    def __call__(self, x, jacobian=False):
+        res = super().__call__(x, jacobian)
+        return replace(res, plain_wall_s=2.0) if jacobian else res
+
+
+def test_measured_forward_equivalents_of_jacobian_runs_against_their_own_plain_part():
+    data = np.zeros(4)
+    problem = LeastSquaresProblem(
+        TimedExactQuadratic(), data, lower=[0.5, 0.5], upper=[2.0, 2.0], reference=[1.0, 1.0]
+    )
+    obj = Evaluator(problem, jacobian_cost=1.7)
+    obj.evaluate([1.0, 1.0], with_jacobian=True)
+    obj.evaluate([1.1, 1.0], with_jacobian=True)
+    assert obj.forward_equivalents() == pytest.approx(2 * 1.5)  # 3 s / 2 s each
+    assert obj.nominal_equivalents() == pytest.approx(2 * 1.7)
+    obj.cost([1.2, 1.0])  # a plain run (1 s) is the unit again, as before
     assert obj.forward_equivalents() == pytest.approx(3 + 3 + 1)

@@ -94,6 +94,20 @@ def add_arguments(p) -> None:
         metavar="N",
         help="FE evaluations of the polish (default 60)",
     )
+    p.add_argument(
+        "--jacobian",
+        choices=["exact", "forward", "central"],
+        default="exact",
+        help="Jacobians of gradient-based methods: exact (the FE model's, by direct "
+        "differentiation) or finite differences (forward | central); default exact",
+    )
+    p.add_argument(
+        "--budget-unit",
+        choices=["evaluations", "forward-equivalents"],
+        default="evaluations",
+        help="what --budget counts: forward evaluations, or nominal forward-equivalents (a run "
+        "with an exact Jacobian counts the model's declared cost); default evaluations",
+    )
     p.add_argument("--json", metavar="FILE", help="write the RunResult plus errors_percent as JSON")
     p.add_argument(
         "--quiet",
@@ -139,7 +153,8 @@ def format_identification(case, result) -> str:
         f"  forward evaluations {result.n_evals} (failed {result.n_failed}, infeasible "
         f"{result.n_infeasible}; cache hits {result.n_cache_hits} not counted), iterations "
         f"{result.n_iterations}, wall {result.wall_s:.2f} s",
-        f"  forward-equivalents {result.forward_equivalents:.1f}"
+        f"  forward-equivalents {result.forward_equivalents:.1f} measured, "
+        f"{result.forward_equivalents_nominal:.1f} nominal (budget in {result.budget_unit})"
         + "".join(
             f", {k} {c['n']} runs = {c['forward_equivalents']:.1f} fe"
             for k, c in result.charges.items()
@@ -227,6 +242,8 @@ def main(args) -> int:
         surrogate=args.surrogate,
         polish=args.polish,
         polish_budget=args.polish_budget,
+        jacobian=args.jacobian,
+        budget_unit=args.budget_unit,
     )
     from bench.progress import EvaluationProgress, enabled, warn_if_long
 

@@ -15,8 +15,9 @@ Accounting (honest: what a user pays for)
   ``n_cache_hits`` and are *not* in ``n_evals``, nor charged to the budget.
 * :meth:`forward_equivalents` converts the evaluations into plain forward runs by measured wall
   time: a plain or infeasible evaluation is one, a run with sensitivities is its wall time over
-  the median wall time of the plain runs of the same evaluator (its nominal ``jacobian_cost``
-  when the evaluator made no successful plain run).
+  the median wall time of the plain runs of the same evaluator (without plain runs, the median
+  plain part of its runs with sensitivities, which the FE model reports: the Newton run is bit
+  for bit the plain run; without either, the nominal ``jacobian_cost``).
 * :meth:`nominal_equivalents` does the same with a fixed, declared price: a run with
   sensitivities (response + exact Jacobian) counts ``jacobian_cost`` forward-equivalents (the
   model's declared ``jacobian_cost``, the measured ratio rounded up; see ``FEForwardModel``),
@@ -116,6 +117,7 @@ class Evaluation:
     cached: bool = False
     wall_s: float = 0.0
     jacobian: np.ndarray | None = None
+    plain_wall_s: float | None = None
 
     @property
     def usable(self) -> bool:
@@ -260,13 +262,13 @@ class Evaluator:
         c["wall_s"] += float(wall_s)
 
     def _unit_s(self) -> float | None:
-        """Median wall time of this evaluator's successful plain runs, s
-        (the forward-equivalent)."""
-        plain = [
-            e["wall_s"]
-            for e in self.log
-            if not e["cached"] and e["kind"] == "plain" and e["ok"] and e["feasible"]
-        ]
+        """Median wall time of this evaluator's successful plain runs, s (the forward-equivalent);
+        without any, the median plain part of its runs with sensitivities (``plain_wall_s``, when
+        the model reports it)."""
+        new = [e for e in self.log if not e["cached"] and e["ok"] and e["feasible"]]
+        plain = [e["wall_s"] for e in new if e["kind"] == "plain"]
+        if not plain:
+            plain = [e["plain_wall_s"] for e in new if e.get("plain_wall_s")]
         return float(np.median(plain)) if plain else None
 
     def charged_equivalents(self) -> dict[str, float]:
@@ -277,7 +279,8 @@ class Evaluator:
     def forward_equivalents(self) -> float:
         """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall
         time). Without a successful plain run to measure against (a method that only ever asks
-        for Jacobians), a run with sensitivities counts its nominal ``jacobian_cost``."""
+        for Jacobians) the runs' own plain parts are the unit, and without those a run with
+        sensitivities counts its nominal ``jacobian_cost``."""
         new = [e for e in self.log if not e["cached"]]
         unit = self._unit_s()
         total = 0.0
@@ -305,7 +308,9 @@ class Evaluator:
         if r is None:
             return self._failure(x, why, res.wall_s)
         J = None if res.jacobian is None else self.problem.residual_jacobian(res.jacobian)
-        return Evaluation(x, float(r @ r), r, True, True, res.message, False, res.wall_s, J)
+        return Evaluation(
+            x, float(r @ r), r, True, True, res.message, False, res.wall_s, J, res.plain_wall_s
+        )
 
     def _failure(self, x, message, wall_s=0.0, feasible=True) -> Evaluation:
         if message.startswith("model raised") and not self._warned:
@@ -354,6 +359,7 @@ class Evaluator:
                 "cached": ev.cached,
                 "n_evals": self.n_evals,
                 "kind": kind,
+                "plain_wall_s": None if ev.cached else ev.plain_wall_s,
             }
         )
         for observe in self.observers:

@@ -25,6 +25,13 @@ from problems.materials import LinearElastic
 #: tighter than the solver defaults so that finite-difference Jacobians are clean
 FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
 
+#: nominal price of ``model(x, jacobian=True)`` (response + exact Jacobian, 6 parameters) in plain
+#: forward runs, per mesh preset: the largest ratio measured over the nine cases by
+#: ``bench/perf/jacobian.py`` (CPU time, docs/fe_model.md "Cost"), rounded up to a tenth. The
+#: evaluator charges it when budgets are counted in forward-equivalents; other meshes get the
+#: largest value
+JACOBIAN_COST = {"coarse": 1.7, "paper": 2.3}
+
 
 def discretisation(mesh: str) -> Discretisation:
     """Discretisation of a mesh spec (``coarse``, ``coarse:quarter``,
@@ -84,7 +91,8 @@ class FEForwardModel:
 
     ``model(x, jacobian=True)`` returns the exact Jacobian dU/dx (m, n) too: rows the measurement
     vector (mm per unit of x for the displacements, kN per unit for the force), columns the
-    identified parameters in physical units, from one run with sensitivities.
+    identified parameters in physical units, from one run with sensitivities; it costs
+    ``jacobian_cost`` plain runs (nominal, :data:`JACOBIAN_COST`).
     """
 
     provides_jacobian: ClassVar[bool] = True
@@ -98,6 +106,12 @@ class FEForwardModel:
     @property
     def names(self) -> tuple[str, ...]:
         return self.case.names
+
+    @property
+    def jacobian_cost(self) -> float:
+        """Nominal forward-equivalents of one response + exact Jacobian on this mesh."""
+        base = str(self.mesh).partition(":")[0]
+        return JACOBIAN_COST.get(base, max(JACOBIAN_COST.values()))
 
     def check(self, x) -> str | None:
         """None when ``x`` defines a well-posed material, else the reason (no FE run)."""
@@ -146,12 +160,16 @@ class FEForwardModel:
         if not resp.converged:
             return ForwardResult(False, None, resp.message, time.perf_counter() - t0)
         values = layout.stack(*resp.front_face(self.points), resp.reaction_kN)
-        J, message = None, ""
+        J, message, plain_s = None, "", None
         if jacobian:
+            t1 = time.perf_counter()
             J = self.jacobian_from(resp, chain)
             if J is None:
                 message = f"no exact Jacobian: {resp.sensitivities.message}"
-        return ForwardResult(True, values, message, time.perf_counter() - t0, J)
+            # the Newton run is bit for bit a plain run: its time without the sensitivities'
+            plain_s = t1 - t0 - resp.sensitivities.wall_s
+        wall = time.perf_counter() - t0
+        return ForwardResult(True, values, message, wall, J, plain_s)
 
     def jacobian_from(self, resp, chain) -> np.ndarray | None:
         """dU/dx (m, n) in the layout of the measurement vector from a response with sensitivities

@@ -24,6 +24,9 @@ class ForwardResult:
     message  : why it failed, or a note
     wall_s   : wall time of the evaluation, s
     jacobian : (m, n) dU_N/dx in physical units, when the model computed it (else None)
+    plain_wall_s : for a run with a Jacobian, the wall time of its plain part (the same work as a
+               run without), s, when the model can tell; the evaluator measures the Jacobian's
+               price against it when it has no plain run of its own
     """
 
     ok: bool
@@ -31,6 +34,7 @@ class ForwardResult:
     message: str = ""
     wall_s: float = 0.0
     jacobian: np.ndarray | None = None
+    plain_wall_s: float | None = None
 
 
 @runtime_checkable
