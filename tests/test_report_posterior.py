@@ -154,3 +154,17 @@ def test_summary_laplace_at_the_fe_optimum_and_a_beyond_names(tmp_path):
     assert post.loc["a", "width95_pct"] == pytest.approx(60.0)
     assert post.loc["a", "laplace_hi_n"] == pytest.approx(1.4)  # 1.2 + 2 x 0.1
     assert post.loc["a", "source"] == "posterior study (surrogate)"
+
+
+def test_a_from_a_chain_kept_in_an_npz_file(tmp_path):
+    rng = np.random.default_rng(5)
+    rec, flat = mcmc_record(EXP, 0, 50, rng=rng)
+    extra = rec["result"]["extra"]
+    chain = np.asarray(extra.pop("chain"))
+    c = get_case(EXP)
+    scale = np.asarray(c.reference, float)
+    np.savez(tmp_path / "chain.npz", chain=chain / scale, scale=scale, names=np.array(c.names))
+    extra["chain_path"] = str(tmp_path / "chain.npz")
+    post = P.posterior_frame(records=[rec]).set_index("parameter")
+    a = np.array([c.material_parameters(x)["a"] for x in flat])
+    assert post.loc["a", "q025"] == pytest.approx(np.percentile(a, 2.5))

@@ -156,7 +156,10 @@ def rows_from_records(records) -> list[dict]:
             "q025": _per_param(extra.get("q2.5"), names),
             "q975": _per_param(extra.get("q97.5"), names),
         }
-        derived = _derived_from_chain(case, names, extra.get("chain"), int(burn or 0))
+        chain = extra.get("chain")
+        if chain is None and extra.get("chain_path"):
+            chain = _chain_from_npz(extra["chain_path"])
+        derived = _derived_from_chain(case, names, chain, int(burn or 0))
         n_runs = counts[(case, tier, track)]
         src = f"mcmc run ({track}, seed {rec['config'].get('seed')}, 1 of {n_runs})"
         for p in names + list(derived):
@@ -177,6 +180,18 @@ def rows_from_records(records) -> list[dict]:
                 row.update(derived[p])
             out.append(row)
     return out
+
+
+def _chain_from_npz(path) -> np.ndarray | None:
+    """The physical chain of an MCMC run kept in an ``.npz`` file
+    (:class:`solvers.npz_backend.NpzBackend`: ``chain`` x ``scale``); None when unreadable."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as z:
+            chain = np.asarray(z["chain"], float)
+            scale = np.asarray(z["scale"], float) if "scale" in z.files else 1.0
+        return chain * scale
+    except (OSError, ValueError, KeyError):
+        return None
 
 
 def _derived_from_chain(case: str, names, chain, burn: int) -> dict[str, dict]:
