@@ -6,17 +6,18 @@ moved into ``DIR/runs/corrupt/``) are listed in report.md and on stderr. It is r
 each time in a temporary directory that then replaces ``DIR/report`` (so no stale table or figure
 survives).
 
-Layout::
+Layout (see docs/reports.md)::
 
-    DIR/report/report.md                         ties everything together
-    DIR/report/tables/table1__<method>.{md,csv,tex}
-    DIR/report/tables/comparison.{md,csv,tex}
-    DIR/report/tables/success.{md,csv,tex}
-    DIR/report/figures/history/<case>__<method>.png   (a) x/x_REF, (b) cost vs iteration
-    DIR/report/figures/<case>__convergence.png        best cost vs evaluations, all methods
-    DIR/report/figures/<case>__ecdf.png               runtime ECDF, all methods
-    DIR/report/figures/all__ecdf.png                  runtime ECDF over all cases
-    DIR/report/runs.parquet, history.parquet          with --format parquet
+    DIR/report/report.md                              overview, findings, tables, figures
+    DIR/report/tables/table1__<method>.{md,csv,tex}   Table 1 per method (label: tier, track, ...)
+    DIR/report/tables/a_exponent.*                    the exponent cases' derived a
+    DIR/report/tables/success.*                       success rate, every method x case
+    DIR/report/tables/{success,ert,targets}__<track>__<tier>.*
+    DIR/report/tables/comparison.*, jacobian.*, posterior_widths.*
+    DIR/report/figures/convergence/<case>__<family>.png   like the paper's Figs 6-14
+    DIR/report/figures/<case>__ecdf.png, all__ecdf.png    runtime ECDFs per track and tier
+    DIR/report/figures/posterior/<case>.png               MCMC intervals and Laplace
+    DIR/report/runs.parquet, history.parquet              with --format parquet
 """
 
 from __future__ import annotations

@@ -1,21 +1,23 @@
 """Report figures from the tidy DataFrames (matplotlib Agg, readable in black and white).
 
-* :func:`history_figure` — like the paper's Figs 6–14 for one case and method: (a) normalised
-  parameters x_i/x_i^REF against iteration, each parameter's box [lower, upper]/x_i^REF drawn as
-  a bracket in the parameter's line style right of the last iteration, and a ring around a final
-  value that lies on a bound (within ``BOUND_TOL`` of the box width), (b) cost against iteration
-  (log scale), for the representative run (median final cost over seeds and starts).
-* :func:`convergence_figure` — per case, across methods: best cost so far against forward
-  evaluations (median over runs), log-log.
-* :func:`ecdf_figure` — COCO-style empirical cumulative distribution of the forward
-  evaluations needed to reach targets, per method: (a) cost targets
-  ``J - J_best <= 10^-k (J_init - J_best)`` (``J_best`` the best cost any run reached on the
-  case, ``J_init`` the median initial cost), (b) parameter targets
-  ``max_i |x_i/x_i^REF - 1| <= 10 %, 1 %, 0.1 %``. One (run, target) pair counts once, at the
-  first evaluation count where the target is met; pairs never met keep the curve below 1.
+* :func:`family_figures` — like the paper's Figs 6–14, one figure per case and method family
+  (local / global / sampling), one row per method: (a) normalised parameters x_i/x_i^REF (and the
+  derived a) against iteration of the run with the median final cost, a ring and a title note at
+  every final value on a bound of the case's box; (b) cost against iteration with the range of
+  the best cost over the method's runs. More than :data:`FAMILY_ROWS` methods: further pages.
+* :func:`ecdf_figure` — COCO-style runtime ECDFs, one column per (track, tier): the fraction of
+  (run, target) pairs reached within a number of forward-equivalents (forward evaluations for
+  frames not prepared by :func:`bench.report.metrics.prepare`); (a) cost targets
+  ``J - J_best <= 10^-k (J_init - J_best)`` per objective (:func:`cost_targets`), (b) parameter
+  targets ``max_i |x_i/x_i^REF - 1| <= 10 %, 1 %, 0.1 %``. One (run, target) pair counts once, at
+  the first point where the target is met; pairs never met keep the curve below 1.
+* :func:`convergence_figure` — per case: best cost so far against forward-equivalents (median
+  over the runs of each method), one panel per (track, tier) (``write_figures(best_cost=True)``).
+* :func:`history_figure` — one run's (a) x_i/x_i^REF with the box as brackets and (b) cost.
 
-Every line differs by line style *and* marker (greys only), so the figures survive printing; style,
-labels and saving: :mod:`bench.plotting`.
+Many-panel figures are drawn on a fixed :func:`grid` without a layout engine and saved once at
+:data:`REPORT_DPI` (:func:`_save_fast`) so that hundreds of runs report in about a minute. Every
+line differs by line style *and* marker (greys only); style and labels: :mod:`bench.plotting`.
 """
 
 from __future__ import annotations
