@@ -141,3 +141,19 @@ def test_report_of_old_records_without_the_new_columns(tmp_path):
     text = md.read_text()
     assert "tracks: fe (1)" in text and "Jacobians: exact (1)" in text
     assert "| linear-shear | lm (consistent) | 1/1 (100 %) | 20 [20, 20] |" in text
+
+
+def test_report_without_histories_and_with_a_crashed_run(tmp_path):
+    r1 = record(LIN, {"E": 0.5})
+    r1["result"]["history"] = []
+    r2 = record(EXP, {"E": 0.5}, seed=3)
+    r2["result"]["history"] = []
+    r2["error"] = "Traceback: boom"
+    r2["result"]["status"] = "failed"
+    for r in (r1, r2):
+        store.write_record(tmp_path, r)
+    text = write_report(tmp_path, ["md", "csv"], posterior_dirs=[]).read_text()
+    assert "**2 runs** (1 crashed)" in text
+    assert "| exponent-tension | none; closest: lm (consistent)" in text
+    ert = pd.read_csv(tmp_path / "report" / "tables" / "ert__fe__consistent.csv")
+    assert ert.set_index("case").loc[EXP, "ert"] == np.inf

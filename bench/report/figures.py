@@ -287,8 +287,11 @@ def history_figure(
 
 
 def _best_curve(h: pd.DataFrame, final: pd.Series | None = None) -> tuple[np.ndarray, np.ndarray]:
-    ev = h["n_evals"].to_numpy(float)
-    bc = h["best_cost"].to_numpy(float)
+    if "n_evals" in h and "best_cost" in h:
+        ev = h["n_evals"].to_numpy(float)
+        bc = h["best_cost"].to_numpy(float)
+    else:  # no history rows
+        ev, bc = np.array([]), np.array([])
     if final is not None:
         ev = np.append(ev, float(final["n_evals"]))
         bc = np.append(bc, float(final["cost"]))
