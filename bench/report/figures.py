@@ -123,9 +123,20 @@ def light_log(ax, axis: str = "y") -> None:
     a.set_major_locator(LogLocator(base=10.0, subs=subs, numticks=4 if not narrow else 8))
     a.set_minor_locator(NullLocator())
     if narrow:
-        from matplotlib.ticker import LogFormatterSciNotation
+        from matplotlib.ticker import FuncFormatter
 
-        a.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False))
+        a.set_major_formatter(FuncFormatter(_mantissa_tick))
+
+
+def _mantissa_tick(v: float, pos=None) -> str:
+    """``2×10^6`` style (``10^6`` for a decade), plain between 0.01 and 10 000."""
+    if not v > 0:
+        return ""
+    if 1e-2 <= v < 1e4:
+        return f"{v:g}"
+    k = int(np.floor(np.log10(v) + 1e-9))
+    m = v / 10.0**k
+    return f"$10^{{{k}}}$" if abs(m - 1) < 1e-6 else f"${m:.0f}\\times10^{{{k}}}$"
 
 
 def light_int(ax, axis: str = "x") -> None:
@@ -597,7 +608,7 @@ def family_figures(
     out = []
     pages = [rows[i : i + FAMILY_ROWS] for i in range(0, len(rows), FAMILY_ROWS)]
     for k, page in enumerate(pages):
-        fig, axes = grid(len(page), 2, panel=(3.9, 1.55), top=1.0, bottom=0.5, hgap=0.5)
+        fig, axes = grid(len(page), 2, panel=(3.8, 1.55), top=1.0, bottom=0.5, hgap=0.5, wgap=0.95)
         for i, (m, g, rep, h) in enumerate(page):
             ax1, ax2 = axes[i]
             it = h["iteration"].to_numpy(float)
