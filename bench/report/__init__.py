@@ -516,7 +516,6 @@ def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
 
     n_crashed = int(runs["crashed"].sum())
     seeds = sorted(int(s) for s in runs["seed"].unique())
-    starts = sorted(runs["start"].unique())
     suites = sorted(s for s in runs["suite"].dropna().unique()) if "suite" in runs else []
     hashes = (
         sorted(str(h) for h in runs["data_hash"].dropna().unique()) if "data_hash" in runs else []
@@ -541,8 +540,7 @@ def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
         f"- tracks: {counts('track')}; data tiers: {counts('tier')}; Jacobians: "
         f"{counts('jacobian')}; starts: {counts('start')}",
         f"- budgets: {', '.join(map(str, budgets))}; seeds: "
-        f"{', '.join(map(str, seeds))}; starts: {', '.join(starts)}; mesh: "
-        f"{', '.join(meshes) or T.DASH}",
+        f"{', '.join(map(str, seeds))}; mesh: {', '.join(meshes) or T.DASH}",
         f"- data file hash(es): {hshow or T.DASH}",
         f"- success criterion: **{rule}**",
         f"- total cost of the runs: {runs['fe_total'].sum():.0f} forward-equivalents; wall time "
