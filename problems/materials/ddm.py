@@ -23,11 +23,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from problems.materials import _kernels as _K
 from problems.materials.hardening import reference_test
 
 _RAD = math.pi / 180.0
+_JIT = dict(cache=True, nogil=True, error_model="numpy")
 
 
 def _dtan_deg(tan_value: float) -> float:
@@ -133,36 +135,30 @@ def affine_sensitivity(
         dstress = c + T_s e,   dstate = h + T_q e
 
     with (c, h) the sensitivities for e = 0 and T = [T_s; T_q] = d(stress, state)/d(strain
-    increment) of the update (T_s is the consistent tangent). One kernel call with k + 6
-    columns gives both: the k parameter ``columns`` (indices into ``parameter_names``) with
-    their derivatives, and six columns with no parameter derivative, zero old derivatives and
-    the unit strain increments. Inputs: strain_increment, stress_old (n, 6), state_old
-    (n, n_state), the ``update`` of them, dstress_old (n, k, 6), dstate_old (n, k, n_state),
-    dstrain_known (n, k, 6) for the k columns (MPa, 1 per parameter unit). Returns
-    (c (n, k, 6) MPa per unit, h (n, k, n_state) per unit, T (n, 6 + n_state, 6) MPa and -);
-    failed points carry NaN like ``sensitivity``. Same arithmetic per column as
-    ``DruckerPrager.sensitivity`` (tested against it to round-off).
+    increment) of the update. One pass over the points gives both (:func:`_affine_kernel`): the
+    k parameter ``columns`` (indices into ``parameter_names``) as ``sensitivity`` computes them,
+    and T: at a smooth return, six unit strain increments solved with the LU factors of the
+    local Jacobian that the parameter columns formed (e_j enters the local residual as E e_j;
+    d sigma and E d eqps come out, the plastic-strain rows are I - C T_s since the plastic
+    strain is formed as eps_pl_n + deps - C (sigma - sigma_n)): six back-substitutions instead
+    of six more columns through the whole kernel; apex returns go through the same closed forms
+    as ``sensitivity`` with six unit-strain columns; elastic points have T_s = D (the update's
+    tangent), T_q = 0. Inputs: strain_increment, stress_old (n, 6), state_old (n, n_state),
+    the ``update`` of them, dstress_old (n, k, 6), dstate_old (n, k, n_state), dstrain_known
+    (n, k, 6) for the k columns (MPa, 1 per parameter unit). Returns (c (n, k, 6) MPa per unit,
+    h (n, k, n_state) per unit, T (n, 6 + n_state, 6) MPa and -); failed points carry NaN like
+    ``sensitivity``. Tested against ``DruckerPrager.sensitivity`` to round-off.
     """
     from problems.materials.drucker_prager import DruckerPrager
 
     if not isinstance(material, DruckerPrager):
         return None
-    n = len(strain_increment)
-    k, n_st = len(columns), np.shape(state_old)[1]
     de, sig_n, st_n = (
         np.ascontiguousarray(a, dtype=float) for a in (strain_increment, stress_old, state_old)
     )
-    dth = np.zeros((_K.TH_SIZE, k + 6))
-    dth[:, :k] = kernel_parameter_jacobian(material)[:, columns]
-    dsig = np.zeros((n, k + 6, 6))
-    dsig[:, :k] = dstress_old
-    dst = np.zeros((n, k + 6, n_st))
-    dst[:, :k] = dstate_old
-    dde = np.zeros((n, k + 6, 6))
-    dde[:, :k] = dstrain_known
-    dde[:, k:] = np.eye(6)
+    dth = np.ascontiguousarray(kernel_parameter_jacobian(material)[:, list(columns)])
     sig_tr, _, plastic = material._elastic_trial(de, sig_n, np.ascontiguousarray(st_n[:, 0]))
-    ds, dq = _K.update_sensitivities(
+    return _affine_kernel(
         material._kernel_params,
         material.yield_function.kernel_params,
         material.potential.kernel_params,
@@ -175,12 +171,158 @@ def affine_sensitivity(
         np.ascontiguousarray(update.stress),
         np.ascontiguousarray(update.state),
         np.ascontiguousarray(update.ok),
-        dsig,
-        dst,
-        dde,
+        np.ascontiguousarray(update.tangent, dtype=float),
+        np.ascontiguousarray(dstress_old, dtype=float),
+        np.ascontiguousarray(dstate_old, dtype=float),
+        np.ascontiguousarray(dstrain_known, dtype=float),
     )
-    T = np.concatenate([ds[:, k:], dq[:, k:]], axis=2).transpose(0, 2, 1)
-    return ds[:, :k], dq[:, :k], np.ascontiguousarray(T)
+
+
+@njit(**_JIT)
+def _affine_kernel(
+    mp,
+    yp,
+    gp,
+    dth,
+    de,
+    sig_n,
+    st_n,
+    sig_tr,
+    plastic,
+    stress,
+    state,
+    ok,
+    tangent,
+    dsig_n,
+    dst_n,
+    dde,
+):
+    """(c, h, T) of :func:`affine_sensitivity`: the loop of ``_kernels.update_sensitivities``
+    for the k parameter columns, plus T per point."""
+    n, k, n_st = de.shape[0], dth.shape[1], st_n.shape[1]
+    c = np.empty((n, k, 6))
+    h = np.empty((n, k, n_st))
+    T = np.zeros((n, 6 + n_st, 6))
+    cone = int(yp[0]) == _K.LINEAR
+    E, nu = mp[_K.M_E], mp[_K.M_NU]
+    x = np.empty(8)
+    R = np.empty(8)
+    J = np.empty((8, 8))
+    piv = np.empty(8, np.int64)
+    Rth = np.empty((8, _K.TH_SIZE + 1))
+    rhs = np.empty((8, k))
+    b6 = np.empty((8, 6))
+    # six unit strain increments, for the apex's closed form
+    z6 = np.zeros((_K.TH_SIZE, 6))
+    eye = np.zeros((n, 6, 6))
+    for j in range(6):
+        eye[:, j, j] = 1.0
+    zs6, zq6 = np.zeros((n, 6, 6)), np.zeros((n, 6, n_st))
+    ds6, dq6 = np.empty((n, 6, 6)), np.empty((n, 6, n_st))
+    for i in range(n):
+        _K._trial_sensitivity(mp, dth, de, dsig_n, dde, i, c)
+        good = not plastic[i] or ok[i]
+        smooth = False
+        if plastic[i] and good:
+            st = (
+                sig_tr[i, 0],
+                sig_tr[i, 1],
+                sig_tr[i, 2],
+                sig_tr[i, 3],
+                sig_tr[i, 4],
+                sig_tr[i, 5],
+            )
+            en = st_n[i, 0]
+            is_apex = False
+            if cone:
+                p_tr, s_tr = _K._deviator(st)
+                is_apex, _, dl, _ = _K._apex_return(mp, yp, gp, p_tr, s_tr, _K._j2(s_tr), en)
+                if is_apex:
+                    _K._apex_sensitivity(mp, yp, gp, dth, p_tr, en, dl, dst_n, i, c, h)
+                    _K._trial_sensitivity(mp, z6, de, zs6, eye, i, ds6)
+                    _K._apex_sensitivity(mp, yp, gp, z6, p_tr, en, dl, zq6, i, ds6, dq6)
+                    _K._plastic_strain_sensitivity(
+                        mp, z6, stress, sig_n, zs6, eye, zq6, i, ds6, dq6
+                    )
+                    for j in range(6):
+                        for r in range(6):
+                            T[i, r, j] = ds6[i, j, r]
+                        for r in range(n_st):
+                            T[i, 6 + r, j] = dq6[i, j, r]
+            if not is_apex:
+                sig = (
+                    stress[i, 0],
+                    stress[i, 1],
+                    stress[i, 2],
+                    stress[i, 3],
+                    stress[i, 4],
+                    stress[i, 5],
+                )
+                good = _K._smooth_sensitivity(
+                    mp,
+                    yp,
+                    gp,
+                    dth,
+                    st,
+                    en,
+                    sig,
+                    state[i, 0],
+                    dst_n,
+                    i,
+                    c,
+                    h,
+                    x,
+                    R,
+                    J,
+                    piv,
+                    Rth,
+                    rhs,
+                )
+                smooth = good
+            if good:
+                _K._plastic_strain_sensitivity(mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, c, h)
+        elif good:  # elastic: the old state
+            for q in range(k):
+                for b in range(n_st):
+                    h[i, q, b] = dst_n[i, q, b]
+        if not good:
+            for q in range(k):
+                for a in range(6):
+                    c[i, q, a] = np.nan
+                for b in range(n_st):
+                    h[i, q, b] = np.nan
+            for r in range(6 + n_st):
+                for j in range(6):
+                    T[i, r, j] = np.nan
+            continue
+        if plastic[i] and not smooth:
+            continue  # apex: T done above
+        if not smooth:  # elastic: T_s = D (the update's tangent), T_q = 0
+            for r in range(6):
+                for j in range(6):
+                    T[i, r, j] = tangent[i, r, j]
+            continue
+        # smooth return: the six unit strain increments enter the local residual as E e_j; one
+        # multi-column solve with the LU factors of the local Jacobian the parameter columns
+        # formed gives d sigma (rows 0-5) and E d eqps (row 7); the plastic strain rows are
+        # e_j - C d sigma
+        for a in range(8):
+            for j in range(6):
+                b6[a, j] = E if a == j else 0.0
+        if not _K._lu8_solve(J, piv, b6):
+            for r in range(6 + n_st):
+                for j in range(6):
+                    T[i, r, j] = np.nan
+            continue
+        for j in range(6):
+            t = b6[0, j] + b6[1, j] + b6[2, j]
+            T[i, 6, j] = b6[7, j] / E
+            for a in range(6):
+                v = b6[a, j]
+                T[i, a, j] = v
+                Sv = (1.0 + nu) * v - nu * t if a < 3 else 2.0 * (1.0 + nu) * v
+                T[i, 7 + a, j] = (1.0 if a == j else 0.0) - Sv / E
+    return c, h, T
 
 
 # --------------------------------------------------------------------------------------------
