@@ -122,3 +122,25 @@ def test_global_on_the_surrogate_track_is_compared_with_lm_on_fe():
     assert "lm (FE) 1/1 (100 %), median max |error| 0.5 %, median 30 fe" in text
     assert "ga (surrogate) 1/1 (100 %), median max |error| 0.2 %, median 315 fe" in text
     assert "the best, ga (surrogate), costs 10 × as much (median fe)" in text
+
+
+def test_posterior_coverage_per_tier():
+    runs, _ = M.prepare(frame([run_row(LIN, {"E": 0.5})]))
+    post = pd.DataFrame(
+        {
+            "case": [LIN] * 3,
+            "tier": ["consistent", "model-error", "model-error"],
+            "source": ["s"] * 3,
+            "parameter": ["E", "E", "H"],
+            "width95_pct": [1.0, 1.0, 1.0],
+            "laplace_width_pct": [float("nan")] * 3,
+            "mean_n": [1.0, 0.97, 1.01],
+            "q025_n": [0.99, 0.96, 1.005],
+            "q975_n": [1.01, 0.98, 1.015],
+        }
+    )
+    text = "\n".join(findings(runs, M.ert_table(runs, n_boot=20), T.success(runs), post=post))
+    assert "none of these cases identifies a or pt0" in text
+    assert "coverage, consistent data**: 1 of 1 95 % intervals" in text
+    assert "coverage, model-error data**: 0 of 2 95 % intervals" in text
+    assert "farthest: E of linear-compression, posterior mean 0.97 × reference" in text

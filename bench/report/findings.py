@@ -215,7 +215,12 @@ def _worst_parameters(runs: pd.DataFrame, ok: pd.Series, post: pd.DataFrame | No
             )
         out.append(line)
     if post is not None and len(post):
-        out += _posterior_lines(post)
+        lines = _posterior_lines(post)
+        out += lines or [
+            f"- posteriors of {', '.join(case_order(post['case'].unique()))}: none of these "
+            "cases identifies a or pt0 (see the posterior table for their widths)."
+        ]
+        out += _coverage_lines(post)
     else:
         out.append("- no posterior (no MCMC record and no posterior study summary) to compare.")
     return out + [""]
@@ -252,6 +257,29 @@ def _posterior_lines(post: pd.DataFrame) -> list[str]:
                 f"- **posterior, {tier} data** ({n_src} posterior(s) over {n_cases} case(s), "
                 "see the posterior table): " + "; ".join(parts) + "."
             )
+    return out
+
+
+def _coverage_lines(post: pd.DataFrame) -> list[str]:
+    """Per data tier: how many posterior 95 % intervals (all parameters, cases and sources)
+    contain the reference value."""
+    out = []
+    ok = post[np.isfinite(post["q025_n"]) & np.isfinite(post["q975_n"])]
+    for tier, g in ok.groupby("tier", sort=True):
+        inside = (g["q025_n"] <= 1.0) & (g["q975_n"] >= 1.0)
+        miss = g[~inside]
+        worst = ""
+        if len(miss):
+            off = (miss["mean_n"] - 1.0).abs() * 100.0
+            r = miss.loc[off.idxmax()]
+            worst = (
+                f"; farthest: {r['parameter']} of {r['case']}, posterior mean "
+                f"{fmt_num(float(r['mean_n']), 3)} × reference"
+            )
+        out.append(
+            f"- **posterior coverage, {tier} data**: {int(inside.sum())} of {len(g)} 95 % "
+            f"intervals (parameters × cases × sources) contain the reference value{worst}."
+        )
     return out
 
 
