@@ -389,19 +389,25 @@ class GPFit:
         amp = np.array([c.amplitude for c in cs])
         return X, inv_ls2, amp, comp, alpha, y_mean, y_std
 
-    def _kernel(self, d, amp):
-        """Kernel values and ``(dk/dd) / d`` of the packed components at scaled distances
-        ``d`` (..., C)."""
+    def _kernel(self, d, amp, derivative: bool = True):
+        """Kernel values and ``(dk/dd) / d`` (None unless ``derivative``) of the packed components
+        at scaled distances ``d`` (..., C)."""
         nu = self.components[0].nu
         if nu == 1.5:
             e = amp * np.exp(-math.sqrt(3.0) * d)
-            return (1.0 + math.sqrt(3.0) * d) * e, -3.0 * e
+            return (1.0 + math.sqrt(3.0) * d) * e, (-3.0 * e if derivative else None)
         if nu == 2.5:
             sd = math.sqrt(5.0) * d
-            e = amp * np.exp(-sd)
-            return (1.0 + sd + sd * sd / 3.0) * e, -5.0 / 3.0 * (1.0 + sd) * e
+            e = np.exp(-sd)
+            e *= amp
+            k = sd * sd
+            k *= 1.0 / 3.0
+            k += sd
+            k += 1.0
+            k *= e
+            return k, (-5.0 / 3.0 * (1.0 + sd) * e if derivative else None)
         k = amp * np.exp(-0.5 * d * d)
-        return k, -k
+        return k, (-k if derivative else None)
 
     def predict(self, Z) -> np.ndarray:
         Z = np.atleast_2d(np.asarray(Z, float))
@@ -414,15 +420,23 @@ class GPFit:
         X, inv_ls2, amp, comp, alpha, y_mean, y_std = packed
         if len(Z) == 1:
             diff = Z[0] - X  # (n, d)
-            k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (n, C)
+            k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp, False)  # (n, C)
             return (np.einsum("nr,nr->r", k[:, comp], alpha) * y_std + y_mean)[None]
         out = np.empty((len(Z), self.n_outputs))
+        counts = np.bincount(comp, minlength=len(amp))
+        single = np.flatnonzero(counts == 1)  # components of one output: a weighted sum each
+        single_out = np.array([np.flatnonzero(comp == c)[0] for c in single], int)
+        alpha_single = alpha[:, single_out]  # (n, S)
+        groups = [(c, np.flatnonzero(comp == c)) for c in np.flatnonzero(counts > 1)]
         # small chunks: the (q, n, C) temporaries stay in cache
-        step = max(1, 200_000 // (len(X) * max(len(amp), X.shape[1])))
+        step = max(1, 40_000 // (len(X) * max(len(amp), X.shape[1])))
         for i in range(0, len(Z), step):
             diff = Z[i : i + step, None, :] - X[None]  # (q, n, d): no cancellation
-            k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp)  # (q, n, C)
-            out[i : i + step] = np.einsum("qnr,nr->qr", k[:, :, comp], alpha)
+            k, _ = self._kernel(np.sqrt((diff * diff) @ inv_ls2), amp, False)  # (q, n, C)
+            if single.size:
+                out[i : i + step, single_out] = np.sum(k[:, :, single] * alpha_single, axis=1)
+            for c, cols in groups:
+                out[i : i + step, cols] = k[:, :, c] @ alpha[:, cols]
         return out * y_std + y_mean
 
     def gradient(self, z) -> np.ndarray:
