@@ -157,3 +157,34 @@ def test_report_without_histories_and_with_a_crashed_run(tmp_path):
     assert "| exponent-tension | none; closest: lm (consistent)" in text
     ert = pd.read_csv(tmp_path / "report" / "tables" / "ert__fe__consistent.csv")
     assert ert.set_index("case").loc[EXP, "ert"] == np.inf
+
+
+def test_cli_out_and_tolerances(e2e_dir, tmp_path, capsys):
+    from bench.cli import main
+
+    c = get_case(EXP)
+    a_ref = c.material_parameters(c.reference)["a"]
+    errs = []
+    for changes in ({"pt0": 1.01}, {"pt0": 1.015, "b": 1.015}):
+        x = c.reference.copy()
+        for k, f in changes.items():
+            x[c.names.index(k)] *= f
+        errs.append(abs(100 * (c.material_parameters(x)["a"] / a_ref - 1)))
+    between = f"{0.5 * (errs[0] + errs[1]):.6f}"
+    assert abs(errs[0] - errs[1]) > 0.1
+    dest = tmp_path / "cli"
+    args = ["report", str(e2e_dir), "--out", str(dest), "--format", "csv", "--no-figures"]
+    assert main(args + ["--tol", "30", "--tol-a", between]) == 0
+    assert f"report: {dest / 'report.md'}" in capsys.readouterr().out
+
+    def rate(case):
+        s = pd.read_csv(dest / "tables" / "success.csv", index_col=0)
+        return float(s.loc["lm (consistent)", case])
+
+    # the two lm runs of the exponent case: only the one with the smaller error of a succeeds
+    assert rate(EXP) == 50.0 and rate(LIN) == 100.0
+    assert main(args + ["--tol", "30", "--tol-a", "30"]) == 0
+    assert rate(EXP) == 100.0
+    assert main(args + ["--tol", "2"]) == 0  # the second run's E is 5 % off
+    assert rate(EXP) == 50.0
+    assert main(args + ["--tol-a", "0"]) == 2
