@@ -528,6 +528,16 @@ def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
         vc = runs[col].astype(str).value_counts()
         return ", ".join(f"{k} ({v})" for k, v in vc.items())
 
+    if "budget_unit" in runs:
+        pairs = sorted(
+            {
+                (int(b), str(u))
+                for b, u in zip(runs["budget"], runs["budget_unit"].fillna("evaluations"))
+            }
+        )
+        budget_text = ", ".join(f"{b} {u}" for b, u in pairs)
+    else:
+        budget_text = ", ".join(map(str, budgets)) + " evaluations"
     hshow = ", ".join(f"`{h[:16]}`" for h in hashes[:6]) + (
         f" and {len(hashes) - 6} more" if len(hashes) > 6 else ""
     )
@@ -539,7 +549,7 @@ def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
         f"- methods ({len(methods)}): {', '.join(methods)}",
         f"- tracks: {counts('track')}; data tiers: {counts('tier')}; Jacobians: "
         f"{counts('jacobian')}; starts: {counts('start')}",
-        f"- budgets: {', '.join(map(str, budgets))}; seeds: "
+        f"- budgets: {budget_text}; seeds: "
         f"{', '.join(map(str, seeds))}; mesh: {', '.join(meshes) or T.DASH}",
         f"- data file hash(es): {hshow or T.DASH}",
         f"- success criterion: **{rule}**",
