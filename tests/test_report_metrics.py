@@ -230,3 +230,12 @@ def test_target_table_relative_to_best_known_cost():
     assert t.loc[0, "k2"] == pytest.approx(100.0)
     assert t.loc[0, "k3"] == pytest.approx(200 / 3)
     assert t.loc[0, "k4"] == pytest.approx(100 / 3)
+
+
+def test_continued_iterations_of_a_surrogate_then_polish_history():
+    from bench.report.figures import continued_iterations
+
+    it, starts = continued_iterations([1, 2, 3, 334, 1, 2, 4])
+    assert it.tolist() == [1, 2, 3, 334, 335, 336, 338] and starts == [334.5]
+    it, starts = continued_iterations([0, 1, 2])
+    assert it.tolist() == [0, 1, 2] and starts == []

@@ -611,7 +611,19 @@ def family_figures(
         fig, axes = grid(len(page), 2, panel=(3.8, 1.55), top=1.0, bottom=0.5, hgap=0.5, wgap=0.95)
         for i, (m, g, rep, h) in enumerate(page):
             ax1, ax2 = axes[i]
-            it = h["iteration"].to_numpy(float)
+            it, phases = continued_iterations(h["iteration"].to_numpy(float))
+            for x in phases:  # e.g. the FE polish after the surrogate phase
+                ax1.axvline(x, color="0.4", linewidth=0.7, linestyle=(0, (4, 2)))
+                ax1.text(
+                    x,
+                    1.0,
+                    " FE polish" if rep.get("track") == "surrogate" else " next phase",
+                    transform=ax1.get_xaxis_transform(),
+                    fontsize=6,
+                    va="top",
+                    ha="left",
+                    color="0.3",
+                )
             for p in active:
                 col = f"xn.{p}"
                 if col not in h or not h[col].notna().any():
@@ -693,6 +705,21 @@ def family_figures(
     return out
 
 
+def continued_iterations(it) -> tuple[np.ndarray, list[float]]:
+    """Iterations made increasing: a phase that counts from the start again (the surrogate track's
+    FE polish after the surrogate phase) continues after the previous phase's last iteration.
+    Returns the continued iterations and where each new phase starts (between two iterations)."""
+    it = np.asarray(it, float)
+    out = it.copy()
+    starts, offset = [], 0.0
+    for i in range(1, len(it)):
+        if np.isfinite(it[i]) and np.isfinite(it[i - 1]) and it[i] < it[i - 1]:
+            offset = out[i - 1] + 1.0 - it[i]
+            starts.append(out[i - 1] + 0.5)
+        out[i] = it[i] + offset
+    return out, starts
+
+
 def _cost_panel(ax, g: pd.DataFrame, h: pd.DataFrame, hist_by: dict) -> None:
     """Cost against iteration: the band of the best cost over the runs ``g``, the representative
     run's iterate costs (dots) and best cost (line); log scale when positive."""
@@ -700,7 +727,9 @@ def _cost_panel(ax, g: pd.DataFrame, h: pd.DataFrame, hist_by: dict) -> None:
     for ch in g["config_hash"]:
         hh = hist_by.get(ch)
         if hh is not None and len(hh):
-            curves.append(hh[["iteration", "best_cost"]].to_numpy(float))
+            c = hh[["iteration", "best_cost"]].to_numpy(float)
+            c[:, 0] = continued_iterations(c[:, 0])[0]
+            curves.append(c)
     if len(curves) > 1:
         n = int(max(c[:, 0].max() for c in curves)) + 1
         n = min(n, 5000)
@@ -715,7 +744,9 @@ def _cost_panel(ax, g: pd.DataFrame, h: pd.DataFrame, hist_by: dict) -> None:
             warnings.simplefilter("ignore", RuntimeWarning)
             lo, hi = np.nanmin(arr, axis=0), np.nanmax(arr, axis=0)
         ax.fill_between(grid, lo, hi, color="0.85", linewidth=0, step="post")
-    it = h["iteration"].to_numpy(float)
+    it, phases = continued_iterations(h["iteration"].to_numpy(float))
+    for x in phases:
+        ax.axvline(x, color="0.4", linewidth=0.7, linestyle=(0, (4, 2)))
     cost = h["cost"].to_numpy(float)
     best = h["best_cost"].to_numpy(float)
     ax.plot(

@@ -119,6 +119,12 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
     if history is not None:
         hattrs = dict(history.attrs)
         history = history.copy()
+        if len(history) and "config_hash" in history and "n_evals" in history:
+            # one run's rows in evaluation order: a history whose phases each count iterations
+            # from 1 (surrogate, then FE polish) is sorted by iteration in the store
+            history = history.assign(_row=np.arange(len(history)))
+            history = history.sort_values(["config_hash", "n_evals", "_row"], kind="stable")
+            history = history.drop(columns="_row").reset_index(drop=True)
         if len(history) and "config_hash" in history:
             keep = ["method", "track", "tier", "treatment", "family", "objective", "solver"]
             info = runs.set_index("config_hash")[keep]
