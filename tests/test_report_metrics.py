@@ -239,3 +239,14 @@ def test_continued_iterations_of_a_surrogate_then_polish_history():
     assert it.tolist() == [1, 2, 3, 334, 335, 336, 338] and starts == [334.5]
     it, starts = continued_iterations([0, 1, 2])
     assert it.tolist() == [0, 1, 2] and starts == []
+
+
+def test_ert_without_charges():
+    rows = [
+        run_row(LIN, {"E": 0.1}, forward_equivalents=10.0, charged_equivalents=390.0, seed=0),
+        run_row(LIN, {"E": 9.0}, forward_equivalents=20.0, charged_equivalents=390.0, seed=1),
+    ]
+    runs, _ = M.prepare(frame(rows))
+    e = M.ert_table(runs, n_boot=50).iloc[0]
+    assert e["ert"] == pytest.approx(810.0) and e["ert_without_charges"] == pytest.approx(30.0)
+    assert e["charged_median"] == pytest.approx(390.0)

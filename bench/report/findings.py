@@ -59,10 +59,18 @@ def findings(
             ((m, int((solved["method"] == m).sum())) for m in first), key=lambda t: -t[1]
         )
         lead = ", ".join(f"{m} on {n}" for m, n in counts) if counts else "no method"
+        charge = float(sub["charged_median"].median()) if "charged_median" in sub else 0.0
+        ctext = (
+            f" The ERTs include the charges recorded with each run (median {fmt_num(charge)} "
+            "fe per run: high-fidelity corrections, BAE statistics, surrogate training; "
+            "`ert_without_charges` in the ERT CSV leaves them out)."
+            if charge > 0
+            else ""
+        )
         md.append(
             f"- **{track} track, {tier} data** ({len(sub)} method × case cells, "
             f"{int(sub['runs'].sum())} runs): a method succeeds on {len(solved)} of {len(g)} "
-            f"cases; the winners: {lead}."
+            f"cases; the winners: {lead}.{ctext}"
         )
         lines = ["| case | winner | success | ERT [95 % CI] (fe) | runner-up (success, ERT) |"]
         lines.append("|:---|:---|---:|---:|:---|")

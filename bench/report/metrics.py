@@ -182,8 +182,11 @@ def ert_table(
     seed: int = 0,
 ) -> pd.DataFrame:
     """One row per (track, tier, case, method): runs, successes, success rate (%), total and
-    median forward-equivalents, ERT and its bootstrap 95 % interval. The bootstrap of a group is
-    seeded by ``seed`` and the group's key, so adding other groups changes nothing."""
+    median forward-equivalents, the median charge per run (``charged_median``: corrections,
+    surrogate training, ...), ERT and its bootstrap 95 % interval, and the ERT without the
+    charges (``ert_without_charges``: what the runs cost when a shared charge is amortised). The
+    bootstrap of a group is seeded by ``seed`` and the group's key, so adding other groups changes
+    nothing."""
     from bench.report.tables import SUCCESS_TOL, case_order, method_order, success
 
     tol = SUCCESS_TOL if tol is None else tol
@@ -194,6 +197,8 @@ def ert_table(
     ):
         fe = g["fe_total"].to_numpy(float)
         fe = np.where(np.isfinite(fe), fe, 0.0)
+        fe_own = g["fe_solver"].to_numpy(float)
+        fe_own = np.where(np.isfinite(fe_own), fe_own, 0.0)
         ok = ok_all.loc[g.index].to_numpy(bool)
         lo, hi = bootstrap_ert(fe, ok, n_boot=n_boot, seed=f"{seed}|{case}|{method}|{track}")
         rows.append(
@@ -211,7 +216,9 @@ def ert_table(
                 "max_err_median": float(g["max_abs_err"].median())
                 if "max_abs_err" in g
                 else math.nan,
+                "charged_median": float(np.median(fe - fe_own)),
                 "ert": ert(fe, ok),
+                "ert_without_charges": ert(fe_own, ok),
                 "ert_lo": lo,
                 "ert_hi": hi,
             }
