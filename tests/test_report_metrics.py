@@ -241,12 +241,28 @@ def test_continued_iterations_of_a_surrogate_then_polish_history():
     assert it.tolist() == [0, 1, 2] and starts == []
 
 
-def test_ert_without_charges():
+def test_ert_amortised_leaves_out_shared_charges():
     rows = [
-        run_row(LIN, {"E": 0.1}, forward_equivalents=10.0, charged_equivalents=390.0, seed=0),
-        run_row(LIN, {"E": 9.0}, forward_equivalents=20.0, charged_equivalents=390.0, seed=1),
+        run_row(LIN, {"E": 0.1}, forward_equivalents=10.0, charged_equivalents=400.0, seed=0),
+        run_row(LIN, {"E": 9.0}, forward_equivalents=20.0, charged_equivalents=400.0, seed=1),
     ]
     runs, _ = M.prepare(frame(rows))
+    recs = [
+        {
+            "config_hash": h,
+            "result": {
+                "charges": {
+                    "surrogate-training": {"forward_equivalents": 390.0},
+                    "hifi": {"forward_equivalents": 10.0},
+                }
+            },
+        }
+        for h in runs["config_hash"]
+    ]
+    runs = M.add_shared_charges(runs, recs)
     e = M.ert_table(runs, n_boot=50).iloc[0]
-    assert e["ert"] == pytest.approx(810.0) and e["ert_without_charges"] == pytest.approx(30.0)
-    assert e["charged_median"] == pytest.approx(390.0)
+    assert e["ert"] == pytest.approx(830.0)  # (410 + 420) / 1
+    assert e["ert_amortised"] == pytest.approx(50.0)  # (20 + 30) / 1: the hifi charge stays
+    assert e["charged_median"] == pytest.approx(400.0)
+    assert e["shared_median"] == pytest.approx(390.0)
+    assert M.ert_table(M.prepare(frame(rows))[0], n_boot=5).iloc[0]["ert_amortised"] == 830.0

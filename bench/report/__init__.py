@@ -162,6 +162,7 @@ def build_report(
     from bench.report.posterior import posterior_frame, width_table
 
     runs, history = M.prepare(runs, history)
+    runs = M.add_shared_charges(runs, records)
     dtol = dict(T.DERIVED_TOL) if tol_a is None else {**T.DERIVED_TOL, "a": float(tol_a)}
     rule = T.success_rule(tol, dtol)
     ok = T.success(runs, tol, dtol)

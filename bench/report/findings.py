@@ -60,10 +60,17 @@ def findings(
         )
         lead = ", ".join(f"{m} on {n}" for m, n in counts) if counts else "no method"
         charge = float(sub["charged_median"].median()) if "charged_median" in sub else 0.0
+        shared = float(sub["shared_median"].median()) if "shared_median" in sub else 0.0
         ctext = (
             f" The ERTs include the charges recorded with each run (median {fmt_num(charge)} "
-            "fe per run: high-fidelity corrections, BAE statistics, surrogate training; "
-            "`ert_without_charges` in the ERT CSV leaves them out)."
+            "fe per run: high-fidelity corrections, BAE statistics, surrogate training"
+            + (
+                f"; of which {fmt_num(shared)} fe shared by the runs, left out in "
+                "`ert_amortised` of the ERT CSV"
+                if shared > 0
+                else ""
+            )
+            + ")."
             if charge > 0
             else ""
         )

@@ -135,6 +135,34 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
     return runs, history
 
 
+#: Charges paid once and shared by many runs (amortised in ``ert_amortised``).
+SHARED_CHARGES = ("surrogate-training",)
+
+
+def add_shared_charges(runs: pd.DataFrame, records) -> pd.DataFrame:
+    """``runs`` with ``fe_shared``: the forward-equivalents of each run's charges of the kinds in
+    :data:`SHARED_CHARGES` (read from the records; 0 when none), and ``fe_amortised`` =
+    ``fe_total - fe_shared``."""
+    shared = {}
+    for rec in records or ():
+        charges = (rec.get("result") or {}).get("charges") or {}
+        items = (
+            charges.items()
+            if isinstance(charges, dict)
+            else ((c.get("kind"), c) for c in charges if isinstance(c, dict))
+        )
+        tot = 0.0
+        for kind, c in items:
+            if kind in SHARED_CHARGES and isinstance(c, dict):
+                v = pd.to_numeric(c.get("forward_equivalents"), errors="coerce")
+                tot += float(v) if np.isfinite(v) else 0.0
+        shared[rec.get("config_hash")] = tot
+    runs = runs.copy()
+    runs["fe_shared"] = runs["config_hash"].map(shared).fillna(0.0).astype(float)
+    runs["fe_amortised"] = runs["fe_total"] - runs["fe_shared"]
+    return runs
+
+
 def _col(df: pd.DataFrame, col: str, default: float) -> np.ndarray:
     if col not in df:
         return np.full(len(df), default, float)
@@ -183,8 +211,9 @@ def ert_table(
 ) -> pd.DataFrame:
     """One row per (track, tier, case, method): runs, successes, success rate (%), total and
     median forward-equivalents, the median charge per run (``charged_median``: corrections,
-    surrogate training, ...), ERT and its bootstrap 95 % interval, and the ERT without the
-    charges (``ert_without_charges``: what the runs cost when a shared charge is amortised). The
+    surrogate training, ...) and of its shared part (``shared_median``, :data:`SHARED_CHARGES`),
+    ERT and its bootstrap 95 % interval, and the ERT without the shared charges
+    (``ert_amortised``: what the runs cost when e.g. a surrogate's training is amortised). The
     bootstrap of a group is seeded by ``seed`` and the group's key, so adding other groups changes
     nothing."""
     from bench.report.tables import SUCCESS_TOL, case_order, method_order, success
@@ -197,7 +226,7 @@ def ert_table(
     ):
         fe = g["fe_total"].to_numpy(float)
         fe = np.where(np.isfinite(fe), fe, 0.0)
-        fe_own = g["fe_solver"].to_numpy(float)
+        fe_own = g["fe_amortised"].to_numpy(float) if "fe_amortised" in g else fe
         fe_own = np.where(np.isfinite(fe_own), fe_own, 0.0)
         ok = ok_all.loc[g.index].to_numpy(bool)
         lo, hi = bootstrap_ert(fe, ok, n_boot=n_boot, seed=f"{seed}|{case}|{method}|{track}")
@@ -216,9 +245,12 @@ def ert_table(
                 "max_err_median": float(g["max_abs_err"].median())
                 if "max_abs_err" in g
                 else math.nan,
-                "charged_median": float(np.median(fe - fe_own)),
+                "charged_median": float(np.median(g["fe_charged"].to_numpy(float)))
+                if "fe_charged" in g
+                else 0.0,
+                "shared_median": float(np.median(fe - fe_own)),
                 "ert": ert(fe, ok),
-                "ert_without_charges": ert(fe_own, ok),
+                "ert_amortised": ert(fe_own, ok),
                 "ert_lo": lo,
                 "ert_hi": hi,
             }
