@@ -156,6 +156,8 @@ def build_report(
     the files moved into ``runs/corrupt/``; both are listed in report.md. ``records``: the records
     themselves (MCMC posteriors); ``posterior_dirs``: folders holding the posterior study's
     ``<case>/summary.json``."""
+    import pandas as pd
+
     from bench.report import metrics as M
     from bench.report import tables as T
     from bench.report.findings import findings
@@ -250,13 +252,26 @@ def build_report(
             f"tab:success-{key}",
             index_label="method",
         )
-        disp = T.pivot(sel, lambda r: T.fmt_ert(r["ert"], r["ert_lo"], r["ert_hi"]))
+        shared = bool((sel.get("shared_median", pd.Series(dtype=float)) > 0).any())
+
+        def ert_cell(r, shared=shared):
+            cell = T.fmt_ert(r["ert"], r["ert_lo"], r["ert_hi"])
+            if shared and math.isfinite(r["ert"]):
+                cell += f"; {T.fmt_num(float(r['ert_amortised']))} amortised"
+            return cell
+
+        disp = T.pivot(sel, ert_cell)
         table(
             f"ert__{key}",
             disp,
             sel.reset_index(drop=True),
             f"ERT to success in forward-equivalents [bootstrap 95 % interval] ({track} track, "
-            f"{tier} data); ∞ = no success.",
+            f"{tier} data); ∞ = no success."
+            + (
+                " 'amortised': the ERT without the charges shared by the runs (surrogate training)."
+                if shared
+                else ""
+            ),
             f"tab:ert-{key}",
             index_label="method",
             raw_kw={"index": False},
