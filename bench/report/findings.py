@@ -154,10 +154,13 @@ def _global_vs_lm(runs: pd.DataFrame, ok: pd.Series) -> list[str]:
                     parts.append(f"{name}: no run")
                     continue
                 k = int(ok.loc[gr.index].sum())
+                am = ""
+                if "fe_shared" in gr and (gr["fe_shared"] > 0).any():
+                    am = f" ({fmt_num(float(gr['fe_amortised'].median()))} amortised)"
                 parts.append(
                     f"{name} {_pct(k, len(gr))}, median max |error| "
                     f"{fmt_pct(float(gr['max_abs_err'].median()))} %, median "
-                    f"{fmt_num(float(gr['fe_total'].median()))} fe"
+                    f"{fmt_num(float(gr['fe_total'].median()))} fe{am}"
                 )
             verdict = _verdict(gl, groups[1:], ok)
             tr = "" if treatment == "none" else f", {treatment} treatment"
