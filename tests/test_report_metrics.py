@@ -266,3 +266,17 @@ def test_ert_amortised_leaves_out_shared_charges():
     assert e["charged_median"] == pytest.approx(400.0)
     assert e["shared_median"] == pytest.approx(390.0)
     assert M.ert_table(M.prepare(frame(rows))[0], n_boot=5).iloc[0]["ert_amortised"] == 830.0
+
+
+def test_analytic_cases_have_no_data_tier():
+    row = {
+        "config_hash": "x",
+        "case": "analytic-linear",
+        "method": "lm",
+        "tier": "model-error",  # the config's default
+        "n_evals": 3,
+        "err.p": 0.1,
+        "x.p": 1.0,
+    }
+    runs, _ = M.prepare(frame([row]))
+    assert runs.loc[0, "tier"] == "analytic" and runs.loc[0, "family"] == "local"

@@ -96,6 +96,8 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
         else:
             runs[col] = runs[col].where(runs[col].notna(), d)
     runs["polish"] = runs["polish"].map(_bool)
+    analytic = runs["case"].map(_is_analytic)
+    runs.loc[analytic, "tier"] = "analytic"  # analytic test problems have no data tiers
     if "solver" not in runs:
         runs["solver"] = runs["method"].map(lambda m: str(m).split(" (")[0])
     if "crashed" not in runs:
@@ -161,6 +163,13 @@ def add_shared_charges(runs: pd.DataFrame, records) -> pd.DataFrame:
     runs["fe_shared"] = runs["config_hash"].map(shared).fillna(0.0).astype(float)
     runs["fe_amortised"] = runs["fe_total"] - runs["fe_shared"]
     return runs
+
+
+def _is_analytic(case: str) -> bool:
+    from problems.inverse.cases import all_cases
+
+    c = all_cases().get(str(case))
+    return bool(c is not None and c.is_analytic)
 
 
 def _col(df: pd.DataFrame, col: str, default: float) -> np.ndarray:
