@@ -212,13 +212,13 @@ def _affine_kernel(
     Rth = np.empty((8, _K.TH_SIZE + 1))
     rhs = np.empty((8, k))
     b6 = np.empty((8, 6))
-    # six unit strain increments, for the apex's closed form
+    # six unit strain increments of one point (index 0), for the apex's closed form
     z6 = np.zeros((_K.TH_SIZE, 6))
-    eye = np.zeros((n, 6, 6))
+    eye = np.zeros((1, 6, 6))
     for j in range(6):
-        eye[:, j, j] = 1.0
-    zs6, zq6 = np.zeros((n, 6, 6)), np.zeros((n, 6, n_st))
-    ds6, dq6 = np.empty((n, 6, 6)), np.empty((n, 6, n_st))
+        eye[0, j, j] = 1.0
+    zs6, zq6 = np.zeros((1, 6, 6)), np.zeros((1, 6, n_st))
+    ds6, dq6 = np.empty((1, 6, 6)), np.empty((1, 6, n_st))
     for i in range(n):
         _K._trial_sensitivity(mp, dth, de, dsig_n, dde, i, c)
         good = not plastic[i] or ok[i]
@@ -239,16 +239,17 @@ def _affine_kernel(
                 is_apex, _, dl, _ = _K._apex_return(mp, yp, gp, p_tr, s_tr, _K._j2(s_tr), en)
                 if is_apex:
                     _K._apex_sensitivity(mp, yp, gp, dth, p_tr, en, dl, dst_n, i, c, h)
-                    _K._trial_sensitivity(mp, z6, de, zs6, eye, i, ds6)
-                    _K._apex_sensitivity(mp, yp, gp, z6, p_tr, en, dl, zq6, i, ds6, dq6)
+                    one = slice(i, i + 1)
+                    _K._trial_sensitivity(mp, z6, de[one], zs6, eye, 0, ds6)
+                    _K._apex_sensitivity(mp, yp, gp, z6, p_tr, en, dl, zq6, 0, ds6, dq6)
                     _K._plastic_strain_sensitivity(
-                        mp, z6, stress, sig_n, zs6, eye, zq6, i, ds6, dq6
+                        mp, z6, stress[one], sig_n[one], zs6, eye, zq6, 0, ds6, dq6
                     )
                     for j in range(6):
                         for r in range(6):
-                            T[i, r, j] = ds6[i, j, r]
+                            T[i, r, j] = ds6[0, j, r]
                         for r in range(n_st):
-                            T[i, 6 + r, j] = dq6[i, j, r]
+                            T[i, 6 + r, j] = dq6[0, j, r]
             if not is_apex:
                 sig = (
                     stress[i, 0],
