@@ -239,6 +239,8 @@ def posterior_frame(records=(), folders=()) -> pd.DataFrame:
     df = pd.DataFrame(rows)
     if not len(df):
         return df
+    analytic = {c: bool(_case(c) is not None and _case(c).is_analytic) for c in df["case"].unique()}
+    df.loc[df["case"].map(analytic), "tier"] = "analytic"  # no data tiers (as in the runs)
     refs = {c: references(c) for c in df["case"].unique()}
     df["reference"] = [refs[c].get(p, math.nan) for c, p in zip(df["case"], df["parameter"])]
     ref = df["reference"].to_numpy(float)
