@@ -278,14 +278,17 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
 
     ``runs``: one row per run — configuration columns (case, ``method`` = :func:`method_label`,
     ``solver``, ``tier``, ``treatment``, seed, start, start_index, budget, mesh, ``data.<key>``,
-    options as JSON), outcome (``forward_equivalents`` of the solver's evaluations,
+    options as JSON), outcome (``forward_equivalents`` of the solver's evaluations, measured;
+    ``forward_equivalents_nominal``, what the budget counted, in ``budget_unit``;
     ``charged_equivalents`` of the runs made for it, ``total_equivalents``) (status, success, cost,
     n_evals, ..., wall_s), per parameter ``x.<p>`` (physical), ``xn.<p>`` (x / reference),
     ``err.<p>`` (signed error in percent; NaN where the parameter is inactive) and ``x0.<p>``, plus
     provenance (data_hash, hostname, started, finished, crashed).
 
     ``history``: one row per history row of each run — config_hash, case, method, seed, start,
-    start_index, budget, iteration, n_evals, cost, best_cost and ``xn.<p>``/``err.<p>``.
+    start_index, budget, ``step`` (the row's position in the run's history), ``phase`` (e.g.
+    ``polish`` after a surrogate search; empty when the solver gives none), iteration, n_evals,
+    cost, best_cost and ``xn.<p>``/``err.<p>``.
     """
     import numpy as np
     import pandas as pd
@@ -323,10 +326,13 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
         row["polish"] = cfg.get("track", "fe") == "surrogate"
         row["mesh"] = cfg.get("mesh")
         charges = res.get("charges") or {}
+        charges = charges.values() if isinstance(charges, dict) else charges
         row["forward_equivalents"] = _num(res.get("forward_equivalents"))
-        row["charged_equivalents"] = sum(
-            _num(c.get("forward_equivalents")) for c in charges.values()
+        row["forward_equivalents_nominal"] = _num(
+            res.get("forward_equivalents_nominal", res.get("forward_equivalents"))
         )
+        row["budget_unit"] = cfg.get("budget_unit", "evaluations")
+        row["charged_equivalents"] = sum(_num(c.get("forward_equivalents")) for c in charges)
         row["total_equivalents"] = row["forward_equivalents"] + row["charged_equivalents"]
         for k, v in sorted((cfg.get("data") or {}).items()):
             row[f"data.{k}"] = v
@@ -361,9 +367,11 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
             row[f"x0.{p}"] = x0[i] if i is not None and i < len(x0) else math.nan
         rows.append(row)
 
-        for h in res.get("history") or []:
+        for step, h in enumerate(res.get("history") or []):
             hr = dict(key)
-            hr["iteration"] = int(h.get("iteration", len(hrows)))
+            hr["step"] = step  # the row's position: iterations restart in an FE polish
+            hr["phase"] = str(h.get("phase", ""))
+            hr["iteration"] = int(h.get("iteration", step))
             hr["n_evals"] = int(h.get("n_evals") or 0)
             hr["cost"] = _num(h.get("cost"))
             hr["best_cost"] = _num(h.get("best_cost", h.get("cost")))
@@ -386,7 +394,7 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
     if len(runs):
         runs = runs.sort_values(sort, kind="stable").reset_index(drop=True)
     if len(history):
-        history = history.sort_values(sort + ["iteration"], kind="stable").reset_index(drop=True)
+        history = history.sort_values(sort + ["step"], kind="stable").reset_index(drop=True)
     runs.attrs["parameters"] = params
     history.attrs["parameters"] = params
     return runs, history
