@@ -97,12 +97,13 @@ class Sensitivities:
     wall_s: float = 0.0
     timing: dict = field(default_factory=dict)
 
-    def front_face(self, points_mm, mesh) -> tuple[np.ndarray, np.ndarray]:
+    def front_face(self, points_mm, mesh, operator=None) -> tuple[np.ndarray, np.ndarray]:
         """d u_h/dp and d u_v/dp at front-face points (m, 2) = (y, z) mm, each (N, m, P) mm per
-        parameter unit (the interpolation of :meth:`Response.front_face`; ``mesh`` its mesh)."""
+        parameter unit (the interpolation of :meth:`Response.front_face`; ``mesh`` its mesh;
+        ``operator``: its interpolation operator when the caller has it already)."""
         from problems.fe.front_face import front_face_operator
 
-        W = front_face_operator(mesh, points_mm)
+        W = front_face_operator(mesh, points_mm) if operator is None else operator
         N, nn, _, P = self.displacements.shape
 
         def apply(component):

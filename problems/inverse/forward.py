@@ -14,7 +14,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from problems.fe.front_face import measurement_grid
+from problems.fe.front_face import front_face_operator, measurement_grid
 from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.inverse import layout
@@ -159,11 +159,13 @@ class FEForwardModel:
             return ForwardResult(False, None, str(exc), time.perf_counter() - t0)
         if not resp.converged:
             return ForwardResult(False, None, resp.message, time.perf_counter() - t0)
-        values = layout.stack(*resp.front_face(self.points), resp.reaction_kN)
+        W = front_face_operator(resp.mesh, self.points)  # as Response.front_face
+        u = resp.displacements
+        values = layout.stack(u[:, :, 1] @ W.T, u[:, :, 2] @ W.T, resp.reaction_kN)
         J, message, plain_s = None, "", None
         if jacobian:
             t1 = time.perf_counter()
-            J = self.jacobian_from(resp, chain)
+            J = self.jacobian_from(resp, chain, W)
             if J is None:
                 message = f"no exact Jacobian: {resp.sensitivities.message}"
             # the Newton run is bit for bit a plain run: its time without the sensitivities'
@@ -171,14 +173,14 @@ class FEForwardModel:
         wall = time.perf_counter() - t0
         return ForwardResult(True, values, message, wall, J, plain_s)
 
-    def jacobian_from(self, resp, chain) -> np.ndarray | None:
+    def jacobian_from(self, resp, chain, operator=None) -> np.ndarray | None:
         """dU/dx (m, n) in the layout of the measurement vector from a response with sensitivities
         (columns ``material_chain(x)[0]``) and ``chain`` = d(material params)/dx; None when its
-        sensitivities failed."""
+        sensitivities failed. ``operator``: the front-face interpolation operator, if at hand."""
         sens = resp.sensitivities
         if sens is None or not sens.ok:
             return None
-        du_h, du_v = sens.front_face(self.points, resp.mesh)
+        du_h, du_v = sens.front_face(self.points, resp.mesh, operator)
         k = len(sens.parameter_names)
         Jp = np.concatenate([du_h.reshape(-1, k), du_v.reshape(-1, k), sens.reaction_kN])
         return Jp @ chain
