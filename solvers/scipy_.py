@@ -1,4 +1,4 @@
-"""scipy adapters: ``lm`` (least_squares, trf) and ``sa`` (dual_annealing)."""
+"""scipy adapters: ``lm`` (least_squares, dogbox or trf) and ``sa`` (dual_annealing)."""
 
 from __future__ import annotations
 
