@@ -1,6 +1,7 @@
 """Local hold-out of the default surrogates (not a test): ``n`` fresh FE runs (LHS, seed stream
 ``[0, 3]``) in the enrichment box around the data's own surrogate optimum (where identifications
-and posteriors live), their error in units of sigma; appended to
+and posteriors live), their error in units of sigma, and the surrogate's Jacobian against the FE
+model's exact one at the box centre (relative error of each sigma-scaled column); appended to
 ``results/surrogates/local_holdout.json`` ({case: {...}}).
 
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate_local [CASE ...] [--points 20]
@@ -29,7 +30,13 @@ def local_holdout(case: str, n: int) -> dict:
     runs = run_points(fe, design.X)
     E = (sur.predict(runs.X) - runs.Y) / sur.pod.scale
     f, u = E[:, -len(data.snapshots_mm) :], E[:, : -len(data.snapshots_mm)]
+    # the surrogate's Jacobian against the FE model's exact one at the enrichment centre
+    centre = np.array(sur.info["enrichment"]["centre"])
+    J_fe = fe(centre, jacobian=True).jacobian / sur.pod.scale[:, None]
+    J_s = sur(centre, jacobian=True).jacobian / sur.pod.scale[:, None]
+    jac_err = np.linalg.norm(J_s - J_fe, axis=0) / np.linalg.norm(J_fe, axis=0)
     return {
+        "jacobian_relative_error": dict(zip(sur.names, map(float, jac_err))),
         "n_points": runs.n_ok,
         "n_failed": runs.n_failed,
         "local_box": [lo.tolist(), hi.tolist()],
@@ -58,7 +65,9 @@ def main(argv=None) -> int:
         print(
             f"{case:24} local hold-out {r['n_points']} points: force RMS {r['force_rms_sigma']:.3f}"
             f" sigma (max {r['force_max_sigma']:.2f}), displacement RMS "
-            f"{r['displacement_rms_sigma']:.3f} sigma (max {r['displacement_max_sigma']:.2f})",
+            f"{r['displacement_rms_sigma']:.3f} sigma (max {r['displacement_max_sigma']:.2f}); "
+            "Jacobian vs FE: "
+            + ", ".join(f"{k} {v:.2g}" for k, v in r["jacobian_relative_error"].items()),
             flush=True,
         )
         out.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
