@@ -4,7 +4,8 @@ current solution and re-solve from there until the parameters settle.
 Round k: ``eps_k = U_hifi(x_k) - U_inverse(x_k)`` (``correction_at(x_k)``), objective with data
 ``U_E - eps_k`` (``make_objective(eps_k)``), solve warm-started at ``x_k`` -> ``x_{k+1}``; stop when
 ``max_i |x_{k+1,i} / x_{k,i} - 1| < tol`` (default 0.1 %) or after ``max_rounds``. Every round's
-evaluations count against one budget, and every high-fidelity run is charged.
+evaluations count against one budget (in the objectives' budget unit: evaluations or nominal
+forward-equivalents), and every high-fidelity run is charged.
 """
 
 from __future__ import annotations
@@ -41,17 +42,23 @@ def solve_iterated(
     if int(max_rounds) < 1:
         raise ValueError(f"max_rounds = {max_rounds!r} is out of range: a whole number >= 1")
     x = np.asarray(x0, float)
-    used, fe, history, charges, rounds = 0, 0.0, [], {}, []
+    used, n_evals, fe, nominal, history, charges, rounds = 0.0, 0, 0.0, 0.0, [], {}, []
     result = None
     for k in range(int(max_rounds)):
-        left = int(budget) - used
+        left = int(budget - used + 1e-9)  # in the objective's budget unit
         if left < 1:
             break
         corr = correction_at(x)
         objective = make_objective(corr)
         result = solve(objective, method, budget=left, seed=seed, x0=x, **options)
-        used += result.n_evals
+        n_evals += result.n_evals
+        used += (
+            result.n_evals
+            if result.budget_unit == "evaluations"
+            else result.forward_equivalents_nominal
+        )
         fe += result.forward_equivalents
+        nominal += result.forward_equivalents_nominal
         for kind, c in result.charges.items():
             total = charges.setdefault(kind, {"n": 0, "wall_s": 0.0, "forward_equivalents": 0.0})
             for key in total:
@@ -78,9 +85,10 @@ def solve_iterated(
     return replace(
         result,
         x0=[float(v) for v in np.asarray(x0, float)],
-        n_evals=used,
+        n_evals=n_evals,
         budget=int(budget),
         forward_equivalents=fe,
+        forward_equivalents_nominal=nominal,
         charges=charges,
         history=history,
         extra=extra,
