@@ -190,6 +190,12 @@ def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, ma
     return corr
 
 
+#: options of the FE polish after a run on a surrogate: it starts near the optimum, where the
+#: relative cost decrease of a step is tiny on ill-conditioned (model-error) problems, so only the
+#: step size (xtol) and the gradient (gtol) stop it, not ftol
+POLISH_OPTIONS = {"ftol": 1e-15}
+
+
 def vectorised_mapper():
     """The mapper of objectives on a surrogate: whole batches in one vectorised call."""
     from problems.surrogate.model import VectorisedMapper
@@ -314,7 +320,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
 
         polished = None
         if spec.polish:
-            polished = run_phase("lm", spec.polish_budget, list(result.x), {}, None)
+            polished = run_phase("lm", spec.polish_budget, list(result.x), POLISH_OPTIONS, None)
         result = combine(
             result,
             built,
