@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from bench.identification import Identification, treated_objective, with_default_treatment
+from bench.identification import Identification, bae_path, treated_objective, with_default_treatment
 from problems.inverse.cases import CASES, default_treatment
 
 
@@ -72,6 +72,23 @@ def test_identify_refuses_a_margin_with_the_default(capsys):
         ]
     )
     assert code == 2 and "sets the plate margin" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_the_default_bae_statistics_are_shipped(name):
+    """`make run` uses the default treatment: its statistics must not be recomputed (32 paper
+    runs per case)."""
+    from problems.inverse.build import resolve_data
+    from problems.inverse.cases import get_case
+    from problems.inverse.model_error import Correction
+
+    spec = with_default_treatment(Identification(name, "lm", treatment="default"))
+    data = resolve_data(get_case(name), spec.mesh, spec.tier, None)
+    path = bae_path(spec, spec.hifi_mesh, data)
+    assert path.exists(), f"{path.name} missing: run `femubench model-error {name}`"
+    corr = Correction.load(path)  # hash-checked
+    assert corr.treatment == "bae" and corr.provenance["samples"] == 32 and corr.n_hifi >= 28
+    assert corr.provenance["hifi_mesh"] == "paper" and corr.provenance["inverse_mesh"] == "coarse"
 
 
 def test_default_objective_uses_the_shipped_statistics_without_a_run():
