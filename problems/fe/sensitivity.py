@@ -51,9 +51,10 @@ SENSITIVITY_RTOL = 1e-8
 #: converged tangent, P back-substitutions), ``krylov`` (GCR for the P columns with a shared,
 #: growing search space, preconditioned by the Newton solver's current CHOLMOD factorisation; no
 #: factorisation) or ``auto``: direct for ``superlu`` Newton runs and for up to
-#: DIRECT_MAX_DOFS free dofs, krylov above (measured crossover, docs/fe_model.md)
+#: DIRECT_MAX_DOFS free dofs (coarse 749, paper 8 160: measured, direct solves 15-40 % less than
+#: krylov on paper, docs/fe_model.md), krylov above (fine, ~25 000: fill-in grows faster)
 SOLVE_MODES = ("auto", "direct", "krylov")
-DIRECT_MAX_DOFS = 2500
+DIRECT_MAX_DOFS = 10_000
 #: the mode :func:`problems.fe.newton.run` uses (bench/perf/jacobian.py sets it to compare)
 DEFAULT_MODE = "auto"
 
