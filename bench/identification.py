@@ -190,10 +190,10 @@ def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, ma
     return corr
 
 
-#: options of the FE polish after a run on a surrogate: it starts near the optimum, where the
-#: relative cost decrease of a step is tiny on ill-conditioned (model-error) problems, so only the
-#: step size (xtol) and the gradient (gtol) stop it, not ftol
-POLISH_OPTIONS = {"ftol": 1e-15}
+#: options of the FE polish after a run on a surrogate: it starts near the optimum (often on a
+#: bound), where a step's relative cost decrease and size are tiny on ill-conditioned
+#: (model-error) problems, so only the gradient (gtol), a stalled step or the budget stop it
+POLISH_OPTIONS = {"ftol": 1e-15, "xtol": 1e-15}
 
 
 def vectorised_mapper():
