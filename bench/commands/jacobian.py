@@ -153,9 +153,13 @@ def main(args) -> int:
     for j, name in enumerate(case.names):
         print(f"{name:10} {x[j]:12.6g} {np.linalg.norm(J[disp, j]):16.6g} {J[-1, j]:14.6g}")
     ratio = wall / forward_wall
+    # the nominal price (problems/inverse/evaluator.py): the response + n or 2n perturbed runs,
+    # or the model's declared jacobian_cost for the run with sensitivities
+    nominal = runs + 1 if args.method != "analytic" else model.jacobian_cost
     print(
         f"cost: {wall:.3f} s ({runs} run{'s' if runs > 1 else ''}, response included) = "
-        f"{ratio:.2f} x one forward run ({forward_wall:.3f} s)"
+        f"{ratio:.2f} x one forward run ({forward_wall:.3f} s); charged {nominal:g} "
+        "forward-equivalents in budgets counted in them"
     )
     if args.json:
         doc = {
@@ -172,6 +176,7 @@ def main(args) -> int:
             "wall_s": wall,
             "forward_wall_s": forward_wall,
             "cost_ratio": ratio,
+            "nominal_forward_equivalents": nominal,
         }
         with open(args.json, "w") as fh:
             json.dump(doc, fh, indent=1)
