@@ -135,3 +135,14 @@ def test_cli_jacobian_option(capsys):
     assert "invalid choice: 'numeric'" in capsys.readouterr().err
     assert main([*argv, "--jacobian", "forward", "--option", "scheme=central"]) == 2
     assert "contradicts jacobian" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method", ["multistart-lm", "pso+lm", "cma"])
+def test_composite_and_population_methods_keep_a_budget_in_forward_equivalents(method):
+    """Phases split the budget in the objective's unit: exact Jacobian runs cost 1.5 each."""
+    res = solve(
+        objective(budget_unit="forward-equivalents"), method, budget=30, x0=[1.0, 2.0, 1.5], seed=1
+    )
+    assert res.forward_equivalents_nominal <= 30.0 + 1e-9
+    runs = res.extra.get("n_jacobian_runs", 0)
+    assert res.forward_equivalents_nominal == pytest.approx(res.n_evals + 0.5 * runs)
