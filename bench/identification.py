@@ -336,6 +336,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         "data_file": spec.data,
         "treatment": spec.treatment,
         "treatment_requested": requested,
+        "jacobian": spec.jacobian,
         "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
     }
     return replace(result, provenance=provenance)

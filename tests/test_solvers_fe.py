@@ -42,7 +42,7 @@ def test_lm_with_exact_jacobians_converges_in_at_most_16_iterations(name):
 
     res = identify(Identification(name, "lm", tier="consistent", treatment="none", budget=200))
     assert res.status == "converged" and res.n_iterations <= 16, (res.n_iterations, res.message)
-    assert res.extra["n_jacobian_runs"] == res.n_evals
+    assert res.extra["n_jacobian_runs"] == res.n_evals and res.provenance["jacobian"] == "exact"
     assert res.forward_equivalents_nominal == pytest.approx(1.7 * res.n_evals)
     assert res.forward_equivalents_nominal < 7 * res.n_iterations
     assert max(abs(e) for e in res.errors_percent().values()) < 1.0  # noise-limited
