@@ -10,20 +10,28 @@ sensitivities (DDM)".
 For one converged increment n -> n+1 with strain increment deps = B (u_{n+1} - u_n) and
 U_n = du_n/dp, S_n = dsigma_n/dp, H_n = dstate_n/dp known (zero before the first increment):
 
-1. the material's ``sensitivity`` with ``dstrain_increment = -B U_n`` (the part of ddeps known
-   before the solve) gives c, the stress sensitivity with U_{n+1} = 0; the full one is
-   ``S_{n+1} = c + D_T B U_{n+1}`` (D_T the consistent tangent of the update);
+1. one material pass (:func:`problems.materials.ddm.affine_sensitivity`) with the known part
+   ``-B U_n`` of ddeps gives c and h, the stress and history sensitivities for U_{n+1} = 0, and
+   T = [T_s; T_q] = d(stress, state)/d(deps) of the update: ``S_{n+1} = c + T_s B U_{n+1}``,
+   ``H_{n+1} = h + T_q B U_{n+1}`` (T_s the consistent tangent);
 2. equilibrium of the free dofs, ``sum B^T S_{n+1} dV = 0``, is ``K_T U_{n+1} = -sum B^T c dV``
    on the free dofs (the pseudo-load); prescribed dofs, the eighth's mid-plane included, have
    U = 0 because the prescribed displacements do not depend on the parameters;
-3. the material's ``sensitivity`` again, with the full ``dstrain_increment = B (U_{n+1} - U_n)``,
-   gives S_{n+1} and H_{n+1} (the history for the next increment);
+3. S_{n+1} and H_{n+1} (the history for the next increment) by the affine map of step 1, in one
+   pass over the elements (:func:`_affine_kernel`) that also forms B U_{n+1} and the
+   internal-force sensitivity of step 4. A material without the one-pass split (or
+   ``DEFAULT_AFFINE = False``) is called twice through its ``sensitivity`` interface: before the
+   solve with ``-B U_n``, after it with ``B (U_{n+1} - U_n)``; same Jacobian to round-off;
 4. the plate-force sensitivity is the plate force of the internal-force sensitivity
    ``sum B^T S_{n+1} dV`` (same definition and factor as the plate force).
 
+The converged tangent's free block assembled for step 2 is the next increment's predictor
+matrix; the Newton solver keeps it (``_Newton._tangent_free``), so the run's own work is one
+assembly lighter and its answers bit for bit those of a plain run.
+
 Bisected increments are increments like the others: only converged ones reach step 1. Only the
-columns asked for are solved (step 2); the material propagates all of its parameters, the others
-keep U = 0 and are dropped.
+columns asked for are carried (the one-pass path) or solved (the two-call path, where the
+material propagates all of its parameters and the others keep U = 0 and are dropped).
 
 Units: displacement sensitivities in mm per parameter unit, plate-force sensitivities in kN per
 parameter unit (parameter units: MPa, degrees or -); pseudo-loads in N per parameter unit.
