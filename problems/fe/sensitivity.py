@@ -91,10 +91,12 @@ class Sensitivities:
     residual        : largest relative equilibrium residual of the sensitivity equations over all
                       increments, ||dF_int on free dofs|| / ||dF_int on prescribed dofs|| (a check)
     wall_s          : wall time spent on the sensitivities inside the run, s
-    timing          : where that time went: material_s (the two ``sensitivity`` calls per
-                      increment), assembly_s (pseudo-loads, strains, internal-force sensitivities,
-                      converged tangents), factor_s, solve_s (s); factorisations, krylov_iterations
-                      (preconditioner applications), mode (the solve mode used)
+    timing          : where that time went: material_s (the material pass and the fused
+                      strain/affine/internal-force pass; or the two ``sensitivity`` calls),
+                      assembly_s (pseudo-loads, converged tangents; in the two-call path also
+                      strains and internal-force sensitivities), factor_s, solve_s (s);
+                      factorisations, krylov_iterations (preconditioner applications), mode (the
+                      solve mode used)
     """
 
     parameter_names: tuple[str, ...]
