@@ -356,6 +356,7 @@ def run_posterior(
         "likelihood": "C = diag(sigma^2 + surrogate hold-out variance)"
         + (" + V V^T (BAE)" if spec.treatment == "bae" else ""),
     }
+    summary["agreement"] = agreement(summary)
     if a is not None:
         m, sd = summary_stats["mean"]["a"], summary_stats["sd"]["a"]
         half = 0.5 * (summary_stats["q975"]["a"] - summary_stats["q025"]["a"])
@@ -378,6 +379,19 @@ def run_posterior(
     write_json(folder / SUMMARY, summary)
     (folder / "posterior.md").write_text(format_summary(summary) + "\n")
     return PosteriorResult(folder, summary)
+
+
+def agreement(s: dict, offset_sd: float = 3.0, ratio=(0.67, 1.5)) -> dict:
+    """Does the surrogate posterior agree with the Laplace approximation at the FE optimum (with
+    the inflated noise)? ``max_offset_sd``: largest |posterior mean - FE optimum| / posterior sd;
+    ``sd_ratio``: range of posterior sd / inflated Laplace sd; ``ok`` when the offset is below
+    ``offset_sd`` and the ratios inside ``ratio`` (else the surrogate, not the data, limits the
+    posterior: its numbers should not be used)."""
+    names = [n for n in s["names"] if s["sd"].get(n)]
+    off = max(abs(s["mean"][n] - s["fe_optimum"][n]) / s["sd"][n] for n in names)
+    r = [s["sd"][n] / s["laplace_sd_inflated"][n] for n in names if s["laplace_sd_inflated"].get(n)]
+    ok = off < offset_sd and ratio[0] <= min(r) and max(r) <= ratio[1]
+    return {"max_offset_sd": float(off), "sd_ratio": [float(min(r)), float(max(r))], "ok": bool(ok)}
 
 
 def _inflated_like(fe_problem, sur_problem):
