@@ -33,7 +33,8 @@ for the exponent cases), ``n_samples`` (kept, unthinned: steps x walkers), ``tau
 ``n_walkers``, ``n_steps``, ``burn``, ``acceptance``, ``n_evals``, ``wall_s``, ``converged``,
 ``surrogate`` (name, hash, hold-out RMS/sigma), ``fe`` (polish evaluations and cost), ``a_width``
 (exponent cases: sd and 95 % half-width of ``a`` in % of its mean, next to the paper's 11-46 %
-Table-1 error).
+Table-1 error), ``agreement`` (``max_offset_sd``, ``sd_ratio``, ``ok``: :func:`agreement`; when
+not ok the surrogate, not the data, limits the posterior).
 """
 
 from __future__ import annotations
