@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: (results folder, the configuration to pick): cheap runs, one per kind of shipped run
 PICKS = [
     ("results/default", {"case": "linear-compression", "method": "lm", "tier": "consistent"}),
+    ("results/default", {"case": "linear-shear", "method": "cma", "track": "surrogate"}),
 ]
 
 
