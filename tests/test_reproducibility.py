@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PICKS = [
     ("results/default", {"case": "linear-compression", "method": "lm", "tier": "consistent"}),
     ("results/default", {"case": "linear-shear", "method": "cma", "track": "surrogate"}),
+    ("results/default", {"case": "exponent-tension", "method": "lm", "tier": "model-error"}),
 ]
 
 
