@@ -70,7 +70,7 @@ NGOPT_OPTIONS = {
     "from dimension, budget and workers)",
 )
 def run_ngopt(r: Run) -> Outcome:
-    obj, o = r.objective, r.options
+    o = r.options
     width = r.upper - r.lower
     workers = max(1, int(o["num_workers"]))
     if o["include_x0"]:
@@ -88,35 +88,68 @@ def run_ngopt(r: Run) -> Outcome:
         opt = ng.optimizers.registry[o["optimizer"]](
             parametrization=param, budget=r.budget, num_workers=workers
         )
-        chosen = _chosen(opt)
-        extra = {"optimizer": chosen}
-        max_asks = int(o["max_asks_factor"]) * r.budget
-        asks, batches = 0, 0
-        while obj.remaining > 0:
-            if asks >= max_asks:
-                return Outcome(
-                    "stalled", f"{asks} asks gave only {obj.n_evals} new points", batches, extra
-                )
-            k = int(min(workers, obj.remaining))
-            cands = [opt.ask() for _ in range(k)]
-            asks += k
-            Z = np.clip(r.lower + np.array([c.value for c in cands]) * width, r.lower, r.upper)
-            try:
-                f = obj.costs(Z)
-            except BudgetExhausted as exc:  # cannot happen (k <= remaining) unless the budget moved
-                return Outcome("budget", str(exc), batches, extra)
-            for c, fc in zip(cands, f):
-                opt.tell(c, float(fc))
-            batches += 1
-            j = int(np.argmin(f))
-            r.record(Z[j], f[j], batch=batches)
-        extra["optimizer"] = _chosen(opt)
+        try:
+            return _ask_and_tell(r, opt, workers, width, o)
+        finally:
+            _stop_threads(opt)  # no recast thread may outlive the run (see _stop_threads)
+
+
+def _ask_and_tell(r: Run, opt, workers: int, width, o) -> Outcome:
+    obj = r.objective
+    chosen = _chosen(opt)
+    extra = {"optimizer": chosen}
+    max_asks = int(o["max_asks_factor"]) * r.budget
+    asks, batches = 0, 0
+    while obj.remaining > 0:
+        if asks >= max_asks:
+            return Outcome(
+                "stalled", f"{asks} asks gave only {obj.n_evals} new points", batches, extra
+            )
+        k = int(min(workers, obj.remaining))
+        cands = [opt.ask() for _ in range(k)]
+        asks += k
+        Z = np.clip(r.lower + np.array([c.value for c in cands]) * width, r.lower, r.upper)
+        try:
+            f = obj.costs(Z)
+        except BudgetExhausted as exc:  # cannot happen (k <= remaining) unless the budget moved
+            return Outcome("budget", str(exc), batches, extra)
+        for c, fc in zip(cands, f):
+            opt.tell(c, float(fc))
+        batches += 1
+        j = int(np.argmin(f))
+        r.record(Z[j], f[j], batch=batches)
+    extra["optimizer"] = _chosen(opt)
     return Outcome(
         "budget",
         f"evaluation budget spent after {batches} batches of up to {workers}",
         batches,
         extra,
     )
+
+
+def _stop_threads(opt, depth: int = 4) -> None:
+    """Stop and join the background threads of the recast optimizers inside ``opt`` (NGOpt's
+    CmaFmin2 runs ``cma.fmin`` on one). Left alive, a thread waits for its next ``tell`` until the
+    optimizer is garbage-collected, at some later moment, when it wakes and runs on inside cma,
+    drawing from NumPy's global generator while another run uses it: the same seed then gave
+    different results."""
+    from nevergrad.optimization import base
+
+    seen, todo = set(), [(opt, 0)]
+    while todo:
+        obj, d = todo.pop()
+        if id(obj) in seen or d > depth:
+            continue
+        seen.add(id(obj))
+        thread = getattr(obj, "_messaging_thread", None)
+        if thread is not None:
+            thread.stop()
+            inner = getattr(thread, "_thread", None)
+            if inner is not None:
+                inner.join(timeout=10.0)
+        for value in vars(obj).values():
+            items = value if isinstance(value, (list, tuple)) else [value]
+            todo.extend((v, d + 1) for v in items if isinstance(v, base.Optimizer))
 
 
 @contextlib.contextmanager
