@@ -14,11 +14,19 @@ the box by Latin hypercube (``init="lhs"``). Seeded: walker start from ``seed``,
 Reported in ``extra``: posterior ``mean``, ``median``, ``std``, ``q2.5``/``q97.5`` (95 % interval)
 per parameter (physical, after discarding ``burn_fraction`` of the steps), ``map`` (best sample) and
 its cost, ``acceptance_fraction``, ``autocorr_time`` (integrated, in steps), ``n_steps``,
-``n_walkers``, ``warnings`` (e.g. a chain shorter than 50 autocorrelation times), and the chain
+``n_walkers``, ``warnings`` (e.g. a chain shorter than 50 autocorrelation times),
+``stopped_converged`` (the run stopped by the convergence rule, before its budget), and the chain
 itself (physical, ``chain[step][walker][param]`` and ``log_prob[step][walker]``), or, with
 ``chain_path``, the path of the ``.npz`` file holding them (see below). The RunResult's ``x`` is the
 best point evaluated (at least as good as the MAP sample). Status: ``"converged"`` when the kept
 chain is at least 50 autocorrelation times long, else ``"budget"`` or ``"max_iterations"``.
+
+Length: with ``stop_converged`` (the default) the chain stops at the first check (every
+``check_every`` steps) where :func:`converged_at` holds - the kept chain is at least
+``min_tau_multiple`` (50) autocorrelation times long and the estimate of tau moved by less than
+``tau_rtol`` since the previous check (emcee's documented rule) - so the budget is a cap, and a
+chain that mixes well costs what it needs, not the whole budget. Every check is made on the chain
+so far only: the stop is as reproducible as the chain.
 
 Structure: :func:`run_mcmc` is a thin loop over :func:`ensemble_steps` (emcee's
 ``EnsembleSampler.sample()`` generator, iterated as emcee's own ``run_mcmc`` does, in chunks the
@@ -57,6 +65,15 @@ MCMC_OPTIONS = {
     "min_tau_multiple": (
         50.0,
         "warn when the kept chain is shorter than this many autocorrelation times",
+    ),
+    "stop_converged": (
+        True,
+        "stop as soon as the chain is converged (see converged_at); the budget is then a cap",
+    ),
+    "check_every": (250, "steps between two convergence checks (stop_converged)"),
+    "tau_rtol": (
+        0.05,
+        "convergence also needs tau_max to have changed by less than this since the last check",
     ),
 }
 
@@ -126,6 +143,38 @@ def ensemble_steps(
             yield state
 
 
+def kept_tau(chain_z: np.ndarray, burn_fraction: float) -> tuple[int, np.ndarray]:
+    """Burn-in (steps) and the integrated autocorrelation time (steps) of each parameter over the
+    kept part of ``chain_z`` (steps, walkers, n); ``inf`` where the chain is too short to tell."""
+    from emcee.autocorr import integrated_time
+
+    steps, n = chain_z.shape[0], chain_z.shape[2]
+    burn = min(int(burn_fraction * steps), steps - 1)
+    kept = chain_z[burn:]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tau = integrated_time(kept, tol=0) if kept.shape[0] > 1 else np.full(n, np.inf)
+    return burn, np.where(np.isfinite(tau), tau, np.inf)  # a too-short chain gives nan
+
+
+def converged_at(
+    chain_z: np.ndarray,
+    burn_fraction: float,
+    min_tau_multiple: float,
+    tau_rtol: float,
+    previous_tau: float,
+) -> tuple[bool, float]:
+    """The stopping rule of emcee's documentation: the kept chain (after discarding
+    ``burn_fraction`` of the steps) is at least ``min_tau_multiple`` times its largest integrated
+    autocorrelation time long, and that time changed by less than ``tau_rtol`` (relative) since the
+    previous check (``previous_tau``). Returns (converged, tau_max)."""
+    burn, tau = kept_tau(chain_z, burn_fraction)
+    tau_max = float(np.max(tau))
+    long_enough = chain_z.shape[0] - burn >= min_tau_multiple * tau_max
+    steady = math.isfinite(previous_tau) and abs(tau_max - previous_tau) <= tau_rtol * tau_max
+    return bool(long_enough and steady), tau_max
+
+
 def chain_summary(
     backend, names, to_physical, burn_fraction: float, min_tau_multiple: float
 ) -> dict:
@@ -133,17 +182,10 @@ def chain_summary(
     x):
     burn-in, mean/median/std/percentiles of the kept chain, MAP sample and cost, acceptance,
     integrated autocorrelation times (steps) and the short-chain warning."""
-    from emcee.autocorr import integrated_time
-
     steps, n = backend.iteration, len(names)
     chain_z, logp = backend.get_chain(), backend.get_log_prob()
-    burn = min(int(burn_fraction * steps), steps - 1)
-    kept = chain_z[burn:]
-    flat = to_physical(kept.reshape(-1, n))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tau = integrated_time(kept, tol=0) if kept.shape[0] > 1 else np.full(n, np.inf)
-    tau = np.where(np.isfinite(tau), tau, np.inf)  # a too-short chain gives nan
+    burn, tau = kept_tau(chain_z, burn_fraction)
+    flat = to_physical(chain_z[burn:].reshape(-1, n))
     tau_max = float(np.max(tau))
     k = np.unravel_index(np.argmax(logp), logp.shape)
     extra = {
@@ -213,11 +255,25 @@ def run_mcmc(r: Run) -> Outcome:
     )
     sampler.random_state = np.random.RandomState(r.seed % 2**32).get_state()
     planned = int(o["n_steps"]) if o["n_steps"] else math.inf
+    check_every = int(o["check_every"])
+    if check_every < 1:
+        raise ValueError(f"mcmc: check_every = {check_every} is out of range: at least 1 step")
+    stopped, tau_seen = False, math.inf
     for state in ensemble_steps(sampler, p0, lambda: obj.remaining, planned):
         k = int(np.argmax(state.log_prob))
         r.record(
             state.coords[k], -2.0 * state.log_prob[k] if np.isfinite(state.log_prob[k]) else None
         )
+        if o["stop_converged"] and backend.iteration % check_every == 0:
+            stopped, tau_seen = converged_at(
+                backend.get_chain(),
+                o["burn_fraction"],
+                o["min_tau_multiple"],
+                o["tau_rtol"],
+                tau_seen,
+            )
+            if stopped:
+                break
     steps = backend.iteration
     if steps == 0:
         return Outcome("budget", "budget too small for one step", 0)
@@ -234,6 +290,7 @@ def run_mcmc(r: Run) -> Outcome:
         logp = backend.get_log_prob()
         extra["chain"] = obj.to_physical(backend.get_chain())
         extra["log_prob"] = np.where(np.isfinite(logp), logp, -np.inf)
+    extra["stopped_converged"] = stopped
     if not extra["warnings"]:
         status = "converged"
     else:

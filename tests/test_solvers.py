@@ -209,6 +209,27 @@ def test_mcmc_recovers_the_linear_gaussian_posterior():
     assert res.cost <= ex["map_cost"] + 1e-12
 
 
+def test_mcmc_stops_when_the_chain_is_converged_and_not_before():
+    obj = analytic_objective("analytic-linear", noise=1.0, seed=11)
+    kw = dict(seed=4, x0=ANALYTIC_CASES["analytic-linear"].start, n_walkers=32, init="lhs")
+    res = solve(obj, "mcmc", budget=32 * 5000 + 32, check_every=100, **kw)
+    ex = res.extra
+    steps, burn = ex["n_steps"], ex["burn"]
+    tau = max(ex["autocorr_time"].values())
+    assert ex["stopped_converged"] and res.status == "converged"
+    assert steps % 100 == 0 and steps < 5000  # stopped at a check, long before the cap
+    assert steps - burn >= 50 * tau  # the rule held where it stopped ...
+    # ... and not at the previous check: the same chain 100 steps shorter is not yet converged
+    from solvers.emcee_ import converged_at
+
+    chain = np.array(ex["chain"]) / obj.reference
+    prev_ok, prev_tau = converged_at(chain[: steps - 200], 0.3, 50.0, 0.05, np.inf)
+    ok, _ = converged_at(chain[: steps - 100], 0.3, 50.0, 0.05, prev_tau)
+    assert not ok
+    full = solve(obj, "mcmc", budget=32 * 1500 + 32, stop_converged=False, **kw)
+    assert full.extra["n_steps"] >= 1500 and not full.extra["stopped_converged"]  # whole budget
+
+
 def test_mcmc_warns_on_a_short_chain_and_writes_the_chain_file(tmp_path):
     obj = analytic_objective("analytic-linear")
     path = tmp_path / "chain.npz"
