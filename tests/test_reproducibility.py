@@ -1,4 +1,5 @@
-"""The shipped results are reproducible: a record of the shipped default suite is rerun from its
+"""The shipped results are reproducible: a record of the shipped default suite (and of the shipped
+comparison) is rerun from its
 stored configuration and must give the same numbers bit for bit (parameters, cost, evaluations,
 iterations). A change of the code that changes the answers fails here until the shipped results
 are regenerated (``make run``)."""
@@ -17,6 +18,17 @@ PICKS = [
     ("results/default", {"case": "linear-compression", "method": "lm", "tier": "consistent"}),
     ("results/default", {"case": "linear-shear", "method": "cma", "track": "surrogate"}),
     ("results/default", {"case": "exponent-tension", "method": "lm", "tier": "model-error"}),
+    # the shipped comparison (suites/comparison.toml): an FE-track run from a seeded random start
+    (
+        "results/comparison",
+        {
+            "case": "linear-compression",
+            "method": "lm",
+            "start": "random",
+            "seed": 2,
+            "jacobian": None,
+        },
+    ),
 ]
 
 
