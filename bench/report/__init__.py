@@ -55,6 +55,7 @@ def write_report(
     tol_a: float | None = None,
     dest: str | Path | None = None,
     posterior_dirs=None,
+    model_error_dirs=None,
 ) -> Path:
     """Write the report of ``out_dir`` into ``dest`` (default ``out_dir/report``); return the path
     of report.md.
@@ -64,8 +65,11 @@ def write_report(
     identified parameters in percent (default :data:`bench.report.tables.SUCCESS_TOL`), ``tol_a``
     that of the derived a (default :data:`bench.report.tables.DERIVED_TOL`). ``posterior_dirs``:
     folders with the posterior study's ``<case>/summary.json`` (default
-    :func:`default_posterior_dirs`). Every record file that could not be read is named on stderr
-    and in report.md. ``progress``: a progress bar (stderr) over the figures.
+    :func:`default_posterior_dirs`); ``model_error_dirs``: folders with the model-error study's
+    ``<case>/*.json`` rows, quoted in the note under each model-error Table 1 (default
+    :func:`bench.report.model_error_note.default_model_error_dirs`). Every record file that
+    could not be read is named on stderr and in report.md. ``progress``: a progress bar (stderr)
+    over the figures.
     """
     from bench import store
     from bench.report.tables import SUCCESS_TOL
@@ -88,6 +92,10 @@ def write_report(
     final.parent.mkdir(parents=True, exist_ok=True)
     if posterior_dirs is None:
         posterior_dirs = default_posterior_dirs(out_dir)
+    if model_error_dirs is None:
+        from bench.report.model_error_note import default_model_error_dirs
+
+        model_error_dirs = default_model_error_dirs(out_dir)
     tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=".report-"))
     try:
         build_report(
@@ -104,6 +112,7 @@ def write_report(
             progress=progress,
             records=records,
             posterior_dirs=posterior_dirs,
+            model_error_dirs=model_error_dirs,
         )
         old = None
         if final.exists():
@@ -149,13 +158,15 @@ def build_report(
     tol_a: float | None = None,
     records=(),
     posterior_dirs=(),
+    model_error_dirs=(),
 ) -> Path:
     """Write the tables, figures and report.md of ``runs``/``history`` into ``dest``.
 
     ``unreadable``: ``(path, reason)`` of the record files that could not be read; ``set_aside``:
     the files moved into ``runs/corrupt/``; both are listed in report.md. ``records``: the records
     themselves (MCMC posteriors); ``posterior_dirs``: folders holding the posterior study's
-    ``<case>/summary.json``."""
+    ``<case>/summary.json``; ``model_error_dirs``: folders holding the model-error study's
+    ``<case>/*.json`` (none found: the notes under the model-error Tables 1 say so)."""
     import pandas as pd
 
     from bench.report import metrics as M
@@ -347,6 +358,11 @@ def build_report(
             md.append(T.to_markdown(disp, index_label="parameter"))
             if note:
                 md.append(note + "\n")
+            sel = runs[runs["method"] == method]
+            if budget is not None:
+                sel = sel[sel["budget"] == budget]
+            if len(sel) and (sel["tier"] == "model-error").all():
+                md.append(_model_error_note(t, sel, records, model_error_dirs, tol, dtol, dest))
             md.append(_links(paths, dest) + "\n")
 
     # --- comparison -------------------------------------------------------------------------
@@ -574,6 +590,37 @@ def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
         "",
     ]
     return lines
+
+
+def _model_error_note(t, sel, records, dirs, tol, dtol, dest: Path) -> str:
+    """The note under a model-error Table 1 (:mod:`bench.report.model_error_note`), its links
+    relative to ``dest``."""
+    from bench.paths import results_root
+    from bench.report import model_error_note as N
+
+    settings = N.run_settings(sel, records)
+    study = N.load_study(dirs, settings)
+    doc = Path(__file__).resolve().parents[2] / "docs" / "objective.md"
+    name = "`results/studies/model_error`"
+    found = [Path(d) for d in dirs or () if Path(d).is_dir()]
+    if found:
+        d = found[0]
+        shown = (
+            "results/studies/model_error"
+            if d.resolve() == (results_root() / "studies" / "model_error").resolve()
+            else _rel(d, dest)
+        )
+        target = d / "overview.md" if (d / "overview.md").is_file() else d
+        name = f"[`{shown}`]({_rel(target, dest)})"
+    return N.model_error_note(
+        t,
+        settings,
+        study,
+        tol=tol,
+        derived_tol=dtol,
+        doc=_rel(doc, dest) if doc.is_file() else None,
+        study_name=name,
+    )
 
 
 def _parquet(runs, history, dest: Path) -> list[Path]:
