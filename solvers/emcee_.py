@@ -259,21 +259,26 @@ def run_mcmc(r: Run) -> Outcome:
     if check_every < 1:
         raise ValueError(f"mcmc: check_every = {check_every} is out of range: at least 1 step")
     stopped, tau_seen = False, math.inf
-    for state in ensemble_steps(sampler, p0, lambda: obj.remaining, planned):
-        k = int(np.argmax(state.log_prob))
-        r.record(
-            state.coords[k], -2.0 * state.log_prob[k] if np.isfinite(state.log_prob[k]) else None
-        )
-        if o["stop_converged"] and backend.iteration % check_every == 0:
-            stopped, tau_seen = converged_at(
-                backend.get_chain(),
-                o["burn_fraction"],
-                o["min_tau_multiple"],
-                o["tau_rtol"],
-                tau_seen,
-            )
-            if stopped:
-                break
+    # a chain never comes back to a point it evaluated: caching its 10^5 evaluations (each with its
+    # residual, m floats) would only fill the memory (10 GB for 150 000 points of m = 8 130)
+    cache, obj.cache = obj.cache, False
+    try:
+        for state in ensemble_steps(sampler, p0, lambda: obj.remaining, planned):
+            k = int(np.argmax(state.log_prob))
+            lp = state.log_prob[k]
+            r.record(state.coords[k], -2.0 * lp if np.isfinite(lp) else None)
+            if o["stop_converged"] and backend.iteration % check_every == 0:
+                stopped, tau_seen = converged_at(
+                    backend.get_chain(),
+                    o["burn_fraction"],
+                    o["min_tau_multiple"],
+                    o["tau_rtol"],
+                    tau_seen,
+                )
+                if stopped:
+                    break
+    finally:
+        obj.cache = cache
     steps = backend.iteration
     if steps == 0:
         return Outcome("budget", "budget too small for one step", 0)

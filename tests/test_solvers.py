@@ -226,6 +226,7 @@ def test_mcmc_stops_when_the_chain_is_converged_and_not_before():
     prev_ok, prev_tau = converged_at(chain[: steps - 200], 0.3, 50.0, 0.05, np.inf)
     ok, _ = converged_at(chain[: steps - 100], 0.3, 50.0, 0.05, prev_tau)
     assert not ok
+    assert not obj._cache and obj.cache  # a chain's points are not kept (memory); setting restored
     full = solve(obj, "mcmc", budget=32 * 1500 + 32, stop_converged=False, **kw)
     assert full.extra["n_steps"] >= 1500 and not full.extra["stopped_converged"]  # whole budget
 
