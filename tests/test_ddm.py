@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import problems.fe.sensitivity as sensitivity
+from problems.fe.linear_solver import superlu_factor
 from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Loading, NewtonSettings, discretise, run
 from problems.inverse import layout
@@ -103,6 +104,53 @@ def test_krylov_and_direct_sensitivity_solves_agree(monkeypatch):
         assert rel(out["krylov"].displacements[..., j], out["direct"].displacements[..., j]) < 1e-7
         assert rel(out["krylov"].reaction_kN[:, j], out["direct"].reaction_kN[:, j]) < 1e-7
     assert out["direct"].residual < 1e-9 and out["krylov"].residual < 1e-6
+
+
+def test_mixed_precision_direct_solves_give_the_double_lu_jacobian(monkeypatch):
+    """Above MIXED_MIN_DOFS (forced here on a small mesh) the direct solves factorise in single
+    precision and refine: the Jacobian is the double LU's."""
+    case = get_case("hyperbolic-shear")
+    model = FEForwardModel(case, "3,3,6")
+    x = case.reference
+    monkeypatch.setattr(sensitivity, "DEFAULT_MODE", "direct")
+    out, timing = {}, {}
+    for name, threshold in (("double", 10**9), ("mixed", 0)):
+        monkeypatch.setattr(sensitivity, "MIXED_MIN_DOFS", threshold)
+        out[name] = model(x, jacobian=True)
+        sens = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities
+        assert out[name].ok and sens.ok and sens.residual < 1e-9
+        timing[name] = sens.timing
+    np.testing.assert_array_equal(out["mixed"].values, out["double"].values)
+    t = timing["mixed"]
+    assert t["factorisations"] == t["mixed_factorisations"] > 0 and t["fallbacks"] == 0
+    assert t["refinements"] >= t["mixed_factorisations"]
+    assert timing["double"]["mixed_factorisations"] == timing["double"]["refinements"] == 0
+    for j in range(len(x)):
+        assert rel(out["mixed"].jacobian[:, j], out["double"].jacobian[:, j]) < 1e-8, j
+
+
+def test_coarse_keeps_the_double_lu(monkeypatch):
+    """coarse (749 free dofs) is below MIXED_MIN_DOFS: its direct solves are the double SuperLU
+    ones of before (its shipped records are reproduced bit for bit)."""
+    case = get_case("linear-compression")
+    model = FEForwardModel(case, "coarse")
+    x = case.reference
+
+    def refuse(A):
+        raise AssertionError(f"mixed-precision factor asked for {A.shape[0]} dofs")
+
+    calls = []
+
+    def double(A):
+        calls.append(A.shape[0])
+        return superlu_factor(A)
+
+    monkeypatch.setattr(sensitivity, "mixed_superlu_factor", refuse)
+    monkeypatch.setattr(sensitivity, "superlu_factor", double)
+    s = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities
+    assert s.ok and s.timing["mode"] == "direct"
+    assert calls and set(calls) == {749} and 749 <= sensitivity.MIXED_MIN_DOFS
+    assert len(calls) == s.timing["factorisations"] and s.timing["mixed_factorisations"] == 0
 
 
 def test_superlu_newton_runs_give_the_same_sensitivities():

@@ -6,10 +6,14 @@ import scipy.sparse as sp
 
 from problems.fe.linear_solver import (
     LINEAR_SOLVERS,
+    MixedSuperLUFactor,
     SingularMatrixError,
+    SuperLUFactor,
     cholmod_available,
     gmres,
     make_linear_solver,
+    mixed_superlu_factor,
+    superlu_factor,
 )
 from problems.fe.mesh import box_mesh
 from problems.fe.newton import BoundaryConditions, Loading, NewtonSettings, _Newton, discretise, run
@@ -126,6 +130,51 @@ def test_factor_solves_one_or_several_right_hand_sides(solver):
     assert x.shape == (A.shape[0],) and np.allclose(
         x, X[:, 2], rtol=1e-8, atol=1e-12 * np.abs(X).max()
     )
+
+
+def test_mixed_precision_factor_solves_to_the_superlu_answer():
+    A = _tangent_block(_plastic(), discretise(box_mesh(3, 3, 6)))
+    assert abs(A - A.T).max() > 1e-3 * abs(A).max()  # non-symmetric
+    B = np.random.default_rng(5).standard_normal((A.shape[0], 7))
+    B[:, 3] = 0.0  # a zero column stays zero
+    ref = superlu_factor(A).solve(B)
+    f = mixed_superlu_factor(A)
+    assert isinstance(f, MixedSuperLUFactor) and not f.exact and f.for_matrix(A) is None
+    single = f._single(B)  # the single-precision solve alone is not the answer ...
+    assert np.linalg.norm(single - ref) / np.linalg.norm(ref) > 1e-9
+    X = f.solve(B, 1e-12)  # ... its refinement is
+    assert X.shape == B.shape and not X[:, 3].any()
+    assert 1 <= f.refinements <= 4 and not f.fallback
+    for j in range(B.shape[1]):
+        assert np.linalg.norm(X[:, j] - ref[:, j]) <= 1e-10 * max(np.linalg.norm(ref[:, j]), 1e-300)
+    x = f.solve(B[:, 2], 1e-12)
+    assert x.shape == (A.shape[0],)
+    assert np.linalg.norm(x - ref[:, 2]) / np.linalg.norm(ref[:, 2]) < 1e-10
+
+
+def _ill_conditioned(d: float) -> sp.csc_matrix:
+    """Identity with a 2 x 2 block [[1, 1], [1, 1 + d]] (condition ~ 4 / d) in the middle."""
+    A = sp.lil_matrix(sp.identity(6))
+    A[2, 3] = A[3, 2] = 1.0
+    A[3, 3] = 1.0 + d
+    return sp.csc_matrix(A)
+
+
+def test_mixed_precision_factor_falls_back_to_the_double_lu():
+    b = np.arange(1.0, 7.0)
+    # 1 + 1e-7 is 1 + 1.19e-7 in float32: the single factors are 19 % off, refinement stalls
+    A = _ill_conditioned(1e-7)
+    f = mixed_superlu_factor(A)
+    assert isinstance(f, MixedSuperLUFactor)
+    x = f.solve(b, 1e-12)
+    assert f.fallback and np.allclose(x, superlu_factor(A).solve(b), rtol=1e-12, atol=0.0)
+    # 1 + 1e-9 is 1 in float32: singular in single precision, a double LU from the start
+    A = _ill_conditioned(1e-9)
+    f = mixed_superlu_factor(A)
+    assert isinstance(f, SuperLUFactor)
+    assert np.linalg.norm(A @ f.solve(b) - b) <= 1e-6 * np.linalg.norm(b)
+    with pytest.raises(SingularMatrixError):  # singular in double too
+        mixed_superlu_factor(_ill_conditioned(0.0))
 
 
 @needs_cholmod

@@ -2,7 +2,7 @@
 
     OMP_NUM_THREADS=1 python -m bench.perf.jacobian [--meshes coarse,paper] [--cases all|NAME,...]
                       [--paper-cases linear-compression,hyperbolic-shear,exponent-tension]
-                      [--modes auto|direct,krylov|auto,auto-2pass] [--repeat 2]
+                      [--modes auto|direct,krylov|auto,auto-2pass|auto,auto-f64] [--repeat 2]
                       [--step 1e-5] [--no-fd]
 
 Per mesh and case, at the case's reference: the best of ``--repeat`` plain forward evaluations
@@ -12,15 +12,18 @@ Per mesh and case, at the case's reference: the best of ``--repeat`` plain forwa
 steadier when other processes share the cores); where the sensitivity time went (material: the
 material pass(es) per increment and the affine update; assem: pseudo-loads, strains,
 internal-force sensitivities and converged tangents; solve: factorisations + back-substitutions
-or Krylov iterations, ``its``); then, unless ``--no-fd``, the largest relative 2-norm error of a
-Jacobian column against central differences of plain runs with relative step ``--step`` (default
-1e-5) and the parameter it belongs to, and the same with a step 100 times smaller (``err/100``):
-where a Gauss point starts to yield within the first step of the reference (a kink of the
-discrete response: the one-sided differences converge to the DDM column from one side only), the
-smaller step is in the clean range again.
+or Krylov iterations, ``its``; ``ref``: refinement steps of the mixed-precision direct solves
+above ``sensitivity.MIXED_MIN_DOFS`` free dofs); then, unless ``--no-fd``, the largest relative
+2-norm error of a Jacobian column against central differences of plain runs with relative step
+``--step`` (default 1e-5) and the parameter it belongs to, and the same with a step 100 times
+smaller (``err/100``): where a Gauss point starts to yield within the first step of the reference
+(a kink of the discrete response: the one-sided differences converge to the DDM column from one
+side only), the smaller step is in the clean range again.
 ``--modes direct,krylov`` times each sensitivity solve mode of problems/fe/sensitivity.py (the
 measured choice behind ``auto``); ``--modes auto,auto-2pass`` the one material pass per increment
-against the two ``sensitivity`` calls of the first implementation. ``coarse`` runs all nine
+against the two ``sensitivity`` calls of the first implementation; ``--modes auto,auto-f64`` the
+direct solves with a double LU at every size against the default (``-f32``: mixed precision at
+every size; the measured choice behind ``MIXED_MIN_DOFS``). ``coarse`` runs all nine
 cases, ``paper`` only ``--paper-cases``.
 """
 
@@ -32,17 +35,28 @@ import time
 import numpy as np
 
 import problems.fe.sensitivity as sensitivity
+from bench.perf.linear_solvers import split_specs
 from problems.inverse.cases import CASES
 from problems.inverse.forward import FEForwardModel, discretisation
 
 PAPER_CASES = "linear-compression,hyperbolic-shear,exponent-tension"
 
-#: ``--modes`` values: (sensitivity solve mode, one material pass per increment); the ``-2pass``
-#: variants time the two ``sensitivity`` calls per increment of the first implementation
+#: ``--modes`` values: (sensitivity solve mode, one material pass per increment, MIXED_MIN_DOFS);
+#: the ``-2pass`` variants time the two ``sensitivity`` calls per increment of the first
+#: implementation, ``-f64`` direct solves with a double LU whatever the size, ``-f32`` with the
+#: single-precision LU and refinement whatever the size
+DEFAULTS = (sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE, sensitivity.MIXED_MIN_DOFS)
 MODES = {
-    **{m: (m, True) for m in sensitivity.SOLVE_MODES},
-    **{f"{m}-2pass": (m, False) for m in sensitivity.SOLVE_MODES},
+    **{m: (m, True, DEFAULTS[2]) for m in sensitivity.SOLVE_MODES},
+    **{f"{m}-2pass": (m, False, DEFAULTS[2]) for m in sensitivity.SOLVE_MODES},
+    **{f"{m}-f64": (m, True, 2**62) for m in ("auto", "direct")},
+    **{f"{m}-f32": (m, True, 0) for m in ("auto", "direct")},
 }
+
+
+def set_mode(values) -> None:
+    """Set (DEFAULT_MODE, DEFAULT_AFFINE, MIXED_MIN_DOFS) of problems.fe.sensitivity."""
+    sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE, sensitivity.MIXED_MIN_DOFS = values
 
 
 def timed(fn):
@@ -64,11 +78,11 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
         t, c, plain = timed(lambda: model(x))
         best_plain, cpu_plain = min(best_plain, t), min(cpu_plain, c)
         for mode in modes:
-            sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = MODES[mode]
+            set_mode(MODES[mode])
             t, c, res = timed(lambda: model(x, jacobian=True))
             best[mode], cpu[mode] = min(best[mode], t), min(cpu[mode], c)
             out[mode] = res
-    sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = "auto", True
+    set_mode(DEFAULTS)
     if not plain.ok or any(not r.ok or r.jacobian is None for r in out.values()):
         return [f"{mesh:8} {name:22} failed: {plain.message or next(iter(out.values())).message}"]
     err, worst, err_small = np.nan, "", np.nan
@@ -87,16 +101,17 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
         worst = case.names[int(np.argmax(errs[step]))]
     rows = []  # the split of the sensitivity time: one more run per mode
     for mode in modes:
-        sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = MODES[mode]
+        set_mode(MODES[mode])
         tm = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities.timing
-        sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE = "auto", True
+        set_mode(DEFAULTS)
         solve = tm["factor_s"] + tm["solve_s"]
         rows.append(
             f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {mode:9} "
             f"{best_plain:7.3f} {best[mode]:7.3f} {best[mode] / best_plain:5.2f} "
             f"{cpu[mode] / cpu_plain:5.2f} "
             f"{tm['material_s']:6.3f} {tm['assembly_s']:6.3f} {solve:6.3f} "
-            f"{tm['krylov_iterations']:5d} {err:9.1e} {worst:>7} {err_small:9.1e}"
+            f"{tm['krylov_iterations']:5d} {tm['refinements']:3d} {err:9.1e} {worst:>7} "
+            f"{err_small:9.1e}"
         )
     return rows
 
@@ -116,7 +131,8 @@ def main(argv=None) -> None:
         "--modes",
         default="auto",
         help="sensitivity paths to time (comma-separated): auto, direct, krylov, or one of them "
-        "with -2pass (two material calls per increment)",
+        "with -2pass (two material calls per increment); auto or direct with -f64 (double LU at "
+        "every size) or -f32 (mixed precision at every size)",
     )
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--step", type=float, default=1e-5, help="relative central-difference step")
@@ -129,11 +145,11 @@ def main(argv=None) -> None:
     print(
         f"{'mesh':8} {'dofs':>6} {'case':22} {'mode':9} {'plain s':>7} {'jac s':>7} {'cost':>5} "
         f"{'cpu':>5} "
-        f"{'mater':>6} {'assem':>6} {'solve':>6} {'its':>5} {'max err':>9} {'worst':>7} "
+        f"{'mater':>6} {'assem':>6} {'solve':>6} {'its':>5} {'ref':>3} {'max err':>9} {'worst':>7} "
         f"{'err/100':>9}",
         flush=True,
     )
-    for mesh in args.meshes.split(","):
+    for mesh in split_specs(args.meshes):  # NX,NY,NZ specs stay whole
         spec = args.paper_cases if mesh.split(":")[0] == "paper" else args.cases
         names = list(CASES) if spec == "all" else spec.split(",")
         for name in names:

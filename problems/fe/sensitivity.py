@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from problems.fe.linear_solver import SingularMatrixError, superlu_factor
+from problems.fe.linear_solver import SingularMatrixError, mixed_superlu_factor, superlu_factor
 from problems.materials.base import MaterialUpdate
 from problems.materials.ddm import affine_sensitivity
 
@@ -55,16 +55,36 @@ from problems.materials.ddm import affine_sensitivity
 #: 1e-12 costs 1.9x the Krylov iterations of 1e-8 (bench/perf/jacobian.py, docs/fe_model.md).
 SENSITIVITY_RTOL = 1e-8
 
-#: how the sensitivity equations are solved: ``direct`` (a SuperLU factorisation of the
-#: converged tangent, P back-substitutions), ``krylov`` (GCR for the P columns with a shared,
-#: growing search space, preconditioned by the Newton solver's current CHOLMOD factorisation; no
-#: factorisation) or ``auto``: direct for ``superlu`` Newton runs and for up to
-#: DIRECT_MAX_DOFS free dofs (coarse 749, paper 8 160: measured, direct solves 15-40 % less than
-#: krylov on paper, docs/fe_model.md), krylov above (fine, ~25 000: fill-in grows faster)
+#: how the sensitivity equations are solved: ``direct`` (a SuperLU factorisation of the converged
+#: tangent, P back-substitutions; in single precision + one refinement step above MIXED_MIN_DOFS),
+#: ``krylov`` (GCR for the P columns with a shared, growing search space, preconditioned by the
+#: Newton solver's current CHOLMOD factorisation; no factorisation) or ``auto``: direct for
+#: ``superlu`` Newton runs and for up to DIRECT_MAX_DOFS free dofs (coarse 749, paper 8 160:
+#: measured, direct solves 15-40 % less than krylov on paper with a double LU, docs/fe_model.md; the
+#: single-precision LU above MIXED_MIN_DOFS has widened that since), krylov above (fine, ~25 000:
+#: fill-in grows faster; not re-measured with the single-precision LU)
 SOLVE_MODES = ("auto", "direct", "krylov")
 DIRECT_MAX_DOFS = 10_000
 #: the mode :func:`problems.fe.newton.run` uses (bench/perf/jacobian.py sets it to compare)
 DEFAULT_MODE = "auto"
+
+#: ``direct`` solves above this many free dofs factorise the converged tangent in single
+#: precision and refine in double to MIXED_RTOL (:func:`problems.fe.linear_solver.
+#: mixed_superlu_factor`); up to it, the double SuperLU LU of before (``coarse``, 749 free dofs,
+#: stays bit for bit on it). Measured, linear-compression, factorisations + six-column solves of
+#: a run, double / mixed, best of 3 alternated (``bench/perf/jacobian.py --modes auto-f64,auto-f32
+#: --no-fd``): coarse (749) 0.034 / 0.038 s, 8,8,16 (1 719) 0.132 / 0.127, 10,10,20 (3 289)
+#: 0.373 / 0.343, 12,12,24 (5 603) 0.97 / 0.77, paper (8 160) 1.97 / 1.52 (cost ratio 1.96 ->
+#: 1.73). UMFPACK (kvxopt) was measured for this use and left: through kvxopt's interface (its
+#: own ordering) its factorisation takes 1.5x SuperLU's time and six solves 13-17x; with the
+#: nested-dissection order kept (not reachable through kvxopt's interface) 0.8x, but it solves
+#: one column at a time (six: 2.4x SuperLU's): 4-14 % off the solve phase, against 23-29 % here
+MIXED_MIN_DOFS = 3_000
+#: relative residual of each column of the mixed-precision solves: the single-precision solve
+#: reaches ~1e-5 and one refinement step 3e-12-7e-12 (paper), so this costs one step per
+#: increment; the Jacobians are the double LU's to 3e-11 per column (paper, three cases; the
+#: Krylov path's SENSITIVITY_RTOL is 1e-8)
+MIXED_RTOL = 1e-10
 
 #: whether :func:`problems.fe.newton.run` uses the one-pass material sensitivities where the
 #: material offers them (tests and bench/perf/jacobian.py set it to False for the two-call path)
@@ -96,7 +116,8 @@ class Sensitivities:
                       assembly_s (pseudo-loads, converged tangents; in the two-call path also
                       strains and internal-force sensitivities), factor_s, solve_s (s);
                       factorisations, krylov_iterations (preconditioner applications), mode (the
-                      solve mode used)
+                      solve mode used); mixed_factorisations (of them in single precision),
+                      refinements (their refinement steps), fallbacks (of them redone in double)
     """
 
     parameter_names: tuple[str, ...]
@@ -193,6 +214,11 @@ class GlobalDDM:
             "factor_s": 0.0,
             "solve_s": 0.0,
             "factorisations": 0,
+            # of them in single precision with refinement (MIXED_MIN_DOFS), its refinement
+            # steps, and those that fell back to a double LU
+            "mixed_factorisations": 0,
+            "refinements": 0,
+            "fallbacks": 0,
             "krylov_iterations": 0,
             # converged tangents assembled here that the next increment's predictor then reused:
             # work the plain run does itself (part of assembly_s), s
@@ -328,13 +354,18 @@ class GlobalDDM:
             return X
         if self.mode == "direct" and not (kept is not None and _symmetric(inc.tangent)):
             Kff = self._converged_tangent(inc)
+            mixed = Kff.shape[0] > MIXED_MIN_DOFS
             t = time.perf_counter()
-            factor = superlu_factor(Kff)
+            factor = mixed_superlu_factor(Kff) if mixed else superlu_factor(Kff)
             self.timing["factor_s"] += time.perf_counter() - t
             self.timing["factorisations"] += 1
             t = time.perf_counter()
-            X[perm] = factor.solve(b)
+            X[perm] = factor.solve(b, MIXED_RTOL) if mixed else factor.solve(b)
             self.timing["solve_s"] += time.perf_counter() - t
+            if mixed:
+                self.timing["mixed_factorisations"] += 1
+                self.timing["refinements"] += getattr(factor, "refinements", 0)
+                self.timing["fallbacks"] += bool(getattr(factor, "fallback", True))
             return X
         # krylov (or a symmetric tangent whose CHOLMOD factor the increment kept: then exact, one
         # iteration per column): the Newton's CHOLMOD factor preconditions GCR
