@@ -120,6 +120,8 @@ def test_report_end_to_end_with_tracks_fd_and_mcmc(e2e_dir, tmp_path):
     post = pd.read_csv(t / "posterior_widths.csv")
     assert set(post["parameter"]) >= {"pt0", "a"}
     assert "## Findings" in text and "## Posterior (MCMC)" in text
+    # the surrogate track's budget counts surrogate evaluations, the FE track's evaluations
+    assert "- budgets: 100 evaluations, 100 surrogate evaluations;" in text
     figs = {p.relative_to(dest).as_posix() for p in dest.rglob("*.png")}
     assert {
         f"figures/convergence/{EXP}__local.png",

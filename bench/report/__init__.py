@@ -561,10 +561,14 @@ def _overview(runs, history, cases, methods, budgets, rule) -> list[str]:
         return ", ".join(f"{k} ({v})" for k, v in vc.items())
 
     if "budget_unit" in runs:
+        tracks = runs["track"].fillna("fe") if "track" in runs else ["fe"] * len(runs)
+        units = runs["budget_unit"].fillna("evaluations")
         pairs = sorted(
             {
-                (int(b), str(u))
-                for b, u in zip(runs["budget"], runs["budget_unit"].fillna("evaluations"))
+                # on the surrogate track the budget counts surrogate evaluations (its FE polish
+                # has its own budget)
+                (int(b), "surrogate evaluations" if t == "surrogate" else str(u))
+                for b, u, t in zip(runs["budget"], units, tracks)
             }
         )
         budget_text = ", ".join(f"{b} {u}" for b, u in pairs)
