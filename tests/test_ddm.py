@@ -108,11 +108,13 @@ def test_krylov_and_direct_sensitivity_solves_agree(monkeypatch):
 
 def test_mixed_precision_direct_solves_give_the_double_lu_jacobian(monkeypatch):
     """Above MIXED_MIN_DOFS (forced here on a small mesh) the direct solves factorise in single
-    precision and refine: the Jacobian is the double LU's."""
+    precision and refine: the Jacobian is the double LU's (without handing the LU to the Newton
+    predictor, which keeps the response bit for bit; the hand-over is tested below)."""
     case = get_case("hyperbolic-shear")
     model = FEForwardModel(case, "3,3,6")
     x = case.reference
     monkeypatch.setattr(sensitivity, "DEFAULT_MODE", "direct")
+    monkeypatch.setattr(sensitivity, "HAND_OVER", False)
     out, timing = {}, {}
     for name, threshold in (("double", 10**9), ("mixed", 0)):
         monkeypatch.setattr(sensitivity, "MIXED_MIN_DOFS", threshold)
@@ -147,10 +149,44 @@ def test_coarse_keeps_the_double_lu(monkeypatch):
 
     monkeypatch.setattr(sensitivity, "mixed_superlu_factor", refuse)
     monkeypatch.setattr(sensitivity, "superlu_factor", double)
-    s = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities
+    resp = model.response(x, sensitivities=model.material_chain(x)[0])
+    s = resp.sensitivities
     assert s.ok and s.timing["mode"] == "direct"
+    assert resp.timing["handed_predictors"] == 0  # the Newton solves are the plain run's
     assert calls and set(calls) == {749} and 749 <= sensitivity.MIXED_MIN_DOFS
     assert len(calls) == s.timing["factorisations"] and s.timing["mixed_factorisations"] == 0
+
+
+def test_factor_handed_to_the_newton_predictor_keeps_the_response_and_the_jacobian(monkeypatch):
+    """Above MIXED_MIN_DOFS (forced here on a small mesh) the direct solves hand their LU of the
+    converged tangent to the next increment's Newton predictor: the response is the plain run's
+    to the Newton tolerance and the Jacobian the one without the hand-over to 1e-8."""
+    case = get_case("hyperbolic-shear")
+    model = FEForwardModel(case, "3,3,6")
+    x = case.reference
+    monkeypatch.setattr(sensitivity, "DEFAULT_MODE", "direct")
+    monkeypatch.setattr(sensitivity, "MIXED_MIN_DOFS", 0)
+    plain = model.response(x)
+    resp, out = {}, {}
+    for hand in (False, True):
+        monkeypatch.setattr(sensitivity, "HAND_OVER", hand)
+        resp[hand] = model.response(x, sensitivities=model.material_chain(x)[0])
+        out[hand] = model(x, jacobian=True)
+        assert resp[hand].converged and resp[hand].sensitivities.ok and out[hand].ok
+    assert plain.timing["handed_predictors"] == resp[False].timing["handed_predictors"] == 0
+    for f in ("reaction_kN", "displacements", "stress", "state"):  # no hand-over: bit for bit
+        np.testing.assert_array_equal(getattr(resp[False], f), getattr(plain, f))
+    r = resp[True]
+    # every increment but the first (elastic: symmetric tangent, no LU) gets the LU ...
+    assert r.timing["handed_predictors"] == r.increments - 1 > 0
+    # ... whose predictor solve is exact: fewer Krylov iterations than the plain run
+    assert r.timing["krylov_iterations"] < plain.timing["krylov_iterations"]
+    assert r.increments == plain.increments and r.cuts == plain.cuts == 0
+    assert rel(r.reaction_kN, plain.reaction_kN) < 1e-8
+    assert rel(r.displacements, plain.displacements) < 1e-8
+    assert rel(out[True].values, model(x).values) < 1e-8
+    for j in range(len(x)):
+        assert rel(out[True].jacobian[:, j], out[False].jacobian[:, j]) < 1e-8, j
 
 
 def test_superlu_newton_runs_give_the_same_sensitivities():

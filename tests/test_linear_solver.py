@@ -6,6 +6,7 @@ import scipy.sparse as sp
 
 from problems.fe.linear_solver import (
     LINEAR_SOLVERS,
+    LUGmresFactor,
     MixedSuperLUFactor,
     SingularMatrixError,
     SuperLUFactor,
@@ -175,6 +176,33 @@ def test_mixed_precision_factor_falls_back_to_the_double_lu():
     assert np.linalg.norm(A @ f.solve(b) - b) <= 1e-6 * np.linalg.norm(b)
     with pytest.raises(SingularMatrixError):  # singular in double too
         mixed_superlu_factor(_ill_conditioned(0.0))
+
+
+def test_lu_preconditioned_gmres_is_exact_on_its_matrix_and_solves_a_nearby_one():
+    """The sensitivity solves' LU of a tangent (single precision + refinement) handed to the
+    Newton predictor: one GMRES iteration at 1e-5 on that very matrix, several on another."""
+    A = _tangent_block(_plastic(), discretise(box_mesh(3, 3, 6)))
+    b = np.random.default_rng(3).standard_normal(A.shape[0])
+    lu = mixed_superlu_factor(A)
+    assert isinstance(lu, MixedSuperLUFactor)
+    f = LUGmresFactor(lu, A)
+    assert not f.exact
+    x = f.solve(b, 1e-5)
+    assert f.krylov_iterations == 1 and np.linalg.norm(A @ x - b) <= 1e-5 * np.linalg.norm(b)
+    x = f.solve(b, 1e-11)
+    assert np.linalg.norm(A @ x - b) <= 1e-11 * np.linalg.norm(b)
+    A2 = A.copy()
+    A2.data *= 1.0 + 0.05 * np.random.default_rng(2).standard_normal(A2.nnz)  # a nearby matrix
+    g = f.for_matrix(A2)
+    assert g.A is A2 and g.factor is lu
+    X = g.solve(np.column_stack([b, 2.0 * b]), 1e-11)
+    assert g.krylov_iterations > 2
+    for j in range(2):
+        assert np.linalg.norm(A2 @ X[:, j] - (j + 1) * b) <= 1e-11 * (j + 1) * np.linalg.norm(b)
+    # an exact (double) LU preconditions too: one iteration even at 1e-12
+    h = LUGmresFactor(superlu_factor(A), A)
+    x = h.solve(b, 1e-12)
+    assert h.krylov_iterations == 1 and np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
 
 
 @needs_cholmod

@@ -2,8 +2,8 @@
 
     OMP_NUM_THREADS=1 python -m bench.perf.jacobian [--meshes coarse,paper] [--cases all|NAME,...]
                       [--paper-cases linear-compression,hyperbolic-shear,exponent-tension]
-                      [--modes auto|direct,krylov|auto,auto-2pass|auto,auto-f64] [--repeat 2]
-                      [--step 1e-5] [--no-fd]
+                      [--modes auto|direct,krylov|auto,auto-2pass|auto,auto-f64|auto-keep,auto]
+                      [--repeat 2] [--step 1e-5] [--no-fd]
 
 Per mesh and case, at the case's reference: the best of ``--repeat`` plain forward evaluations
 ``model(x)`` and of evaluations with the Jacobian ``model(x, jacobian=True)`` (response + dU/dx,
@@ -23,7 +23,9 @@ side only), the smaller step is in the clean range again.
 measured choice behind ``auto``); ``--modes auto,auto-2pass`` the one material pass per increment
 against the two ``sensitivity`` calls of the first implementation; ``--modes auto,auto-f64`` the
 direct solves with a double LU at every size against the default (``-f32``: mixed precision at
-every size; the measured choice behind ``MIXED_MIN_DOFS``). ``coarse`` runs all nine
+every size; the measured choice behind ``MIXED_MIN_DOFS``); ``--modes auto-keep,auto`` without
+and with the hand-over of that factorisation to the next increment's Newton predictor
+(``sensitivity.HAND_OVER``). ``coarse`` runs all nine
 cases, ``paper`` only ``--paper-cases``.
 """
 
@@ -44,19 +46,31 @@ PAPER_CASES = "linear-compression,hyperbolic-shear,exponent-tension"
 #: ``--modes`` values: (sensitivity solve mode, one material pass per increment, MIXED_MIN_DOFS);
 #: the ``-2pass`` variants time the two ``sensitivity`` calls per increment of the first
 #: implementation, ``-f64`` direct solves with a double LU whatever the size, ``-f32`` with the
-#: single-precision LU and refinement whatever the size
-DEFAULTS = (sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE, sensitivity.MIXED_MIN_DOFS)
+#: single-precision LU and refinement whatever the size, ``-keep`` without handing the direct
+#: solves' factorisation to the next increment's Newton predictor (``sensitivity.HAND_OVER``)
+DEFAULTS = (
+    sensitivity.DEFAULT_MODE,
+    sensitivity.DEFAULT_AFFINE,
+    sensitivity.MIXED_MIN_DOFS,
+    sensitivity.HAND_OVER,
+)
 MODES = {
-    **{m: (m, True, DEFAULTS[2]) for m in sensitivity.SOLVE_MODES},
-    **{f"{m}-2pass": (m, False, DEFAULTS[2]) for m in sensitivity.SOLVE_MODES},
-    **{f"{m}-f64": (m, True, 2**62) for m in ("auto", "direct")},
-    **{f"{m}-f32": (m, True, 0) for m in ("auto", "direct")},
+    **{m: (m, True, DEFAULTS[2], DEFAULTS[3]) for m in sensitivity.SOLVE_MODES},
+    **{f"{m}-2pass": (m, False, DEFAULTS[2], DEFAULTS[3]) for m in sensitivity.SOLVE_MODES},
+    **{f"{m}-f64": (m, True, 2**62, DEFAULTS[3]) for m in ("auto", "direct")},
+    **{f"{m}-f32": (m, True, 0, DEFAULTS[3]) for m in ("auto", "direct")},
+    **{f"{m}-keep": (m, True, DEFAULTS[2], False) for m in ("auto", "direct")},
 }
 
 
 def set_mode(values) -> None:
-    """Set (DEFAULT_MODE, DEFAULT_AFFINE, MIXED_MIN_DOFS) of problems.fe.sensitivity."""
-    sensitivity.DEFAULT_MODE, sensitivity.DEFAULT_AFFINE, sensitivity.MIXED_MIN_DOFS = values
+    """Set (DEFAULT_MODE, DEFAULT_AFFINE, MIXED_MIN_DOFS, HAND_OVER) of problems.fe.sensitivity."""
+    (
+        sensitivity.DEFAULT_MODE,
+        sensitivity.DEFAULT_AFFINE,
+        sensitivity.MIXED_MIN_DOFS,
+        sensitivity.HAND_OVER,
+    ) = values
 
 
 def timed(fn):
@@ -132,7 +146,8 @@ def main(argv=None) -> None:
         default="auto",
         help="sensitivity paths to time (comma-separated): auto, direct, krylov, or one of them "
         "with -2pass (two material calls per increment); auto or direct with -f64 (double LU at "
-        "every size) or -f32 (mixed precision at every size)",
+        "every size), -f32 (mixed precision at every size) or -keep (no hand-over of the factor to "
+        "the Newton predictor)",
     )
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--step", type=float, default=1e-5, help="relative central-difference step")

@@ -224,6 +224,13 @@ class MixedSuperLUFactor:
     def for_matrix(self, A):
         return None
 
+    def preconditioner(self):
+        """v -> M^-1 v (one column, double in and out) with the single-precision factors, or the
+        exact solve once the factorisation fell back to double."""
+        if self._exact is not None:
+            return self._exact.solve
+        return lambda v: self._single(v.reshape(self.n, 1)).reshape(v.shape)
+
 
 def mixed_superlu_factor(A: sp.spmatrix) -> MixedSuperLUFactor | SuperLUFactor:
     """:class:`MixedSuperLUFactor` of A; the double :func:`superlu_factor` when the single-
@@ -244,6 +251,55 @@ def mixed_superlu_factor(A: sp.spmatrix) -> MixedSuperLUFactor | SuperLUFactor:
         else:
             return MixedSuperLUFactor(A, lu32)
     return superlu_factor(A)
+
+
+# ----------------------------------------------------------------- LU-preconditioned GMRES
+class LUGmresFactor:
+    """GMRES on a matrix ``A`` right-preconditioned by the LU factors of a nearby matrix of the
+    same pattern (a :class:`MixedSuperLUFactor` or :class:`SuperLUFactor` of the converged tangent
+    of the previous increment, from the sensitivity solves).
+
+    The Newton solver of a run with sensitivities above ``sensitivity.MIXED_MIN_DOFS`` free dofs
+    solves each increment's predictor with it (:meth:`problems.fe.newton._Newton.adopt_factor`):
+    the predictor matrix *is* the factorised tangent, so one Krylov iteration reaches the
+    predictor's tolerance. A solve that does not converge falls back to an exact SuperLU of ``A``
+    (as :class:`CholmodGmresFactor`).
+    """
+
+    exact = False
+
+    def __init__(self, factor, A, psolve=None):
+        self.factor = factor
+        self._psolve = psolve if psolve is not None else _lu_preconditioner(factor)
+        self.A = A
+        self.n = A.shape[0]
+        self.krylov_iterations = 0
+        self._exact: SuperLUFactor | None = None
+
+    def for_matrix(self, A) -> "LUGmresFactor":
+        return LUGmresFactor(self.factor, A, self._psolve)
+
+    def solve(self, rhs: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
+        rhs = np.asarray(rhs, dtype=float)
+        if self._exact is not None:
+            return self._exact.solve(rhs)
+        cols = rhs.reshape(self.n, -1)
+        out = np.empty_like(cols)
+        self.krylov_iterations = 0
+        for j in range(cols.shape[1]):
+            x, its, ok = gmres(self.A.dot, self._psolve, cols[:, j], rtol)
+            self.krylov_iterations += its
+            if not ok:  # stagnation or breakdown: solve this matrix exactly from now on
+                self._exact = superlu_factor(self.A)
+                return self._exact.solve(rhs)
+            out[:, j] = x
+        return out.reshape(rhs.shape)
+
+
+def _lu_preconditioner(factor):
+    """v -> M^-1 v of an LU factor (single-precision factors where it has them)."""
+    make = getattr(factor, "preconditioner", None)
+    return make() if make is not None else factor.solve
 
 
 # --------------------------------------------------------------------------------- CHOLMOD+GMRES

@@ -27,7 +27,11 @@ U_n = du_n/dp, S_n = dsigma_n/dp, H_n = dstate_n/dp known (zero before the first
 
 The converged tangent's free block assembled for step 2 is the next increment's predictor
 matrix; the Newton solver keeps it (``_Newton._tangent_free``), so the run's own work is one
-assembly lighter and its answers bit for bit those of a plain run.
+assembly lighter and, up to MIXED_MIN_DOFS free dofs, its answers bit for bit those of a plain
+run. Above MIXED_MIN_DOFS the direct solves also hand their LU of that matrix to the Newton
+solver (``HAND_OVER``, ``_Newton.adopt_factor``), which solves the next predictor with it (one
+Krylov iteration instead of 7-9 with its CHOLMOD preconditioner, and at times a factorisation):
+the response is then the plain run's to the Newton tolerance, no longer bit for bit.
 
 Bisected increments are increments like the others: only converged ones reach step 1. Only the
 columns asked for are carried (the one-pass path) or solved (the two-call path, where the
@@ -85,6 +89,15 @@ MIXED_MIN_DOFS = 3_000
 #: increment; the Jacobians are the double LU's to 3e-11 per column (paper, three cases; the
 #: Krylov path's SENSITIVITY_RTOL is 1e-8)
 MIXED_RTOL = 1e-10
+
+#: whether the direct solves above MIXED_MIN_DOFS hand their factorisation of the converged tangent
+#: to the Newton solver, which preconditions the next increment's predictor (same matrix) with it
+#: (``_Newton.adopt_factor``): one Krylov iteration (5 ms on ``paper``) instead of 7-9 with the
+#: CHOLMOD preconditioner and at times a CHOLMOD factorisation (22-68 ms); the Newton solves of a
+#: paper run with sensitivities take ~0.25 s less than a plain run's. Only for the predictor: as
+#: the corrections' preconditioner one application of the single-precision LU costs 1.6x a CHOLMOD
+#: one and saves too few iterations (measured, ``bench/perf/jacobian.py --modes auto-keep,auto``)
+HAND_OVER = True
 
 #: whether :func:`problems.fe.newton.run` uses the one-pass material sensitivities where the
 #: material offers them (tests and bench/perf/jacobian.py set it to False for the two-call path)
@@ -164,7 +177,9 @@ class GlobalDDM:
 
     ``newton`` is the run's ``_Newton`` solver: its assembly, boundary conditions and linear
     solver are reused, its state (the factorisation its iterations reuse, its counters) is never
-    changed, so the run's answers are bit for bit those of a run without sensitivities.
+    changed, so the run's answers are bit for bit those of a run without sensitivities -- except
+    above MIXED_MIN_DOFS free dofs with HAND_OVER, where each direct solve's factorisation is
+    handed to the Newton solver for the next predictor (same answers to the Newton tolerance).
     ``columns`` are the indices of the parameters to solve for; ``mode`` one of SOLVE_MODES
     (default DEFAULT_MODE); ``affine=False`` forces the two ``sensitivity`` calls per increment
     even where the material offers the one-pass split (the reference path of the tests).
@@ -366,6 +381,8 @@ class GlobalDDM:
                 self.timing["mixed_factorisations"] += 1
                 self.timing["refinements"] += getattr(factor, "refinements", 0)
                 self.timing["fallbacks"] += bool(getattr(factor, "fallback", True))
+                if HAND_OVER:  # the next increment's Newton solves start from this factor
+                    self.newton.adopt_factor(factor, Kff, inc.tangent)
             return X
         # krylov (or a symmetric tangent whose CHOLMOD factor the increment kept: then exact, one
         # iteration per column): the Newton's CHOLMOD factor preconditions GCR
