@@ -283,17 +283,11 @@ class LUGmresFactor:
         rhs = np.asarray(rhs, dtype=float)
         if self._exact is not None:
             return self._exact.solve(rhs)
-        cols = rhs.reshape(self.n, -1)
-        out = np.empty_like(cols)
-        self.krylov_iterations = 0
-        for j in range(cols.shape[1]):
-            x, its, ok = gmres(self.A.dot, self._psolve, cols[:, j], rtol)
-            self.krylov_iterations += its
-            if not ok:  # stagnation or breakdown: solve this matrix exactly from now on
-                self._exact = superlu_factor(self.A)
-                return self._exact.solve(rhs)
-            out[:, j] = x
-        return out.reshape(rhs.shape)
+        x, self.krylov_iterations = gmres_columns(self.A, self._psolve, rhs, rtol)
+        if x is None:  # stagnation or breakdown: solve this matrix exactly from now on
+            self._exact = superlu_factor(self.A)
+            return self._exact.solve(rhs)
+        return x
 
 
 def _lu_preconditioner(factor):
@@ -389,19 +383,13 @@ class CholmodGmresFactor:
         rhs = np.asarray(rhs, dtype=float)
         if self._exact is not None:
             return self._exact.solve(rhs)
-        cols = rhs.reshape(self.n, -1)
-        out = np.empty_like(cols)
-        self.krylov_iterations = 0
-        for j in range(cols.shape[1]):
-            x, its, ok = gmres(self.A.dot, self._psolve, cols[:, j], rtol)
-            self.krylov_iterations += its
-            self._solver.krylov_iterations += its
-            if not ok:  # stagnation or breakdown: solve this matrix exactly from now on
-                self._exact = superlu_factor(self.A)
-                self._solver.fallbacks += 1
-                return self._exact.solve(rhs)
-            out[:, j] = x
-        return out.reshape(rhs.shape)
+        x, self.krylov_iterations = gmres_columns(self.A, self._psolve, rhs, rtol)
+        self._solver.krylov_iterations += self.krylov_iterations
+        if x is None:  # stagnation or breakdown: solve this matrix exactly from now on
+            self._exact = superlu_factor(self.A)
+            self._solver.fallbacks += 1
+            return self._exact.solve(rhs)
+        return x
 
 
 class CholmodGmresSolver:
@@ -442,6 +430,22 @@ class CholmodGmresSolver:
         else:
             f = CholmodGmresFactor(self, p, p.generation, A)
         return f
+
+
+def gmres_columns(A, psolve, rhs: np.ndarray, rtol: float) -> tuple[np.ndarray | None, int]:
+    """Preconditioned GMRES (:func:`gmres`) on ``A`` for each column of ``rhs`` (n,) or (n, k):
+    the solution shaped like ``rhs`` and the Krylov iterations spent, or ``(None, iterations)``
+    as soon as a column stagnates or breaks down (the caller then solves exactly)."""
+    cols = rhs.reshape(A.shape[0], -1)
+    out = np.empty_like(cols)
+    total = 0
+    for j in range(cols.shape[1]):
+        x, its, ok = gmres(A.dot, psolve, cols[:, j], rtol)
+        total += its
+        if not ok:
+            return None, total
+        out[:, j] = x
+    return out.reshape(rhs.shape), total
 
 
 def gmres(matvec, psolve, b: np.ndarray, rtol: float, restart: int = 40, maxiter: int = 200):
