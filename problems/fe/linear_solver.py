@@ -128,17 +128,19 @@ class SuperLUFactor:
         return None
 
 
+def _splu(A: sp.csc_matrix):
+    """scipy's SuperLU of A in its given order; RuntimeError if exactly singular."""
+    # The ordering is already fill-reducing: keep it (NATURAL) and pivot on the diagonal.
+    return spla.splu(
+        A, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
+
+
 def superlu_factor(A: sp.spmatrix) -> SuperLUFactor:
     """SuperLU of A in its given (fill-reducing) order, diagonal pivoting; SingularMatrixError if
     singular."""
     try:
-        # The ordering is already fill-reducing: keep it (NATURAL) and pivot on the diagonal.
-        lu = spla.splu(
-            sp.csc_matrix(A),
-            permc_spec="NATURAL",
-            diag_pivot_thresh=0.0,
-            options={"SymmetricMode": True},
-        )
+        lu = _splu(sp.csc_matrix(A))
     except RuntimeError as exc:  # "Factor is exactly singular"
         raise SingularMatrixError(str(exc)) from exc
     return SuperLUFactor(lu)
@@ -240,12 +242,7 @@ def mixed_superlu_factor(A: sp.spmatrix) -> MixedSuperLUFactor | SuperLUFactor:
     if np.all(np.isfinite(data32)):
         A32 = sp.csc_matrix((data32, A.indices, A.indptr), shape=A.shape)
         try:
-            lu32 = spla.splu(
-                A32,
-                permc_spec="NATURAL",
-                diag_pivot_thresh=0.0,
-                options={"SymmetricMode": True},
-            )
+            lu32 = _splu(A32)
         except RuntimeError:  # singular in single precision: try double
             pass
         else:

@@ -659,11 +659,7 @@ class _Newton:
                 factor = self._factorise(Kff, D)
             else:
                 self._factor, self._factor_D = factor, D
-            t = time.perf_counter()
-            du[self._perm_position] = factor.solve(rhs_free[self._perm_position], rtol)
-            self.timing["solve_s"] += time.perf_counter() - t
-            its = factor.krylov_iterations
-            self.timing["krylov_iterations"] += its
+            its = self._apply(factor, rhs_free, rtol, du)
             if its:  # bookkeeping of the preconditioner's ageing (iterations per decade of rtol)
                 decades = max(-math.log10(max(rtol, 1e-16)), 1.0)
                 if self._fresh_rate is None:
@@ -675,6 +671,15 @@ class _Newton:
             du[:], why = np.nan, f"singular tangent ({exc})"
             self._factor = None
         return du, why
+
+    def _apply(self, factor: Factor, rhs_free, rtol, du) -> int:
+        """``du`` (``bc.free`` order) <- the solve of ``factor`` (elimination order) for
+        ``rhs_free``, timed; returns (and counts) its Krylov iterations."""
+        t = time.perf_counter()
+        du[self._perm_position] = factor.solve(rhs_free[self._perm_position], rtol)
+        self.timing["solve_s"] += time.perf_counter() - t
+        self.timing["krylov_iterations"] += factor.krylov_iterations
+        return factor.krylov_iterations
 
     def adopt_factor(self, factor: Factor, Kff, D) -> None:
         """Solve the next increment's predictor, whose matrix is ``Kff`` (the free block of the
@@ -690,10 +695,7 @@ class _Newton:
         current factorisation and its ageing bookkeeping as they are."""
         du = np.empty_like(rhs_free)
         try:
-            t = time.perf_counter()
-            du[self._perm_position] = factor.solve(rhs_free[self._perm_position], rtol)
-            self.timing["solve_s"] += time.perf_counter() - t
-            self.timing["krylov_iterations"] += factor.krylov_iterations
+            self._apply(factor, rhs_free, rtol, du)
             self.timing["handed_predictors"] += 1
             why = ""
         except SingularMatrixError as exc:
