@@ -32,17 +32,20 @@ from pathlib import Path
 TABLE_FORMATS = ("md", "csv", "tex")
 
 
-def default_posterior_dirs(out_dir: Path) -> list[Path]:
-    """Where the posterior study's ``<case>/summary.json`` files are looked for: ``DIR/posterior``,
-    ``DIR/studies/posterior`` and the sibling ``DIR/../studies/posterior`` (the results root's
-    studies, for ``results/<suite>``)."""
+def study_dirs(out_dir: Path, study: str, *, direct: bool = True) -> list[Path]:
+    """The existing folders of a study's results for the report of ``out_dir``: ``DIR/<study>``
+    (with ``direct``), ``DIR/studies/<study>`` and the sibling ``DIR/../studies/<study>`` (the
+    results root's studies, for ``results/<suite>``)."""
     out_dir = Path(out_dir)
-    cands = [
-        out_dir / "posterior",
-        out_dir / "studies" / "posterior",
-        out_dir.resolve().parent / "studies" / "posterior",
-    ]
+    cands = [out_dir / study] if direct else []
+    cands += [out_dir / "studies" / study, out_dir.resolve().parent / "studies" / study]
     return [p for p in dict.fromkeys(cands) if p.is_dir()]
+
+
+def default_posterior_dirs(out_dir: Path) -> list[Path]:
+    """Where the posterior study's ``<case>/summary.json`` files are looked for
+    (:func:`study_dirs` of ``posterior``)."""
+    return study_dirs(out_dir, "posterior")
 
 
 def write_report(

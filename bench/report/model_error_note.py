@@ -65,15 +65,11 @@ class Setting(NamedTuple):
 
 def default_model_error_dirs(out_dir: Path) -> list[Path]:
     """Where the model-error study's ``<case>/*.json`` rows are looked for, like the posterior
-    study (:func:`bench.report.default_posterior_dirs`): ``DIR/studies/model_error`` and the
-    results root's ``DIR/../studies/model_error``. (``DIR/model_error`` is not a candidate: at the
-    results root it holds the BAE statistics, not the study.)"""
-    out_dir = Path(out_dir)
-    cands = [
-        out_dir / "studies" / "model_error",
-        out_dir.resolve().parent / "studies" / "model_error",
-    ]
-    return [p for p in dict.fromkeys(cands) if p.is_dir()]
+    study: :func:`bench.report.study_dirs` without ``DIR/model_error``, which at the results root
+    holds the BAE statistics, not the study."""
+    from bench.report import study_dirs
+
+    return study_dirs(out_dir, "model_error", direct=False)
 
 
 def run_settings(runs: pd.DataFrame, records=()) -> dict[str, Setting]:
