@@ -4,6 +4,8 @@ measured in the same run; surrogate search + FE polish against FE-only LM from r
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate speed [--cases all] [--repeat 200]
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate polish [--cases all] [--starts 3]
         [--tier consistent] [--out results/surrogates/polish_vs_lm.jsonl]
+    OMP_NUM_THREADS=1 python -m bench.perf.surrogate tradeoff [--cases all]
+        [--json results/surrogates/tradeoff.json]
 
 ``speed``: per case, the median CPU time (``time.process_time``: on a shared machine the wall time
 of a long computation mostly measures how long the process waited for a core) of one surrogate
@@ -11,6 +13,15 @@ call (checks included), of one call with the Jacobian, the per-point time of bat
 1000 points (``evaluate_batch``, the path the vectorised mapper takes for populations and emcee),
 and the median of 3 plain FE runs on the coarse mesh, alternating; the ratios FE / surrogate.
 Single calls are timed in groups of 20 (the CPU clock's resolution).
+
+``tradeoff``: per case whose training and hold-out runs are kept (``runs_dir()`` of
+:mod:`problems.surrogate.build`, matched by training hash: no new FE runs), the shipped regression
+against regressions that share kernels, refitted on the same training runs and POD: one GP for all
+modes, the leading mode alone plus one GP for the rest, and the cross-validated RBF. For each: the
+hold-out RMS error in units of sigma (displacements, force; the same 50 hold-out runs), the CPU
+time of one surrogate call and of its regression alone (the POD coefficients), against one plain
+FE run in the same process. It answers whether the
+10^4 speed target can be bought with fewer kernels without losing the 1 sigma accuracy target.
 
 ``polish``: per case, the FE-only LM optimum ``x_LM`` (LM from the default start, budget 200), then
 from ``--starts`` seeded random starts (``start = random``, ``start_index = k``): FE-only LM
@@ -94,6 +105,101 @@ def speed(cases, repeat: int) -> list[dict]:
             f"(x{row['ratio_batch1000_per_point']:.3g})",
             flush=True,
         )
+    return rows
+
+
+def _cpu_per_call(fn, X, repeat: int) -> float:
+    """Median CPU time of one ``fn(x)`` over groups of 20 calls, s."""
+    fn(X[0])
+    times = []
+    for i in range(0, repeat, 20):
+        t0 = time.process_time()
+        for x in X[i : i + 20]:
+            fn(x)
+        times.append((time.process_time() - t0) / 20)
+    return statistics.median(times)
+
+
+def tradeoff(cases, repeat: int) -> list[dict]:
+    import dataclasses
+
+    from bench.surrogate_run import load_for
+    from problems.inverse import layout
+    from problems.inverse.data import get_data
+    from problems.inverse.forward import FEForwardModel
+    from problems.surrogate.build import runs_dir
+    from problems.surrogate.regression import Scorer, fit_gp, fit_rbf, select_rbf
+
+    rows = []
+    for name in cases:
+        sur = load_for("default", name, "coarse")
+        key = (sur.info.get("training_hash") or "")[:12]
+        kept = sorted(runs_dir().glob(f"{name}__coarse__{key}.npz")) if key else []
+        if not kept:
+            print(f"{name:24} no kept training runs (hash {key or '?'}): skipped", flush=True)
+            continue
+        runs = np.load(kept[0])
+        if "hold_X" not in runs:
+            print(f"{name:24} no kept hold-out runs: skipped", flush=True)
+            continue
+        pod, width = sur.pod, sur.upper - sur.lower
+        Z = (runs["X"] - sur.lower) / width
+        if Z.shape != sur.train_z.shape or not np.allclose(Z, sur.train_z, rtol=0, atol=1e-12):
+            print(f"{name:24} kept runs are not the surrogate's training set: skipped", flush=True)
+            continue
+        A = pod.coefficients(runs["Y"])
+        N = int(sur.info["description"]["n_snapshots"])
+        all_blocks = layout.blocks(N, (pod.mean.size - N) // (2 * N))
+        report = {k: all_blocks[k] for k in ("displacement", "force")}
+        scorer = Scorer(pod.modes, {k: all_blocks[k] for k in layout.BLOCK_NAMES})
+        HZ = (runs["hold_X"] - sur.lower) / width
+        data = get_data(name)
+        fe = FEForwardModel(sur.checker.case, "coarse", data.settings.loading, data.points)
+        X = sur.lower + np.random.default_rng(0).random((repeat, len(width))) * width
+        fe(X[0])  # warm-up
+        fe_s = []
+        for k in range(3):
+            t0 = time.process_time()
+            fe(X[k])
+            fe_s.append(time.process_time() - t0)
+        fe_s = statistics.median(fe_s)
+        variants = {"shipped": sur.regression}
+        t0 = time.process_time()
+        variants["gp, one kernel"] = fit_gp(Z, A, n_individual=0, individual=(), restarts=1)
+        variants["gp, leading mode + one kernel"] = fit_gp(
+            Z, A, n_individual=1, individual=(), restarts=1
+        )
+        cfg, _ = select_rbf(Z, A, scorer)
+        variants[f"rbf ({cfg['kernel']})"] = fit_rbf(Z, A, **cfg)
+        fit_s = time.process_time() - t0
+        for label, reg in variants.items():
+            model = dataclasses.replace(sur, regression=reg)
+            E = (pod.reconstruct(reg.predict(HZ)) - runs["hold_Y"]) / pod.scale
+            rms = {k: float(np.sqrt(np.mean(E[:, sl] ** 2))) for k, sl in report.items()}
+            one = _cpu_per_call(model, X, repeat)
+            kernels_s = _cpu_per_call(
+                lambda x, reg=reg: reg.predict(model.to_scaled(x)[None]), X, repeat
+            )
+            n_kernels = len(getattr(reg, "components", ())) or 1
+            row = {
+                "case": name,
+                "regression": label,
+                "kernels": n_kernels,
+                "holdout_rms_sigma": rms,
+                "surrogate_s": one,
+                "regression_s": kernels_s,
+                "fe_s": fe_s,
+                "ratio": fe_s / one,
+            }
+            rows.append(row)
+            print(
+                f"{name:24} {label:32} kernels {n_kernels:2d} | hold-out RMS: displacement "
+                f"{rms['displacement']:.3g} sigma, force {rms['force']:.3g} sigma | one call "
+                f"{1e6 * one:.0f} us (coefficients {1e6 * kernels_s:.0f} us), FE {fe_s:.3f} s: "
+                f"x{fe_s / one:.3g}",
+                flush=True,
+            )
+        print(f"{name:24} refits took {fit_s:.0f} s CPU", flush=True)
     return rows
 
 
@@ -223,18 +329,22 @@ def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("what", choices=["speed", "polish"])
+    p.add_argument("what", choices=["speed", "polish", "tradeoff"])
     p.add_argument("--cases", default="all")
     p.add_argument("--repeat", type=int, default=200)
     p.add_argument("--starts", type=int, default=3)
     p.add_argument("--tier", default="consistent", choices=["consistent", "model-error"])
     p.add_argument("--tol", type=float, default=1e-3)
     p.add_argument("--out", default=None)
-    p.add_argument("--json", default=None, help="speed: write the rows as JSON")
+    p.add_argument("--json", default=None, help="speed, tradeoff: write the rows as JSON")
     a = p.parse_args(argv)
     cases = _cases(a.cases)
     if a.what == "speed":
         rows = speed(cases, a.repeat)
+        if a.json:
+            Path(a.json).write_text(json.dumps(rows, indent=1))
+    elif a.what == "tradeoff":
+        rows = tradeoff(cases, a.repeat)
         if a.json:
             Path(a.json).write_text(json.dumps(rows, indent=1))
     else:

@@ -28,10 +28,9 @@ import pandas as pd
 
 from bench.report.derived import derive_points, derived_reference
 from bench.store import parameter_order
+from problems.inverse.cases import PAPER_A_ERROR
 
 MAX_SAMPLES = 20_000
-#: The paper's Table 1: error of the identified a over the exponent cases, percent (issue 16).
-PAPER_A_ERROR = (11.0, 46.0)
 SUMMARY = "summary.json"
 
 

@@ -46,10 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
+from problems.inverse.cases import PAPER_A_ERROR
+
 SUMMARY = "summary.json"
 CHAIN = "chain.npz"
-#: the paper's Table-1 identification error of the exponent coefficient a, %
-PAPER_A_ERROR = (11.0, 46.0)
 
 
 @dataclass

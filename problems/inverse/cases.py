@@ -51,6 +51,9 @@ FIXED = dict(OPTIONAL_PARAMETERS)
 E_REF, BETA_REF, K_REF, PSI_REF = 30_000.0, 35.0, 0.85, 15.0
 SIGMA_C0, PT0_REF, B_REF, H_OVER_SIGMA0 = 20.0, 2.5, 1.5, 75.0
 A_REF = (PT0_REF + SIGMA_C0 / 3.0) / SIGMA_C0**B_REF  # exponent surface through p = -pt0, q = 0
+#: the seed paper's Table 1: range of the identification error of the exponent coefficient a
+#: over the exponent cases, percent (the parameter it identifies worst)
+PAPER_A_ERROR = (11.0, 46.0)
 
 
 # --- the same concrete seen through each hardening test ------------------------------------
