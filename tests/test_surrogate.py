@@ -372,3 +372,32 @@ def test_surrogate_of_the_fe_model_on_a_small_mesh(tmp_path):
 
     res = sur(CASES["linear-compression"].reference, jacobian=True)
     assert res.ok and res.jacobian.shape == (8130, 6)
+
+
+def test_validation_times_the_model_in_process_on_the_cpu_clock(rbf_surrogate):
+    """The speed ratio compares CPU times measured in this process: a model that burns ~20 ms of
+    CPU per run is timed at that, whatever wall time its hold-out runs took on workers."""
+    import time
+
+    from problems.surrogate.training import Runs
+    from problems.surrogate.validation import validate
+
+    class Busy(ToyModel):
+        def __call__(self, x):
+            t0 = time.process_time()
+            while time.process_time() - t0 < 0.02:
+                pass
+            return super().__call__(x)
+
+    model = Busy()
+    X = make_design(LOWER, [1.9, 0.5, 0.5], 12, seed=5).X
+    Y = np.array([model(x).values for x in X[:2]] + [ToyModel()(x).values for x in X[2:]])
+    runs = Runs(X, Y, np.full(len(X), 7.0), [], [], 84.0, 84.0)  # workers' wall: 7 s per run
+    val = validate(rbf_surrogate, runs, SIGMA, BLOCKS, model=model)
+    assert val.clock == "cpu" and 0.019 <= val.fe_eval_s < 0.2
+    assert val.fe_worker_wall_s == 7.0 and val.summary()["fe_worker_wall_s"] == 7.0
+    assert 0 < val.surrogate_eval_s < val.fe_eval_s
+    assert val.speed_ratio == pytest.approx(val.fe_eval_s / val.surrogate_eval_s)
+    without = validate(rbf_surrogate, runs, SIGMA, BLOCKS)
+    assert without.fe_eval_s == 7.0 and without.clock.startswith("wall")
+    assert without.blocks == val.blocks  # the errors do not depend on the timing

@@ -449,7 +449,12 @@ def build_surrogate(
         )
         cost["holdout"] = hold.cost()
         val = validate(
-            sur, hold, sigma, report_blocks or blocks or {"all": slice(0, runs.Y.shape[1])}, units
+            sur,
+            hold,
+            sigma,
+            report_blocks or blocks or {"all": slice(0, runs.Y.shape[1])},
+            units,
+            model=model,
         )
         info["validation"] = val.summary()
         variance = val.variance
