@@ -144,3 +144,41 @@ def test_posterior_coverage_per_tier():
     assert "coverage, consistent data**: 1 of 1 95 % intervals" in text
     assert "coverage, model-error data**: 0 of 2 95 % intervals" in text
     assert "farthest: E of linear-compression, posterior mean 0.97 × reference" in text
+
+
+def test_shared_charges_paid_by_both_are_also_compared_without_them():
+    """On BAE-treated data LM and a global method pay the same statistics: the verdict gives the
+    ratio of totals and of their own costs."""
+    rows = [
+        run_row(
+            LIN,
+            {"E": 3.0},
+            tier="model-error",
+            forward_equivalents=10.0,
+            charged_equivalents=1000.0,
+        ),
+        run_row(
+            LIN,
+            {"E": 3.0},
+            method="pso+lm (model-error)",
+            solver="pso+lm",
+            tier="model-error",
+            forward_equivalents=100.0,
+            charged_equivalents=1000.0,
+        ),
+    ]
+    runs, _ = M.prepare(frame(rows))
+    recs = [
+        {
+            "config_hash": h,
+            "result": {
+                "charges": {"hifi": {"forward_equivalents": 1000.0}},
+                "provenance": {"treatment": "bae"},
+            },
+        }
+        for h in runs["config_hash"]
+    ]
+    runs = M.add_shared_charges(runs, recs)
+    text = "\n".join(findings(runs, M.ert_table(runs, n_boot=20), T.success(runs)))
+    # totals 1100 / 1010 = 1.1; own 100 / 10 = 10
+    assert "costs 1.1 × as much (median fe; 10 × without the shared charges)" in text

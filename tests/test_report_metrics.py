@@ -266,6 +266,13 @@ def test_ert_amortised_leaves_out_shared_charges():
     assert e["charged_median"] == pytest.approx(400.0)
     assert e["shared_median"] == pytest.approx(390.0)
     assert M.ert_table(M.prepare(frame(rows))[0], n_boot=5).iloc[0]["ert_amortised"] == 830.0
+    # BAE statistics are computed once per case: shared; a one-point correction's hifi run is not
+    for treatment, shared in (("bae", 400.0), ("one-point", 390.0)):
+        for rec in recs:
+            rec["result"]["provenance"] = {"treatment": treatment}
+        got = M.add_shared_charges(runs.drop(columns=["fe_shared", "fe_amortised"]), recs)
+        assert got["fe_shared"].tolist() == [shared, shared]
+        assert got["fe_amortised"].tolist() == pytest.approx([410.0 - shared, 420.0 - shared])
 
 
 def test_analytic_cases_have_no_data_tier():

@@ -282,7 +282,8 @@ def build_report(
             f"ERT to success in forward-equivalents [bootstrap 95 % interval] ({track} track, "
             f"{tier} data); ∞ = no success."
             + (
-                " 'amortised': the ERT without the charges shared by the runs (surrogate training)."
+                " 'amortised': the ERT without the charges shared by the runs (surrogate "
+                "training, BAE statistics)."
                 if shared
                 else ""
             ),

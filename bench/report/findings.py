@@ -182,20 +182,25 @@ def _verdict(gl: pd.DataFrame, groups: list, ok: pd.Series) -> str:
     )
     fe_l, fe_g = float(gl["fe_total"].median()), float(g["fe_total"].median())
     ratio = fe_g / fe_l if fe_l > 0 else math.inf
+    own = ""
+    if "fe_shared" in gl and (gl["fe_shared"] > 0).any() and (g["fe_shared"] > 0).any():
+        # both pay the same shared charge (e.g. a case's BAE statistics): their own costs too
+        am_l, am_g = float(gl["fe_amortised"].median()), float(g["fe_amortised"].median())
+        own = f"; {fmt_num(am_g / am_l if am_l > 0 else math.inf, 2)} × without the shared charges"
     if s_g > s_l:
         return (
             f"The best global method, {name}, succeeds more often than lm "
             f"({100 * s_g:.0f} % against {100 * s_l:.0f} %) at {fmt_num(ratio, 2)} × its median "
-            "cost."
+            f"cost{own}."
         )
     if s_g == s_l:
         return (
             f"No global method succeeds more often than lm ({100 * s_l:.0f} %); the best, "
-            f"{name}, costs {fmt_num(ratio, 2)} × as much (median fe)."
+            f"{name}, costs {fmt_num(ratio, 2)} × as much (median fe{own})."
         )
     return (
         f"lm succeeds more often ({100 * s_l:.0f} %) than every global method (best: {name}, "
-        f"{100 * s_g:.0f} %), which costs {fmt_num(ratio, 2)} × as much (median fe)."
+        f"{100 * s_g:.0f} %), which costs {fmt_num(ratio, 2)} × as much (median fe{own})."
     )
 
 

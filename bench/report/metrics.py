@@ -139,15 +139,24 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
 
 #: Charges paid once and shared by many runs (amortised in ``ert_amortised``).
 SHARED_CHARGES = ("surrogate-training",)
+#: Charges that are shared when the run's treatment is BAE: the high-fidelity and inverse-model
+#: runs of the error statistics, computed once per case and stored with a hash
+#: (a one-point or iterated correction pays its own high-fidelity runs: not shared)
+SHARED_CHARGES_BAE = ("hifi", "inverse-for-correction")
 
 
 def add_shared_charges(runs: pd.DataFrame, records) -> pd.DataFrame:
     """``runs`` with ``fe_shared``: the forward-equivalents of each run's charges of the kinds in
-    :data:`SHARED_CHARGES` (read from the records; 0 when none), and ``fe_amortised`` =
+    :data:`SHARED_CHARGES` (and :data:`SHARED_CHARGES_BAE` when its provenance says the treatment
+    was ``bae``; read from the records; 0 when none), and ``fe_amortised`` =
     ``fe_total - fe_shared``."""
     shared = {}
     for rec in records or ():
-        charges = (rec.get("result") or {}).get("charges") or {}
+        result = rec.get("result") or {}
+        charges = result.get("charges") or {}
+        kinds = SHARED_CHARGES
+        if (result.get("provenance") or {}).get("treatment") == "bae":
+            kinds = SHARED_CHARGES + SHARED_CHARGES_BAE
         items = (
             charges.items()
             if isinstance(charges, dict)
@@ -155,7 +164,7 @@ def add_shared_charges(runs: pd.DataFrame, records) -> pd.DataFrame:
         )
         tot = 0.0
         for kind, c in items:
-            if kind in SHARED_CHARGES and isinstance(c, dict):
+            if kind in kinds and isinstance(c, dict):
                 v = pd.to_numeric(c.get("forward_equivalents"), errors="coerce")
                 tot += float(v) if np.isfinite(v) else 0.0
         shared[rec.get("config_hash")] = tot
