@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 
 from bench.report import metrics as M
 from bench.report import tables as T
@@ -182,3 +183,40 @@ def test_shared_charges_paid_by_both_are_also_compared_without_them():
     text = "\n".join(findings(runs, M.ert_table(runs, n_boot=20), T.success(runs)))
     # totals 1100 / 1010 = 1.1; own 100 / 10 = 10
     assert "costs 1.1 × as much (median fe; 10 × without the shared charges)" in text
+
+
+def test_the_surrogate_alone_is_judged_before_its_polish():
+    rows = [
+        run_row(
+            LIN,
+            {"E": 0.1},
+            method="cma (consistent, surrogate + FE polish)",
+            solver="cma",
+            track="surrogate",
+            seed=s,
+            forward_equivalents=15.0,
+        )
+        for s in range(3)
+    ]
+    runs, _ = M.prepare(frame(rows))
+    before = ([1.03, 1.0], [1.001, 0.99], [1.0, 0.5])  # largest errors 3 %, 1 %, 50 %
+    recs = [
+        {
+            "config_hash": h,
+            "result": {
+                "reference": [100.0, 2.0],
+                "extra": {"surrogate": {"x": [100.0 * a, 2.0 * b]}, "polish": {"n_evals": n}},
+            },
+        }
+        for h, (a, b), n in zip(runs["config_hash"], before, (5, 7, 30))
+    ]
+    runs = M.add_surrogate_optimum(runs, recs)
+    assert runs["sur_max_err"].tolist() == pytest.approx([3.0, 1.0, 50.0])
+    text = "\n".join(findings(runs, M.ert_table(runs, n_boot=20), T.success(runs), tol=2.0))
+    assert "within 2 % in 1/3 (33 %) of them" in text
+    assert "| linear-compression | 3 | 3 | 1/3 (33 %) | 0.1 | 7 |" in text
+    fe = M.add_surrogate_optimum(M.prepare(frame([run_row(LIN, {"E": 0.1})]))[0], [])
+    assert fe["sur_max_err"].isna().all()
+    assert "before the FE polish" not in "\n".join(
+        findings(fe, M.ert_table(fe, n_boot=5), T.success(fe))
+    )

@@ -179,6 +179,7 @@ def build_report(
 
     runs, history = M.prepare(runs, history)
     runs = M.add_shared_charges(runs, records)
+    runs = M.add_surrogate_optimum(runs, records)
     dtol = dict(T.DERIVED_TOL) if tol_a is None else {**T.DERIVED_TOL, "a": float(tol_a)}
     rule = T.success_rule(tol, dtol)
     ok = T.success(runs, tol, dtol)
@@ -206,7 +207,7 @@ def build_report(
         )
         lines = unreadable_lines(unreadable, set_aside, base=source)
         md.append("".join(f"- {line}\n" for line in lines))
-    md += findings(runs, ert_df, ok, post=post, jac=jac, rule=rule)
+    md += findings(runs, ert_df, ok, post=post, jac=jac, rule=rule, tol=tol)
 
     def table(stem, display, raw, caption, label, raw_kw=None, **kw):
         ri = (raw_kw or {}).get("index")

@@ -36,8 +36,10 @@ def findings(
     post: pd.DataFrame | None = None,
     jac: pd.DataFrame | None = None,
     rule: str = "",
+    tol: float = 2.0,
 ) -> list[str]:
-    """Markdown lines of the findings (see the module docstring)."""
+    """Markdown lines of the findings (see the module docstring); ``tol`` (%) is the success
+    tolerance of the identified parameters."""
     from bench.report.metrics import rank, winners
 
     md = ["## Findings\n"]
@@ -93,7 +95,7 @@ def findings(
             win = (
                 r["method"]
                 if r["successes"] > 0
-                else f"none; closest: {r['method']} (median max |error| "
+                else f"none; closest: {r['method']} (median largest error "
                 f"{fmt_pct(float(r['max_err_median']))} %)"
             )
             lines.append(
@@ -106,11 +108,14 @@ def findings(
     md.append("### What the global methods buy over Levenberg–Marquardt\n")
     md += _global_vs_lm(runs, ok)
 
-    # 3. worst-identified parameters -----------------------------------------------------------
+    # 3. the surrogate alone -------------------------------------------------------------------
+    md += _surrogate_alone(runs, tol)
+
+    # 4. worst-identified parameters -----------------------------------------------------------
     md.append("### The worst-identified parameters\n")
     md += _worst_parameters(runs, ok, post)
 
-    # 4. FD versus exact ------------------------------------------------------------------------
+    # 5. FD versus exact ------------------------------------------------------------------------
     if jac is not None and len(jac):
         md.append("### Finite-difference against exact Jacobians\n")
         md += _jacobian_finding(jac)
@@ -169,6 +174,39 @@ def _global_vs_lm(runs: pd.DataFrame, ok: pd.Series) -> list[str]:
                 f"{gs['case'].nunique()} case(s)): " + "; ".join(parts) + f". {verdict}"
             )
     return out + [""] if out else ["No run from the default or random starts.\n"]
+
+
+def _surrogate_alone(runs: pd.DataFrame, tol: float) -> list[str]:
+    """Per case: how far the surrogate search's own optimum is from the reference, and what the
+    FE polish adds (surrogate-track runs whose records keep that optimum)."""
+    if "sur_max_err" not in runs:
+        return []
+    sub = runs[(runs["track"] == "surrogate") & runs["sur_max_err"].notna()]
+    if not len(sub):
+        return []
+    md = ["### The surrogate alone, before the FE polish\n"]
+    k = int((sub["sur_max_err"] <= tol).sum())
+    md.append(
+        f"Largest error over the identified parameters of the optimum the search found on the "
+        f"surrogate, against the same run after its FE polish ({len(sub)} surrogate-track runs): "
+        f"the surrogate's optimum is within {fmt_num(tol)} % in {_pct(k, len(sub))} of them.\n"
+    )
+    lines = [
+        f"| case | runs | surrogate optimum: median largest error (%) | within {fmt_num(tol)} % "
+        "| after the polish: median largest error (%) | polish FE evaluations (median) |",
+        "|:---|---:|---:|---:|---:|---:|",
+    ]
+    order = case_order(sub["case"].unique())
+    for case in order:
+        g = sub[sub["case"] == case]
+        kk = int((g["sur_max_err"] <= tol).sum())
+        lines.append(
+            f"| {case} | {len(g)} | {fmt_pct(float(g['sur_max_err'].median()))} | "
+            f"{_pct(kk, len(g))} | {fmt_pct(float(g['max_abs_err'].median()))} | "
+            f"{fmt_num(float(g['polish_evals'].median()))} |"
+        )
+    md.append("\n".join(lines) + "\n")
+    return md
 
 
 def _verdict(gl: pd.DataFrame, groups: list, ok: pd.Series) -> str:

@@ -174,6 +174,28 @@ def add_shared_charges(runs: pd.DataFrame, records) -> pd.DataFrame:
     return runs
 
 
+def add_surrogate_optimum(runs: pd.DataFrame, records) -> pd.DataFrame:
+    """``runs`` with, for surrogate-track runs, ``sur_max_err``: the largest ``100 |x/x_REF - 1|``
+    (%) over the identified parameters of the surrogate search's own optimum (before the FE
+    polish), and ``polish_evals``: the FE evaluations of the polish (NaN for other runs)."""
+    err, polish = {}, {}
+    for rec in records or ():
+        result = rec.get("result") or {}
+        extra = result.get("extra") or {}
+        x = (extra.get("surrogate") or {}).get("x") if isinstance(extra, dict) else None
+        ref = result.get("reference")
+        if x is None or ref is None or len(x) != len(ref):
+            continue
+        x, ref = np.asarray(x, float), np.asarray(ref, float)
+        err[rec.get("config_hash")] = float(100.0 * np.max(np.abs(x / ref - 1.0)))
+        n = (extra.get("polish") or {}).get("n_evals")
+        polish[rec.get("config_hash")] = float(n) if n is not None else math.nan
+    runs = runs.copy()
+    runs["sur_max_err"] = runs["config_hash"].map(err).astype(float)
+    runs["polish_evals"] = runs["config_hash"].map(polish).astype(float)
+    return runs
+
+
 def _is_analytic(case: str) -> bool:
     from problems.inverse.cases import all_cases
 
