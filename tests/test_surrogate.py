@@ -366,6 +366,7 @@ def test_surrogate_of_the_fe_model_on_a_small_mesh(tmp_path):
             and doc["holdout"][block]["max_sigma"] >= 0
         )
     assert doc["fe_eval_s"] > doc["surrogate_eval_s"] > 0
+    assert doc["clock"] == "cpu" and doc["fe_worker_wall_s"] > 0
     sur = load(out)
     assert sur.hash == doc["hash"] and sur.n_values == 8130
     from problems.inverse.cases import CASES

@@ -141,6 +141,8 @@ def summary(sur, folder, size_bytes: int) -> dict:
         "surrogate_jacobian_s": val.get("surrogate_jacobian_s"),
         "fe_eval_s": val.get("fe_eval_s"),
         "speed_ratio": val.get("speed_ratio"),
+        "clock": val.get("clock", "wall (hold-out runs)"),
+        "fe_worker_wall_s": val.get("fe_worker_wall_s"),
         "cost": info["cost"],
         "build_wall_s": info["cost"].get("build_wall_s"),
         "enrichment": info.get("enrichment"),
