@@ -18,10 +18,10 @@ Single calls are timed in groups of 20 (the CPU clock's resolution).
 :mod:`problems.surrogate.build`, matched by training hash: no new FE runs), the shipped regression
 against regressions that share kernels, refitted on the same training runs and POD: one GP for all
 modes, the leading mode alone plus one GP for the rest, and the cross-validated RBF. For each: the
-hold-out RMS error in units of sigma (displacements, force; the same 50 hold-out runs), the CPU
-time of one surrogate call and of its regression alone (the POD coefficients), against one plain
-FE run in the same process. It answers whether the
-10^4 speed target can be bought with fewer kernels without losing the 1 sigma accuracy target.
+hold-out RMS error in units of sigma (displacements, force; the same valid hold-out runs), the
+CPU time of one surrogate call and of its regression alone (the POD coefficients), against one
+plain FE run in the same process. It answers whether the 10^4 speed target can be bought with
+fewer kernels without losing the 1 sigma accuracy target.
 
 ``polish``: per case, the FE-only LM optimum ``x_LM`` (LM from the default start, budget 200), then
 from ``--starts`` seeded random starts (``start = random``, ``start_index = k``): FE-only LM
@@ -109,15 +109,12 @@ def speed(cases, repeat: int) -> list[dict]:
 
 
 def _cpu_per_call(fn, X, repeat: int) -> float:
-    """Median CPU time of one ``fn(x)`` over groups of 20 calls, s."""
+    """Median CPU time of one ``fn(x)`` over the first ``repeat`` rows of ``X`` after a warm-up
+    call, s (groups of 20 calls)."""
+    from problems.surrogate.validation import cpu_per_call
+
     fn(X[0])
-    times = []
-    for i in range(0, repeat, 20):
-        t0 = time.process_time()
-        for x in X[i : i + 20]:
-            fn(x)
-        times.append((time.process_time() - t0) / 20)
-    return statistics.median(times)
+    return cpu_per_call(fn, X[:repeat])
 
 
 def tradeoff(cases, repeat: int) -> list[dict]:
