@@ -57,6 +57,13 @@ VERSIONED = (
     "pandas",
     "meshio",
     "SALib",
+    "numba",
+    "llvmlite",
+    "kvxopt",
+    "scikit-learn",
+    "cma",
+    "nevergrad",
+    "scikit-optimize",
 )
 
 
@@ -119,7 +126,36 @@ def machine() -> dict[str, Any]:
         "cpu_count": os.cpu_count(),
         "cpu_affinity": affinity,
         "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
+        "arch": arch(),
     }
+
+
+@functools.lru_cache(maxsize=1)
+def arch() -> str:
+    """The code paths a run's arithmetic took: the CPU that numba compiles for and the kernels
+    of the BLAS numpy loaded (e.g. ``"znver4; openblas Zen"``). Two machines of one kind can
+    differ here, and then floating-point results differ in the last digits."""
+    import numpy  # noqa: F401  (loads the BLAS that threadpoolctl reports)
+
+    parts = []
+    try:
+        import llvmlite.binding as llvm
+
+        parts.append(llvm.get_host_cpu_name())
+    except Exception:  # pragma: no cover - numba is a dependency
+        parts.append("?")
+    try:
+        from threadpoolctl import threadpool_info
+
+        blas = [
+            f"{i.get('internal_api')} {i.get('architecture')}"
+            for i in threadpool_info()
+            if i.get("user_api") == "blas"
+        ]
+        parts += sorted(set(blas))
+    except Exception:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        pass
+    return "; ".join(parts)
 
 
 def initial_point(case, config: RunConfig):

@@ -1,14 +1,18 @@
 """The shipped results are reproducible: a record of the shipped default suite (and of the shipped
-comparison) is rerun from its
-stored configuration and must give the same numbers bit for bit (parameters, cost, evaluations,
-iterations). A change of the code that changes the answers fails here until the shipped results
-are regenerated (``make run``)."""
+comparison) is rerun from its stored configuration. On a machine whose arithmetic takes the same
+code paths as the one that made the record (``machine.arch``: the CPU numba compiles for and the
+BLAS kernels) it must give the same numbers bit for bit (parameters, cost, evaluations,
+iterations); elsewhere floating-point results differ in the last digits, and the run must reach
+the same answer: the same status and every parameter within 1e-6 (relative) of the record. A
+change of the code that changes the answers fails here until the shipped results are regenerated
+(``make run``)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -52,6 +56,12 @@ def test_a_shipped_record_is_reproduced_bit_for_bit(folder, want, tmp_path):
     assert again["config_hash"] == shipped["config_hash"]
     old, new = shipped["result"], again["result"]
     assert new["status"] == old["status"]
-    assert new["x"] == old["x"]  # bit for bit: the JSON floats are exact
-    assert new["cost"] == old["cost"]
-    assert (new["n_evals"], new.get("n_iterations")) == (old["n_evals"], old.get("n_iterations"))
+    if shipped["machine"].get("arch") == again["machine"]["arch"]:
+        assert new["x"] == old["x"]  # bit for bit: the JSON floats are exact
+        assert new["cost"] == old["cost"]
+        assert (new["n_evals"], new.get("n_iterations")) == (
+            old["n_evals"],
+            old.get("n_iterations"),
+        )
+    else:
+        np.testing.assert_allclose(new["x"], old["x"], rtol=1e-6, atol=0)

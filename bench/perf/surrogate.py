@@ -2,17 +2,28 @@
 measured in the same run; surrogate search + FE polish against FE-only LM from random starts.
 
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate speed [--cases all] [--repeat 200]
+        [--json results/surrogates/speed.json]
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate polish [--cases all] [--starts 3]
         [--tier consistent] [--out results/surrogates/polish_vs_lm.jsonl]
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate tradeoff [--cases all]
         [--json results/surrogates/tradeoff.json]
 
-``speed``: per case, the median CPU time (``time.process_time``: on a shared machine the wall time
-of a long computation mostly measures how long the process waited for a core) of one surrogate
-call (checks included), of one call with the Jacobian, the per-point time of batches of 32 and
-1000 points (``evaluate_batch``, the path the vectorised mapper takes for populations and emcee),
-and the median of 3 plain FE runs on the coarse mesh, alternating; the ratios FE / surrogate.
-Single calls are timed in groups of 20 (the CPU clock's resolution).
+``speed``: per case, in one process, the median CPU time (``time.process_time``: on a shared
+machine the wall time of a long computation mostly measures how long the process waited for a
+core) of 3 plain FE runs on the coarse mesh, and on the default surrogate against the case's
+consistent data:
+
+* ``misfit``: one evaluation of the cost at a point, what replaces an FE run + residual in an
+  objective (:class:`problems.surrogate.misfit.SurrogateMisfit`: box, material rule, GP mean of the
+  POD coefficients, misfit in their space; one compiled call), single and per point in batches of
+  32 and 1000;
+* ``values`` / ``jacobian``: one call returning the 8 130 predicted values (and their Jacobian);
+* ``evaluator``: one cost through the :class:`~problems.inverse.evaluator.Evaluator` a solver
+  sees (counting, cache, log; every point new), single and per point in batches of 1000, and the
+  same with ``cost_path=False`` (``before``: the model's call and the whole residual, the path of
+  the records made before the cost path);
+
+and the ratios FE / each. Single calls are timed in groups of 20 (the CPU clock's resolution).
 
 ``tradeoff``: per case whose training and hold-out runs are kept (``runs_dir()`` of
 :mod:`problems.surrogate.build`, matched by training hash: no new FE runs), the shipped regression
@@ -49,60 +60,85 @@ def _cases(spec: str) -> list[str]:
     return spec.split(",")
 
 
+def _cpu(fn, items, group: int = 20) -> float:
+    """Median CPU time of one ``fn(item)``, s, timed in groups of ``group`` calls after a
+    warm-up call on the last item (not timed: every timed item is new to a cache)."""
+    from problems.surrogate.validation import cpu_per_call
+
+    fn(items[-1])
+    return cpu_per_call(fn, items[:-1], group)
+
+
+def _cpu_batch(fn, X, size: int, repeats: int = 5) -> float:
+    """Median CPU time per point of ``fn(batch)`` over ``repeats`` batches of ``size`` rows, s."""
+    fn(X[:size])
+    times = []
+    for k in range(repeats):
+        batch = X[(k * size) % len(X) :][:size]
+        t0 = time.process_time()
+        fn(batch)
+        times.append((time.process_time() - t0) / len(batch))
+    return statistics.median(times)
+
+
 def speed(cases, repeat: int) -> list[dict]:
+    """Per case, CPU times in one process (see the module docstring) and the ratios to one
+    coarse FE run."""
     from bench.surrogate_run import load_for
-    from problems.inverse.data import get_data
+    from problems.inverse.build import build_objective
+    from problems.inverse.evaluator import Evaluator
     from problems.inverse.forward import FEForwardModel
+    from problems.surrogate.model import VectorisedMapper
 
     rows = []
     for name in cases:
         sur = load_for("default", name, "coarse")
-        data = get_data(name)
-        fe = FEForwardModel(sur.checker.case, "coarse", data.settings.loading, data.points)
+        fast = build_objective(name, tier="consistent", forward=sur, mapper=VectorisedMapper())
+        plain = Evaluator(fast.problem, mapper=VectorisedMapper(), cost_path=False)
+        misfit = fast._misfit
+        data = fast.problem
+        fe = FEForwardModel(sur.checker.case, "coarse", sur.checker.loading, sur.checker.points)
         rng = np.random.default_rng(0)
-        X = sur.lower + rng.random((1000, len(sur.names))) * (sur.upper - sur.lower)
-        sur(X[0]), sur(X[0], jacobian=True), sur.evaluate_batch(X[:32])  # warm-up
-        fe_t, one, jac, b32, b1000 = [], [], [], [], []
-        clock = time.process_time
-        for k in range(3):
-            t0 = clock()
+        width = sur.upper - sur.lower
+        X = sur.lower + rng.random((max(1000, 2 * repeat), len(sur.names))) * width
+        Z = X / data.reference
+
+        def fresh(ev):  # a batch through an emptied cache (reset: microseconds)
+            return lambda B: (ev.reset(), ev.costs(B))
+
+        fe(X[0])  # warm-up
+        fe_t = []
+        for k in range(1, 4):
+            t0 = time.process_time()
             fe(X[k])
-            fe_t.append(clock() - t0)
-            for i in range(0, repeat, 20):
-                t0 = clock()
-                for x in X[i : i + 20]:
-                    sur(x)
-                one.append((clock() - t0) / 20)
-            for i in range(0, max(20, repeat // 5), 20):
-                t0 = clock()
-                for x in X[i : i + 20]:
-                    sur(x, jacobian=True)
-                jac.append((clock() - t0) / 20)
-            t0 = clock()
-            sur.evaluate_batch(X[32 * k : 32 * (k + 1)])
-            b32.append((clock() - t0) / 32)
-            t0 = clock()
-            sur.evaluate_batch(X)
-            b1000.append((clock() - t0) / len(X))
+            fe_t.append(time.process_time() - t0)
         row = {
             "case": name,
             "fe_s": statistics.median(fe_t),
-            "surrogate_s": statistics.median(one),
-            "surrogate_jacobian_s": statistics.median(jac),
-            "batch32_per_point_s": statistics.median(b32),
-            "batch1000_per_point_s": statistics.median(b1000),
+            "misfit_s": _cpu(misfit, X[:repeat]),
+            "misfit_batch32_s": _cpu_batch(misfit, X, 32, 20),
+            "misfit_batch1000_s": _cpu_batch(misfit, X, 1000, 3),
+            "values_s": _cpu(sur, X[:repeat]),
+            "jacobian_s": _cpu(lambda x: sur(x, jacobian=True), X[: max(20, repeat // 5)]),
+            "evaluator_s": _cpu(fast.cost, Z[:repeat]),
+            "evaluator_batch1000_s": _cpu_batch(fresh(fast), Z, 1000, 3),
+            "evaluator_before_s": _cpu(plain.cost, Z[repeat : 2 * repeat]),
+            "evaluator_before_batch1000_s": _cpu_batch(fresh(plain), Z, 1000, 3),
         }
-        for k in ("surrogate_s", "surrogate_jacobian_s", "batch32_per_point_s"):
+        for k in [k for k in row if k.endswith("_s") and k != "fe_s"]:
             row["ratio_" + k[:-2]] = row["fe_s"] / row[k]
-        row["ratio_batch1000_per_point"] = row["fe_s"] / row["batch1000_per_point_s"]
         rows.append(row)
+        us = {k: 1e6 * v for k, v in row.items() if k.endswith("_s") and k != "fe_s"}
         print(
-            f"{name:24} CPU: FE {row['fe_s']:.3f} s | one {1e6 * row['surrogate_s']:.0f} us "
-            f"(x{row['ratio_surrogate']:.3g}), +Jacobian {1e6 * row['surrogate_jacobian_s']:.0f} us"
-            f", batch 32: {1e6 * row['batch32_per_point_s']:.0f} us/point "
-            f"(x{row['ratio_batch32_per_point']:.3g}), batch 1000: "
-            f"{1e6 * row['batch1000_per_point_s']:.0f} us/point "
-            f"(x{row['ratio_batch1000_per_point']:.3g})",
+            f"{name:24} CPU: FE {row['fe_s']:.3f} s | misfit: one {us['misfit_s']:.1f} us "
+            f"(x{row['ratio_misfit']:.3g}), batch 32 {us['misfit_batch32_s']:.1f} us/point "
+            f"(x{row['ratio_misfit_batch32']:.3g}), batch 1000 {us['misfit_batch1000_s']:.1f} "
+            f"(x{row['ratio_misfit_batch1000']:.3g}) | values {us['values_s']:.0f} us, +Jacobian "
+            f"{us['jacobian_s']:.0f} us | evaluator: one {us['evaluator_s']:.1f} us "
+            f"(x{row['ratio_evaluator']:.3g}; before {us['evaluator_before_s']:.0f} us), "
+            f"batch 1000 {us['evaluator_batch1000_s']:.1f} us/point "
+            f"(x{row['ratio_evaluator_batch1000']:.3g}; before "
+            f"{us['evaluator_before_batch1000_s']:.0f})",
             flush=True,
         )
     return rows

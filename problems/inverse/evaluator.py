@@ -52,14 +52,26 @@ Batches and parallelism
 :meth:`costs`, :meth:`evaluate_many` and :meth:`jacobian` send all uncached feasible points of
 one batch through a single ``mapper(fn, items)`` call (``fn`` is a picklable callable wrapping
 the model, ``items`` the physical points); ``mapper=None`` is :func:`sequential_map`.
+
+The cost path of a cheap model
+------------------------------
+A model offering ``misfit_of(problem)`` (the surrogate: it is affine in a few coefficients)
+gives the costs of a batch of points without its measurement vectors
+(:mod:`problems.surrogate.misfit`, :mod:`problems.inverse.reduced`): plain evaluations take
+that path in-process (no mapper: a call costs microseconds), with the same counts, cache, budget
+and failure policy; the residual vector of such an evaluation is made when a solver first asks
+for it. Runs with sensitivities take the model's own call. ``cost_path=False`` turns it off (then
+every evaluation is the model's call and the problem's residual, as for any model).
 """
 
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
@@ -103,14 +115,16 @@ class BudgetExhausted(Exception):
 
 @dataclass(frozen=True)
 class Evaluation:
-    """One evaluated point. ``x`` is physical; ``residual`` is the whitened residual.
+    """One evaluated point. ``x`` is physical; ``residual`` is the whitened residual (made on
+    first use when the evaluation came from a model's cost path: ``_residual`` is then a
+    callable).
 
     ``jacobian`` is dR/dz (m, n) when the point was run with exact sensitivities.
     """
 
     x: np.ndarray
     cost: float
-    residual: np.ndarray | None
+    _residual: np.ndarray | Callable[[], np.ndarray] | None
     ok: bool
     feasible: bool
     message: str = ""
@@ -118,6 +132,14 @@ class Evaluation:
     wall_s: float = 0.0
     jacobian: np.ndarray | None = None
     plain_wall_s: float | None = None
+
+    @property
+    def residual(self) -> np.ndarray | None:
+        r = self._residual
+        if callable(r):
+            r = r()
+            object.__setattr__(self, "_residual", r)
+        return r
 
     @property
     def usable(self) -> bool:
@@ -136,6 +158,8 @@ class Evaluator:
                   ``"forward-equivalents"`` (:meth:`nominal_equivalents`)
     jacobian_cost : nominal forward-equivalents of one response + exact Jacobian (default: the
                   model's declared ``jacobian_cost``, else DEFAULT_JACOBIAN_COST); >= 1
+    cost_path : plain evaluations of a model offering ``misfit_of`` take its cost path (see the
+                  module docstring)
 
     ``observers`` (a list) holds callables ``observer(evaluator, evaluation)`` called after each
     recorded evaluation (progress bars, live logs); they must not raise.
@@ -150,6 +174,7 @@ class Evaluator:
         exact_jacobian: bool = True,
         budget_unit: str = "evaluations",
         jacobian_cost: float | None = None,
+        cost_path: bool = True,
     ):
         if budget_unit not in BUDGET_UNITS:
             raise ValueError(
@@ -171,6 +196,8 @@ class Evaluator:
         self._warned = False
         self.charges: dict[str, dict[str, float]] = {}
         self.observers: list = []
+        make = getattr(problem.model, "misfit_of", None) if cost_path else None
+        self._misfit = make(problem) if make is not None else None
         self.reset()
 
     # --- the problem, as a solver sees it --------------------------------------------------------
@@ -373,7 +400,8 @@ class Evaluator:
         ``with_jacobian`` runs the model with exact sensitivities (only a cached evaluation that
         already has them is reused).
         """
-        prepared = self.problem.classify(Z)
+        fast = self._misfit is not None and not with_jacobian
+        prepared = self.problem.classify(Z, check=not fast)
         keys = [x.tobytes() for x, _ in prepared]
         kind = "jacobian" if with_jacobian else "plain"
         # index -> cached Evaluation, or index of its first copy
@@ -397,16 +425,9 @@ class Evaluator:
         run_idx = [i for i in todo if prepared[i][1] is None]
         done: dict[int, Evaluation] = {}
         if run_idx:
-            mapper = self.mapper or sequential_map
-            results = list(
-                mapper(RunModel(self.model, with_jacobian), [prepared[i][0] for i in run_idx])
-            )
-            if len(results) != len(run_idx):
-                raise RuntimeError(
-                    f"mapper returned {len(results)} results for {len(run_idx)} points"
-                )
-            for i, res in zip(run_idx, results):
-                done[i] = self._finish(prepared[i][0], res)
+            points = [prepared[i][0] for i in run_idx]
+            run = self._cost_path if fast else partial(self._run, with_jacobian=with_jacobian)
+            done.update(zip(run_idx, run(points)))
         for i in todo:
             if i not in done:
                 done[i] = self._failure(prepared[i][0], prepared[i][1], feasible=False)
@@ -428,6 +449,53 @@ class Evaluator:
             out.append(ev)
         if len(new) > allowed:
             raise BudgetExhausted(self.budget, self.n_evals, self.budget_unit)
+        return out
+
+    def _run(self, points, with_jacobian: bool = False) -> list[Evaluation]:
+        """Evaluations of feasible ``points`` by the model's call, in one mapper call."""
+        mapper = self.mapper or sequential_map
+        results = list(mapper(RunModel(self.model, with_jacobian), points))
+        if len(results) != len(points):
+            raise RuntimeError(f"mapper returned {len(results)} results for {len(points)} points")
+        return [self._finish(x, res) for x, res in zip(points, results)]
+
+    def _cost_path(self, points) -> list[Evaluation]:
+        """Plain evaluations of in-box ``points`` by the model's cost path (the model's rule
+        decides feasibility); on any exception the path is dropped for good (warned once) and
+        the points are classified and run as for any model."""
+        t0 = time.perf_counter()
+        try:
+            costs, A, reasons = self._misfit(np.array(points))
+            notes = self._misfit.messages(points)
+        except Exception as exc:  # never into the solver: the exact path decides
+            warnings.warn(
+                f"the model's cost path failed ({type(exc).__name__}: {exc}); using its call",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            self._misfit = None
+            out: list[Evaluation | None] = [None] * len(points)
+            feasible = []
+            for k, x in enumerate(points):
+                why = self.problem.check(x)
+                if why is None:
+                    feasible.append(k)
+                else:
+                    out[k] = self._failure(x, why, feasible=False)
+            for k, ev in zip(feasible, self._run([points[k] for k in feasible])):
+                out[k] = ev
+            return out
+        each = (time.perf_counter() - t0) / len(points)
+        residual = self._misfit.residual
+        out = []
+        for x, cost, a, why, note in zip(points, costs, A, reasons, notes):
+            if why is not None:
+                out.append(self._failure(x, why, feasible=False))
+            elif not math.isfinite(cost):
+                out.append(self._failure(x, "non-finite cost", each))
+            else:
+                ev = Evaluation(x, float(cost), partial(residual, a), True, True, note, False, each)
+                out.append(ev)
         return out
 
     def _fitting(self, charges: list[float]) -> int:

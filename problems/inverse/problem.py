@@ -75,6 +75,8 @@ class LeastSquaresProblem:
             raise ValueError("reference values must be finite and non-zero (z = x / reference)")
         if np.any(self.lower > self.upper):
             raise ValueError("a lower bound is above its upper bound")
+        tol = BOX_TOL * np.maximum(self.upper - self.lower, np.abs(self.reference) * 1e-12)
+        self._outer = (self.lower - tol, self.upper + tol)  # beyond: outside the box
         zl, zu = self.lower / self.reference, self.upper / self.reference
         self.lower_z, self.upper_z = np.minimum(zl, zu), np.maximum(zl, zu)
         self._chol = self._sigma = None
@@ -140,19 +142,19 @@ class LeastSquaresProblem:
         return w
 
     # --- points and residuals ------------------------------------------------------------------
-    def classify(self, Z) -> list[tuple[np.ndarray, str | None]]:
+    def classify(self, Z, check: bool = True) -> list[tuple[np.ndarray, str | None]]:
         """For scaled points Z (k, n): the physical point (clipped within tolerance) and why it is
-        infeasible (non-finite, outside the box, or the model's ``check``), or None if feasible."""
+        infeasible (non-finite, outside the box, or the model's ``check``; ``check=False``: the
+        caller asks the model later), or None if feasible."""
         Z = np.atleast_2d(np.asarray(Z, dtype=float))
         if Z.ndim != 2 or Z.shape[1] != self.n_params:
             raise ValueError(
                 f"expected {self.n_params} parameters {self.names}, got shape {Z.shape[1:]}"
             )
         X = Z * self.reference
-        tol = BOX_TOL * np.maximum(self.upper - self.lower, np.abs(self.reference) * 1e-12)
         finite = np.all(np.isfinite(X), axis=1)
-        out = (X < self.lower - tol) | (X > self.upper + tol)
-        Xc = np.clip(X, self.lower, self.upper)
+        out = (X < self._outer[0]) | (X > self._outer[1])
+        Xc = np.minimum(np.maximum(X, self.lower), self.upper)  # np.clip: same values, 10x slower
         prepared = []
         for k in range(len(X)):
             if not finite[k]:
@@ -166,12 +168,15 @@ class LeastSquaresProblem:
                 prepared.append((X[k].copy(), f"outside the bounds: {bad}"))
             else:
                 x = Xc[k].copy()
-                try:
-                    msg = self.model.check(x)
-                except Exception as exc:
-                    msg = f"check raised {type(exc).__name__}: {exc}"
-                prepared.append((x, msg))
+                prepared.append((x, self.check(x) if check else None))
         return prepared
+
+    def check(self, x) -> str | None:
+        """The model's ``check`` of the physical point ``x`` (an exception is a reason too)."""
+        try:
+            return self.model.check(x)
+        except Exception as exc:
+            return f"check raised {type(exc).__name__}: {exc}"
 
     def residual(self, values) -> tuple[np.ndarray | None, str]:
         """Whitened residual of predicted ``values`` (m,), or (None, why) when they are unusable."""

@@ -83,6 +83,33 @@ class SurrogateModel:
         return np.ascontiguousarray(self.pod.scale[:, None] * self.pod.modes)
 
     @cached_property
+    def _packed_gp(self):
+        """The compiled GP mean's arrays (:class:`~problems.surrogate._kernels.PackedGP`), or None
+        when the regression is not a Matern 5/2 GP of shared training points (then numpy)."""
+        from problems.surrogate._kernels import PackedGP
+
+        return PackedGP.of(self.regression)
+
+    def coefficients(self, Z) -> np.ndarray:
+        """(q, r) POD coefficients at scaled points ``Z`` (q, d): the compiled GP mean where it
+        applies, else the regression's own (numpy) prediction."""
+        gp = self._packed_gp
+        return self.regression.predict(Z) if gp is None else gp.mean(Z)
+
+    def affine_form(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(offset (m,), basis (m, r))`` of ``U = offset + basis a``: the model is affine in its
+        POD coefficients ``a``."""
+        return self.pod.mean, self._weights
+
+    def misfit_of(self, problem):
+        """The compiled cost path of ``problem`` on this surrogate
+        (:class:`~problems.surrogate.misfit.SurrogateMisfit`): what the evaluator uses for plain
+        evaluations."""
+        from problems.surrogate.misfit import SurrogateMisfit
+
+        return SurrogateMisfit(self, problem)
+
+    @cached_property
     def _covers_box(self) -> bool:
         """True when the training design box is the whole box (no extrapolation possible)."""
         lo, hi = self.design_box
@@ -117,7 +144,7 @@ class SurrogateModel:
         if reason is not None:
             return ForwardResult(False, None, reason, time.perf_counter() - t0)
         z = self.to_scaled(x)
-        a = self.regression.predict(z[None])[0]
+        a = self.coefficients(z[None])[0]
         W = self._weights
         values = self.pod.mean + W @ a
         J = None
@@ -132,7 +159,7 @@ class SurrogateModel:
     def predict(self, X) -> np.ndarray:
         """(q, m) predictions at the rows of ``X`` (physical), no checks (vectorised)."""
         Z = self.to_scaled(np.atleast_2d(X))
-        return self.pod.mean + self.regression.predict(Z) @ self._weights.T
+        return self.pod.mean + self.coefficients(Z) @ self._weights.T
 
     def evaluate_batch(self, X, jacobian: bool = False) -> list[ForwardResult]:
         """``[self(x, jacobian) for x in X]``, with the values of the valid points computed in one

@@ -12,11 +12,15 @@ hold-out points:
 ``variance`` (m,) = mean over the hold-out points of e^2 per measurement (units of the measurement
 squared): the surrogate's error variance that a likelihood adds to the noise variance.
 The cost of one evaluation is measured in the same process: the median CPU time
-(``time.process_time``) of one surrogate call (``__call__``, checks included; timed in groups of
-20, the CPU clock's resolution) and of one plain run of the model (after a warm-up run), and their
-ratio. CPU time, because the hold-out runs' wall times on loaded workers mostly measure the wait
-for a core (they are kept as ``fe_worker_wall_s``). Without the model at hand the hold-out runs'
-median wall time stands in for it.
+(``time.process_time``) of one surrogate call (``__call__``, checks included, the measurement
+vector; timed in groups of 20, the CPU clock's resolution), of one evaluation of the misfit
+(``misfit_eval_s``: the cost path an objective takes, :mod:`problems.surrogate.misfit`, against a
+hold-out run as data; and per point in a batch of 1000, ``misfit_batch_eval_s``) and of one plain
+run of the model (after a warm-up run), and their ratios (``speed_ratio`` is the misfit's: one
+surrogate evaluation of an objective against one FE run). CPU time, because the hold-out runs'
+wall times on loaded workers mostly measure the wait for a core (they are kept as
+``fe_worker_wall_s``). Without the model at hand the hold-out runs' median wall time stands in
+for it.
 """
 
 from __future__ import annotations
@@ -50,11 +54,15 @@ class Validation:
     variance: np.ndarray | None = field(default=None, repr=False)
     fe_worker_wall_s: float | None = None
     clock: str = "cpu"
+    misfit_eval_s: float | None = None
+    misfit_batch_eval_s: float | None = None
 
     @property
     def speed_ratio(self) -> float:
-        """FE evaluation time over surrogate evaluation time."""
-        return self.fe_eval_s / self.surrogate_eval_s if self.surrogate_eval_s > 0 else float("inf")
+        """FE evaluation time over the time of one surrogate evaluation of an objective (the
+        misfit's, else the call's)."""
+        one = self.misfit_eval_s or self.surrogate_eval_s
+        return self.fe_eval_s / one if one > 0 else float("inf")
 
     def summary(self) -> dict:
         """JSON-ready summary (the per-measurement variance is left out: it is stored as an
@@ -67,6 +75,8 @@ class Validation:
             "blocks": self.blocks,
             "surrogate_eval_s": self.surrogate_eval_s,
             "surrogate_jacobian_s": self.surrogate_jacobian_s,
+            "misfit_eval_s": self.misfit_eval_s,
+            "misfit_batch_eval_s": self.misfit_batch_eval_s,
             "fe_eval_s": self.fe_eval_s,
             "speed_ratio": self.speed_ratio,
             "clock": self.clock,
@@ -91,10 +101,18 @@ def format_summary(s: dict) -> str:
             f"  {name:>12} {b['rms_sigma']:10.3g} {b['max_sigma']:10.3g} {b['mean_abs']:10.3g} "
             f"{b['max_abs']:10.3g}  {b['unit']}"
         )
+    misfit = s.get("misfit_eval_s")
     lines.append(
-        f"  one evaluation: surrogate {s['surrogate_eval_s'] * 1e3:.3g} ms (with Jacobian "
-        f"{s['surrogate_jacobian_s'] * 1e3:.3g} ms), model {s['fe_eval_s']:.3g} s: "
-        f"ratio {s['speed_ratio']:.3g} ({s.get('clock', 'wall')} time)"
+        f"  one evaluation: surrogate values {s['surrogate_eval_s'] * 1e3:.3g} ms (with Jacobian "
+        f"{s['surrogate_jacobian_s'] * 1e3:.3g} ms)"
+        + (
+            f", misfit {misfit * 1e6:.3g} us (in a batch of 1000: "
+            f"{s['misfit_batch_eval_s'] * 1e6:.3g} us a point)"
+            if misfit
+            else ""
+        )
+        + f"; model {s['fe_eval_s']:.3g} s: ratio {s['speed_ratio']:.3g} "
+        f"({s.get('clock', 'wall')} time)"
     )
     return "\n".join(lines)
 
@@ -144,6 +162,7 @@ def validate(
         pred.append(res.values)
     one = cpu_per_call(surrogate, np.tile(runs.X, (max(1, 200 // len(runs.X)), 1))[:200])
     jac = cpu_per_call(lambda x: surrogate(x, jacobian=True), runs.X[:20])
+    misfit_s, misfit_batch_s = _misfit_times(surrogate, runs, sigma)
     worker_wall = float(np.median(runs.wall_s))
     if model is not None:
         model(runs.X[0])  # warm-up (compiled kernels, caches)
@@ -175,4 +194,31 @@ def validate(
         np.mean(E**2, axis=0),
         worker_wall,
         clock,
+        misfit_s,
+        misfit_batch_s,
     )
+
+
+def _misfit_times(surrogate, runs, sigma) -> tuple[float | None, float | None]:
+    """CPU time of one misfit evaluation on ``surrogate`` (its cost path, against the first
+    hold-out run as data) and per point in a batch of 1000, s; None without a cost path."""
+    if not hasattr(surrogate, "misfit_of"):
+        return None, None
+    from problems.inverse.problem import LeastSquaresProblem
+
+    mid = 0.5 * (surrogate.lower + surrogate.upper)
+    problem = LeastSquaresProblem(
+        surrogate,
+        runs.Y[0],
+        surrogate.lower,
+        surrogate.upper,
+        np.where(mid != 0, mid, 1.0),
+        sigma=sigma,
+    )
+    misfit = surrogate.misfit_of(problem)
+    points = np.tile(runs.X, (max(1, 1000 // len(runs.X) + 1), 1))
+    misfit(points[:1])  # warm-up (compiled kernels)
+    one = cpu_per_call(misfit, points[:200])
+    t0 = time.process_time()
+    misfit(points[:1000])
+    return one, (time.process_time() - t0) / len(points[:1000])
