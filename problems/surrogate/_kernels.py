@@ -9,7 +9,7 @@ GP mean (Matern 5/2, the kernel of every shipped surrogate; other kernels use th
 ordered for the vector unit: training points innermost, the squared distances from the
 differences (as numpy does: an expansion into norms would lose digits for short length scales,
 and the weights of an ill-conditioned GP amplify every digit), ``exp(-s)`` as a table of
-``exp(-k / 128)`` times a degree-6 Taylor polynomial of the remainder (relative error <= 3 eps,
+``exp(-k / 64)`` times a degree-6 Taylor polynomial of the remainder (relative error <= 3 eps,
 tested; numba has no vectorised ``exp`` without Intel's SVML, which the llvmlite wheels lack) for
 points in the unit box when every ``s`` there is within :data:`EXP_REACH` (all shipped
 surrogates: s <= 28), ``math.exp`` otherwise; each sum over the training points in eight
@@ -33,7 +33,7 @@ from numba import njit, uint64
 
 from problems.inverse.feasibility import _clear
 
-_STEPS = 128.0
+_STEPS = 64.0
 #: the reach of the exponential's table: exp(-x) for 0 <= x <= EXP_REACH
 EXP_REACH = 40.0
 _TABLE = np.exp(-np.arange(int(EXP_REACH * _STEPS) + 2) / _STEPS)
@@ -43,9 +43,9 @@ _SQRT5 = math.sqrt(5.0)
 
 @njit(inline="always", fastmath={"contract"})
 def exp_neg(x):
-    """exp(-x) for 0 <= x <= EXP_REACH: ``exp(-k / 128)`` from a table times a degree-6 Taylor
-    polynomial of exp(-f), 0 <= f < 1/128 (a global table: as an argument it would stop the
-    vectorisation)."""
+    """exp(-x) for 0 <= x <= EXP_REACH: ``exp(-k / 64)`` from a 20 kB table times a degree-6
+    Taylor polynomial of exp(-f), 0 <= f < 1/64 (a global table: as an argument it would stop
+    the vectorisation)."""
     k = uint64(x * _STEPS)
     f = x - k * (1.0 / _STEPS)
     p = (((((_C6 * f + _C5) * f + _C4) * f + _C3) * f + _C2) * f + _C1) * f + 1.0
