@@ -38,7 +38,6 @@ _STEPS = 64.0
 EXP_REACH = 40.0
 _TABLE = np.exp(-np.arange(int(EXP_REACH * _STEPS) + 2) / _STEPS)
 _C1, _C2, _C3, _C4, _C5, _C6 = (-1.0, 1.0 / 2, -1.0 / 6, 1.0 / 24, -1.0 / 120, 1.0 / 720)
-_SQRT5 = math.sqrt(5.0)
 
 
 @njit(inline="always", fastmath={"contract"})
@@ -83,40 +82,42 @@ def _dot(k, a):
 
 
 @njit(inline="always", fastmath={"contract"})
-def _gp_mean_point(z, XT, W, alphaT, starts, outputs, y, reach, k, out):
-    """Coefficients ``out`` (r,) at one scaled point ``z`` (d,); ``k`` (n,) is scratch; ``reach``:
+def _gp_mean_point(z, XT, W, alphaT, starts, outputs, y, reach, k, t2, out):
+    """Coefficients ``out`` (r,) at one scaled point ``z`` (d,); ``k`` (n,), ``t2`` (d, n) are
+    scratch; ``reach``:
     every s of a point in the unit box is within the table's reach."""
     d, n = XT.shape
     unit = reach
     for j in range(d):
         unit = unit and 0.0 <= z[j] <= 1.0
+    for j in range(d):  # squared differences, shared by the components
+        zj = z[j]
+        for i in range(n):
+            t = zj - XT[j, i]
+            t2[j, i] = t * t
     for c in range(W.shape[0]):
         if d == 6:  # the nine cases: one pass over the training points
             w0, w1, w2, w3, w4, w5 = W[c, 0], W[c, 1], W[c, 2], W[c, 3], W[c, 4], W[c, 5]
-            z0, z1, z2, z3, z4, z5 = z[0], z[1], z[2], z[3], z[4], z[5]
-            x0, x1, x2, x3, x4, x5 = XT[0], XT[1], XT[2], XT[3], XT[4], XT[5]
+            q0, q1, q2, q3, q4, q5 = t2[0], t2[1], t2[2], t2[3], t2[4], t2[5]
             for i in range(n):
-                t0, t1, t2 = z0 - x0[i], z1 - x1[i], z2 - x2[i]
-                t3, t4, t5 = z3 - x3[i], z4 - x4[i], z5 - x5[i]
-                k[i] = ((w0 * t0 * t0 + w1 * t1 * t1) + (w2 * t2 * t2 + w3 * t3 * t3)) + (
-                    w4 * t4 * t4 + w5 * t5 * t5
+                k[i] = ((w0 * q0[i] + w1 * q1[i]) + (w2 * q2[i] + w3 * q3[i])) + (
+                    w4 * q4[i] + w5 * q5[i]
                 )
         else:
             for i in range(n):
                 k[i] = 0.0
             for j in range(d):
-                w, zj = W[c, j], z[j]
+                w = W[c, j]
                 for i in range(n):
-                    t = zj - XT[j, i]
-                    k[i] += w * t * t
+                    k[i] += w * t2[j, i]
         if unit:  # s <= the table's reach
             for i in range(n):
-                s = _SQRT5 * math.sqrt(max(k[i], 0.0))
-                k[i] = (1.0 + s + s * s * (1.0 / 3.0)) * exp_neg(s)
+                s = math.sqrt(k[i])
+                k[i] = ((s * (1.0 / 3.0) + 1.0) * s + 1.0) * exp_neg(s)
         else:
             for i in range(n):
-                s = _SQRT5 * math.sqrt(max(k[i], 0.0))
-                k[i] = (1.0 + s + s * s * (1.0 / 3.0)) * math.exp(-s)
+                s = math.sqrt(k[i])
+                k[i] = ((s * (1.0 / 3.0) + 1.0) * s + 1.0) * math.exp(-s)
         for o in range(starts[c], starts[c + 1]):
             col = outputs[o]
             out[col] = _dot(k, alphaT[col]) * y[1, col] + y[0, col]
@@ -126,15 +127,15 @@ def _gp_mean_point(z, XT, W, alphaT, starts, outputs, y, reach, k, out):
 def gp_mean(Z, XT, W, alphaT, starts, outputs, y, reach, out):
     """GP posterior means ``out`` (q, r) at scaled points ``Z`` (q, d).
 
-    XT (d, n) training points; W (C, d) inverse squared length scales; alphaT (r, n)
+    XT (d, n) training points; W (C, d) ``5 / l_cj^2``; alphaT (r, n)
     amplitude * alpha of each output; starts
     (C + 1,) and outputs (r,) the outputs of component c are ``outputs[starts[c]:starts[c+1]]``;
     y (2, r) output mean and standard deviation; ``reach``: the largest ``s`` of a point in the
     unit box is within :data:`EXP_REACH` (then such points take :func:`exp_neg`, all others
     ``math.exp``)."""
-    k = np.empty(XT.shape[1])
+    k, t2 = np.empty(XT.shape[1]), np.empty(XT.shape)
     for p in range(Z.shape[0]):
-        _gp_mean_point(Z[p], XT, W, alphaT, starts, outputs, y, reach, k, out[p])
+        _gp_mean_point(Z[p], XT, W, alphaT, starts, outputs, y, reach, k, t2, out[p])
 
 
 @njit(cache=True)
@@ -151,7 +152,7 @@ def surrogate_costs(
     outputs,
     y,
     reach,
-    T,
+    TT,
     g,
     c_perp,
     A,
@@ -161,13 +162,14 @@ def surrogate_costs(
     """For the physical points ``X`` (q, d): ``clear`` (q,) = inside the box ``limits[0:2]``
     (inclusive) and passing the material screen (:mod:`problems.inverse.feasibility`, open
     ranges ``limits[2:4]``, ``code``, ``idx``, ``consts``); the GP means ``A`` (q, r) at the
-    scaled points and the misfits ``costs`` (q,) ``c_perp + ||g - T a||^2`` (T upper
+    scaled points and the misfits ``costs`` (q,) ``c_perp + ||g - T a||^2`` (``TT = T^T``, T upper
     triangular). Every point is evaluated; the caller uses the costs of the valid ones.
     Returns the number of points not clear."""
     d = X.shape[1]
-    k = np.empty(XT.shape[1])
+    k, t2 = np.empty(XT.shape[1]), np.empty(XT.shape)
     z = np.empty(d)
     r = g.size
+    e = np.empty(r)
     n_unclear = 0
     for p in range(X.shape[0]):
         x = X[p]
@@ -178,13 +180,16 @@ def surrogate_costs(
         clear[p] = inside and _clear(x, limits[2], limits[3], code, idx, consts)
         n_unclear += not clear[p]
         a = A[p]
-        _gp_mean_point(z, XT, W, alphaT, starts, outputs, y, reach, k, a)
+        _gp_mean_point(z, XT, W, alphaT, starts, outputs, y, reach, k, t2, a)
+        for i in range(r):
+            e[i] = g[i]
+        for j in range(r):  # e = g - T a, column by column (T^T stored: contiguous columns)
+            aj = a[j]
+            for i in range(j + 1):
+                e[i] -= TT[j, i] * aj
         total = 0.0
         for i in range(r):
-            e = g[i]
-            for j in range(i, r):
-                e -= T[i, j] * a[j]
-            total += e * e
+            total += e[i] * e[i]
         costs[p] = c_perp + total
     return n_unclear
 
@@ -207,7 +212,7 @@ class PackedGP:
         X, inv_ls2, amp, comp, alpha, y_mean, y_std = packed
         order = np.argsort(comp, kind="stable")
         starts = np.searchsorted(comp[order], np.arange(len(amp) + 1)).astype(np.int64)
-        W = np.ascontiguousarray(inv_ls2.T)
+        W = np.ascontiguousarray(5.0 * inv_ls2.T)  # s^2 = sum_j W_cj (z_j - x_ij)^2
         # the largest s of a point z in the unit box: |z_j - x_ij| <= max(|x_ij|, |1 - x_ij|)
         reach = np.max(np.maximum(X**2, (1.0 - X) ** 2), axis=0)  # (d,)
         s_max = math.sqrt(5.0 * float(np.max(reach @ inv_ls2)))

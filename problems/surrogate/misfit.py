@@ -43,14 +43,15 @@ class SurrogateMisfit:
             self._compiled = (
                 (limits, screen.code, screen.idx, screen.consts),
                 gp.args,
-                (a.T, a.g, a.c_perp),
+                (np.ascontiguousarray(a.T.T), a.g, a.c_perp),
             )
 
     def __call__(self, X) -> tuple[np.ndarray, np.ndarray, list]:
         """``(costs (q,), coefficients (q, r), reasons)`` at the physical points ``X`` (q, d):
         ``reasons[k]`` is None for a valid point, else why it is invalid (then its cost is
         meaningless). Points must be finite."""
-        X = np.ascontiguousarray(np.atleast_2d(X), dtype=float)
+        X = np.asarray(X, dtype=float)
+        X = np.ascontiguousarray(X if X.ndim == 2 else X.reshape(1, -1))
         q = len(X)
         if self._compiled is None:
             reasons = [self.model.check(x) for x in X]
