@@ -139,6 +139,8 @@ def summary(sur, folder, size_bytes: int) -> dict:
         "n_holdout": val.get("n_points", 0),
         "surrogate_eval_s": val.get("surrogate_eval_s"),
         "surrogate_jacobian_s": val.get("surrogate_jacobian_s"),
+        "misfit_eval_s": val.get("misfit_eval_s"),
+        "misfit_batch_eval_s": val.get("misfit_batch_eval_s"),
         "fe_eval_s": val.get("fe_eval_s"),
         "speed_ratio": val.get("speed_ratio"),
         "clock": val.get("clock", "wall (hold-out runs)"),

@@ -2,7 +2,8 @@
 measured in the same run; surrogate search + FE polish against FE-only LM from random starts.
 
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate speed [--cases all] [--repeat 200]
-        [--json results/surrogates/speed.json]
+        [--rounds 3] [--json results/surrogates/speed.json]
+    python -m bench.perf.surrogate table --json results/surrogates/speed.json   (markdown)
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate polish [--cases all] [--starts 3]
         [--tier consistent] [--out results/surrogates/polish_vs_lm.jsonl]
     OMP_NUM_THREADS=1 python -m bench.perf.surrogate tradeoff [--cases all]
@@ -23,7 +24,9 @@ consistent data:
   same with ``cost_path=False`` (``before``: the model's call and the whole residual, the path of
   the records made before the cost path);
 
-and the ratios FE / each. Single calls are timed in groups of 20 (the CPU clock's resolution).
+and the ratios FE / each: medians over ``--rounds`` rounds, each one FE run then every surrogate
+timing (so that a burst of load on this shared machine falls on both). Single calls are timed
+in groups of 20 (the CPU clock's resolution).
 
 ``tradeoff``: per case whose training and hold-out runs are kept (``runs_dir()`` of
 :mod:`problems.surrogate.build`, matched by training hash: no new FE runs), the shipped regression
@@ -81,9 +84,9 @@ def _cpu_batch(fn, X, size: int, repeats: int = 5) -> float:
     return statistics.median(times)
 
 
-def speed(cases, repeat: int) -> list[dict]:
-    """Per case, CPU times in one process (see the module docstring) and the ratios to one
-    coarse FE run."""
+def speed(cases, repeat: int, rounds: int = 3) -> list[dict]:
+    """Per case, CPU times in one process (see the module docstring): medians over ``rounds``
+    alternating rounds, and the ratios to one coarse FE run."""
     from bench.surrogate_run import load_for
     from problems.inverse.build import build_objective
     from problems.inverse.evaluator import Evaluator
@@ -100,31 +103,33 @@ def speed(cases, repeat: int) -> list[dict]:
         fe = FEForwardModel(sur.checker.case, "coarse", sur.checker.loading, sur.checker.points)
         rng = np.random.default_rng(0)
         width = sur.upper - sur.lower
-        X = sur.lower + rng.random((max(1000, 2 * repeat), len(sur.names))) * width
+        X = sur.lower + rng.random((max(1000, rounds * repeat), len(sur.names))) * width
         Z = X / data.reference
 
         def fresh(ev):  # a batch through an emptied cache (reset: microseconds)
             return lambda B: (ev.reset(), ev.costs(B))
 
         fe(X[0])  # warm-up
-        fe_t = []
-        for k in range(1, 4):
+        times: dict[str, list[float]] = {}
+        for k in range(rounds):  # alternating rounds: the machine's load falls on all alike
             t0 = time.process_time()
-            fe(X[k])
-            fe_t.append(time.process_time() - t0)
-        row = {
-            "case": name,
-            "fe_s": statistics.median(fe_t),
-            "misfit_s": _cpu(misfit, X[:repeat]),
-            "misfit_batch32_s": _cpu_batch(misfit, X, 32, 20),
-            "misfit_batch1000_s": _cpu_batch(misfit, X, 1000, 3),
-            "values_s": _cpu(sur, X[:repeat]),
-            "jacobian_s": _cpu(lambda x: sur(x, jacobian=True), X[: max(20, repeat // 5)]),
-            "evaluator_s": _cpu(fast.cost, Z[:repeat]),
-            "evaluator_batch1000_s": _cpu_batch(fresh(fast), Z, 1000, 3),
-            "evaluator_before_s": _cpu(plain.cost, Z[repeat : 2 * repeat]),
-            "evaluator_before_batch1000_s": _cpu_batch(fresh(plain), Z, 1000, 3),
-        }
+            fe(X[1 + k])
+            one = slice(repeat * k, repeat * (k + 1))
+            fast.reset(), plain.reset()  # every timed point new to the evaluators' caches
+            for key, value in {
+                "fe_s": time.process_time() - t0,
+                "misfit_s": _cpu(misfit, X[one]),
+                "misfit_batch32_s": _cpu_batch(misfit, X, 32, 10),
+                "misfit_batch1000_s": _cpu_batch(misfit, X, 1000, 1),
+                "values_s": _cpu(sur, X[one]),
+                "jacobian_s": _cpu(lambda x: sur(x, jacobian=True), X[one][:20]),
+                "evaluator_s": _cpu(fast.cost, Z[one]),
+                "evaluator_batch1000_s": _cpu_batch(fresh(fast), Z, 1000, 1),
+                "evaluator_before_s": _cpu(plain.cost, Z[one][::-1]),
+                "evaluator_before_batch1000_s": _cpu_batch(fresh(plain), Z, 1000, 1),
+            }.items():
+                times.setdefault(key, []).append(value)
+        row = {"case": name, **{key: statistics.median(v) for key, v in times.items()}}
         for k in [k for k in row if k.endswith("_s") and k != "fe_s"]:
             row["ratio_" + k[:-2]] = row["fe_s"] / row[k]
         rows.append(row)
@@ -142,6 +147,30 @@ def speed(cases, repeat: int) -> list[dict]:
             flush=True,
         )
     return rows
+
+
+def speed_table(rows) -> str:
+    """The markdown table of ``speed`` rows (docs/surrogate.md section 13)."""
+
+    def us(row, key):
+        return f"{1e6 * row[key]:.1f} ({row['ratio_' + key[:-2]] / 1e4:.2f})"
+
+    lines = [
+        "| case | FE run, CPU s | misfit: one, µs (ratio / 10⁴) | batch 32, µs/point | "
+        "batch 1000, µs/point | values, µs | + Jacobian, µs | evaluator: one, µs (before) | "
+        "evaluator: batch 1000, µs/point (before) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        before = 1e6 * r["evaluator_before_s"], 1e6 * r["evaluator_before_batch1000_s"]
+        lines.append(
+            f"| {r['case']} | {r['fe_s']:.3f} | {us(r, 'misfit_s')} | "
+            f"{us(r, 'misfit_batch32_s')} | {us(r, 'misfit_batch1000_s')} | "
+            f"{1e6 * r['values_s']:.0f} | {1e6 * r['jacobian_s']:.0f} | "
+            f"{us(r, 'evaluator_s')} ({before[0]:.0f}) | "
+            f"{us(r, 'evaluator_batch1000_s')} ({before[1]:.0f}) |"
+        )
+    return "\n".join(lines)
 
 
 def _cpu_per_call(fn, X, repeat: int) -> float:
@@ -362,9 +391,10 @@ def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("what", choices=["speed", "polish", "tradeoff"])
+    p.add_argument("what", choices=["speed", "table", "polish", "tradeoff"])
     p.add_argument("--cases", default="all")
     p.add_argument("--repeat", type=int, default=200)
+    p.add_argument("--rounds", type=int, default=3, help="speed: alternating rounds (median)")
     p.add_argument("--starts", type=int, default=3)
     p.add_argument("--tier", default="consistent", choices=["consistent", "model-error"])
     p.add_argument("--tol", type=float, default=1e-3)
@@ -373,9 +403,11 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     cases = _cases(a.cases)
     if a.what == "speed":
-        rows = speed(cases, a.repeat)
+        rows = speed(cases, a.repeat, a.rounds)
         if a.json:
             Path(a.json).write_text(json.dumps(rows, indent=1))
+    elif a.what == "table":
+        print(speed_table(json.loads(Path(a.json).read_text())))
     elif a.what == "tradeoff":
         rows = tradeoff(cases, a.repeat)
         if a.json:

@@ -40,29 +40,28 @@ class SurrogateMisfit:
         if gp is not None:
             limits = np.vstack([model.lower, model.upper, screen.lo, screen.hi])
             a = self.affine
-            self._compiled = (
-                (limits, screen.code, screen.idx, screen.consts),
-                gp.args,
-                (np.ascontiguousarray(a.T.T), a.g, a.c_perp),
-            )
+            self._compiled = (limits, screen.code, screen.idx, screen.consts) + gp.args
+            self._compiled += (np.ascontiguousarray(a.T.T), a.g, a.c_perp)
 
     def __call__(self, X) -> tuple[np.ndarray, np.ndarray, list]:
         """``(costs (q,), coefficients (q, r), reasons)`` at the physical points ``X`` (q, d):
         ``reasons[k]`` is None for a valid point, else why it is invalid (then its cost is
         meaningless). Points must be finite."""
         X = np.asarray(X, dtype=float)
-        X = np.ascontiguousarray(X if X.ndim == 2 else X.reshape(1, -1))
+        if X.ndim == 1:
+            X = X[None]
+        if not X.flags.c_contiguous:
+            X = np.ascontiguousarray(X)
         q = len(X)
         if self._compiled is None:
             reasons = [self.model.check(x) for x in X]
             A = self.model.coefficients(self.model.to_scaled(X))
             return self.affine.costs(A), A, reasons
-        screen, gp, reduced = self._compiled
         A = np.empty((q, self.affine.n_coefficients))
         costs = np.empty(q)
         clear = np.empty(q, bool)
         reasons = [None] * q
-        if surrogate_costs(X, *screen, *gp, *reduced, A, costs, clear):
+        if surrogate_costs(X, *self._compiled, A, costs, clear):
             for k in np.flatnonzero(~clear):
                 reasons[k] = self.model.check(X[k])
         return costs, A, reasons
