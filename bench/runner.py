@@ -135,7 +135,13 @@ def arch() -> str:
     """The code paths a run's arithmetic took: the CPU that numba compiles for and the kernels
     of the BLAS numpy loaded (e.g. ``"znver4; openblas Zen"``). Two machines of one kind can
     differ here, and then floating-point results differ in the last digits."""
-    import numpy  # noqa: F401  (loads the BLAS that threadpoolctl reports)
+    import numpy  # noqa: F401  (load every BLAS the runs use: numpy's, scipy's, kvxopt's)
+    import scipy.linalg  # noqa: F401
+
+    try:
+        import kvxopt  # noqa: F401
+    except ImportError:  # pragma: no cover - a dependency
+        pass
 
     parts = []
     try:

@@ -157,8 +157,8 @@ def speed_table(rows) -> str:
 
     lines = [
         "| case | FE run, CPU s | misfit: one, µs (ratio / 10⁴) | batch 32, µs/point | "
-        "batch 1000, µs/point | values, µs | + Jacobian, µs | evaluator: one, µs (before) | "
-        "evaluator: batch 1000, µs/point (before) |",
+        "batch 1000, µs/point | values, µs | + Jacobian, µs | evaluator: one, µs, now / before "
+        "(ratio now) | evaluator: batch 1000, µs/point, now / before (ratio now) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -167,8 +167,10 @@ def speed_table(rows) -> str:
             f"| {r['case']} | {r['fe_s']:.3f} | {us(r, 'misfit_s')} | "
             f"{us(r, 'misfit_batch32_s')} | {us(r, 'misfit_batch1000_s')} | "
             f"{1e6 * r['values_s']:.0f} | {1e6 * r['jacobian_s']:.0f} | "
-            f"{us(r, 'evaluator_s')} ({before[0]:.0f}) | "
-            f"{us(r, 'evaluator_batch1000_s')} ({before[1]:.0f}) |"
+            f"{1e6 * r['evaluator_s']:.1f} / {before[0]:.0f} "
+            f"({r['ratio_evaluator'] / 1e4:.2f}) | "
+            f"{1e6 * r['evaluator_batch1000_s']:.1f} / {before[1]:.0f} "
+            f"({r['ratio_evaluator_batch1000'] / 1e4:.2f}) |"
         )
     return "\n".join(lines)
 
