@@ -260,3 +260,20 @@ def test_a_failing_cost_path_falls_back_to_the_models_call(shipped):
     b = plain.evaluate_many(Z)
     assert [(e.cost, e.feasible) for e in a] == [(e.cost, e.feasible) for e in b]
     assert fast._misfit is None
+
+
+def test_surrogate_command_times_a_stored_surrogate_without_changing_it(tmp_path, capsys):
+    import json
+
+    from bench.cli import main
+    from bench.surrogate_run import load_for
+
+    before = load_for("default", "linear-shear", "coarse").hash
+    out = tmp_path / "t.json"
+    assert main(["surrogate", "linear-shear", "--time", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["hash"] == before == load_for("default", "linear-shear", "coarse").hash
+    assert doc["clock"] == "cpu" and 0 < doc["misfit_batch_eval_s"] and 0 < doc["misfit_eval_s"]
+    assert doc["misfit_eval_s"] < doc["surrogate_eval_s"] < doc["fe_eval_s"]
+    assert doc["speed_ratio"] == pytest.approx(doc["fe_eval_s"] / doc["misfit_eval_s"])
+    assert "one misfit evaluation" in capsys.readouterr().out

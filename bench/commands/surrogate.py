@@ -109,6 +109,47 @@ def add_arguments(p) -> None:
         "--json", metavar="FILE", help="write the summary (hold-out errors, cost, hash) as JSON"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--time",
+        action="store_true",
+        help="build nothing: time the stored surrogate of CASE (default name, or --out) against "
+        "one FE run in this process (one call, one misfit evaluation single and per point in a "
+        "batch of 1000; CPU clock) and print it (--json: write it); the stored model is unchanged",
+    )
+
+
+def time_stored(args) -> int:
+    """``--time``: the evaluation costs of a stored surrogate, measured now."""
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from bench.surrogate_run import load_for
+    from problems.inverse.data import get_data, load
+    from problems.inverse.forward import FEForwardModel
+    from problems.surrogate.validation import time_evaluations
+
+    sur = load_for(args.out or "default", args.case, args.mesh)
+    data = get_data(args.case) if args.data is None else load(args.data)
+    checker = sur.checker
+    fe = FEForwardModel(checker.case, args.mesh, checker.loading, checker.points)
+    rng = np.random.default_rng(args.seed)
+    X = sur.lower + rng.random((50, len(sur.names))) * (sur.upper - sur.lower)
+    X = X[[sur.check(x) is None for x in X]]
+    t = time_evaluations(sur, X, data.values, data.sigma(), model=fe)
+    doc = {"case": args.case, "mesh": args.mesh, "hash": sur.hash, **t}
+    print(
+        f"{args.case} on {args.mesh}, surrogate {str(sur.hash)[:12]} (CPU time, this process): "
+        f"one call {1e6 * t['surrogate_eval_s']:.0f} us (with Jacobian "
+        f"{1e6 * t['surrogate_jacobian_s']:.0f} us); one misfit evaluation "
+        f"{1e6 * t['misfit_eval_s']:.1f} us, per point in a batch of 1000 "
+        f"{1e6 * t['misfit_batch_eval_s']:.1f} us; one FE run {t['fe_eval_s']:.3f} s: ratio "
+        f"{t['speed_ratio']:.3g} (batch {t['fe_eval_s'] / t['misfit_batch_eval_s']:.3g})"
+    )
+    if args.json:
+        Path(args.json).write_text(json.dumps(doc, indent=1))
+    return 0
 
 
 def summary(sur, folder, size_bytes: int) -> dict:
@@ -165,6 +206,8 @@ def main(args) -> int:
     case = get_case(args.case)
     if case.is_analytic:
         raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
+    if args.time:
+        return time_stored(args)
     if args.samples < 10:
         raise ValueError(f"--samples {args.samples} is out of range: need at least 10")
     if args.holdout < 0:

@@ -160,16 +160,10 @@ def validate(
             )
         n_extra += res.message.startswith("extrapolation")
         pred.append(res.values)
-    one = cpu_per_call(surrogate, np.tile(runs.X, (max(1, 200 // len(runs.X)), 1))[:200])
-    jac = cpu_per_call(lambda x: surrogate(x, jacobian=True), runs.X[:20])
-    misfit_s, misfit_batch_s = _misfit_times(surrogate, runs, sigma)
     worker_wall = float(np.median(runs.wall_s))
-    if model is not None:
-        model(runs.X[0])  # warm-up (compiled kernels, caches)
-        model_s = cpu_per_call(model, runs.X[1 : 1 + model_repeats], group=1)
-        clock = "cpu"
-    else:
-        model_s, clock = worker_wall, "wall (hold-out runs)"
+    t = time_evaluations(surrogate, runs.X, runs.Y[0], sigma, model, model_repeats)
+    if model is None:
+        t["fe_eval_s"], t["clock"] = worker_wall, "wall (hold-out runs)"
     E = np.array(pred) - runs.Y
     out = {}
     for name, sl in blocks.items():
@@ -187,38 +181,56 @@ def validate(
         runs.n_failed,
         runs.n_infeasible,
         out,
-        one,
-        jac,
-        model_s,
+        t["surrogate_eval_s"],
+        t["surrogate_jacobian_s"],
+        t["fe_eval_s"],
         int(n_extra),
         np.mean(E**2, axis=0),
         worker_wall,
-        clock,
-        misfit_s,
-        misfit_batch_s,
+        t["clock"],
+        t["misfit_eval_s"],
+        t["misfit_batch_eval_s"],
     )
 
 
-def _misfit_times(surrogate, runs, sigma) -> tuple[float | None, float | None]:
-    """CPU time of one misfit evaluation on ``surrogate`` (its cost path, against the first
-    hold-out run as data) and per point in a batch of 1000, s; None without a cost path."""
-    if not hasattr(surrogate, "misfit_of"):
-        return None, None
-    from problems.inverse.problem import LeastSquaresProblem
+def time_evaluations(surrogate, points, data, sigma, model=None, model_repeats: int = 3) -> dict:
+    """CPU times in this process, s: one surrogate call (``surrogate_eval_s``; with the Jacobian
+    ``surrogate_jacobian_s``), one misfit evaluation against ``data`` with ``sigma`` on the
+    surrogate's cost path (``misfit_eval_s``; per point in a batch of 1000,
+    ``misfit_batch_eval_s``; None without a cost path), one plain run of ``model``
+    (``fe_eval_s``, after a warm-up run; None without a model), at the physical ``points``;
+    ``speed_ratio`` = FE over the misfit (else over the call), ``clock``."""
+    points = np.atleast_2d(np.asarray(points, float))
+    tiled = np.tile(points, (max(1, 1000 // len(points) + 1), 1))
+    out = {
+        "surrogate_eval_s": cpu_per_call(surrogate, tiled[:200]),
+        "surrogate_jacobian_s": cpu_per_call(lambda x: surrogate(x, jacobian=True), points[:20]),
+        "misfit_eval_s": None,
+        "misfit_batch_eval_s": None,
+        "fe_eval_s": None,
+        "clock": "cpu",
+    }
+    if hasattr(surrogate, "misfit_of"):
+        from problems.inverse.problem import LeastSquaresProblem
 
-    mid = 0.5 * (surrogate.lower + surrogate.upper)
-    problem = LeastSquaresProblem(
-        surrogate,
-        runs.Y[0],
-        surrogate.lower,
-        surrogate.upper,
-        np.where(mid != 0, mid, 1.0),
-        sigma=sigma,
-    )
-    misfit = surrogate.misfit_of(problem)
-    points = np.tile(runs.X, (max(1, 1000 // len(runs.X) + 1), 1))
-    misfit(points[:1])  # warm-up (compiled kernels)
-    one = cpu_per_call(misfit, points[:200])
-    t0 = time.process_time()
-    misfit(points[:1000])
-    return one, (time.process_time() - t0) / len(points[:1000])
+        mid = 0.5 * (surrogate.lower + surrogate.upper)
+        problem = LeastSquaresProblem(
+            surrogate,
+            data,
+            surrogate.lower,
+            surrogate.upper,
+            np.where(mid != 0, mid, 1.0),
+            sigma=sigma,
+        )
+        misfit = surrogate.misfit_of(problem)
+        misfit(tiled[:1])  # warm-up (compiled kernels)
+        out["misfit_eval_s"] = cpu_per_call(misfit, tiled[:200])
+        t0 = time.process_time()
+        misfit(tiled[:1000])
+        out["misfit_batch_eval_s"] = (time.process_time() - t0) / len(tiled[:1000])
+    if model is not None:
+        model(points[0])  # warm-up (compiled kernels, caches)
+        out["fe_eval_s"] = cpu_per_call(model, points[1 : 1 + model_repeats], group=1)
+    one = out["misfit_eval_s"] or out["surrogate_eval_s"]
+    out["speed_ratio"] = out["fe_eval_s"] / one if out["fe_eval_s"] else None
+    return out
