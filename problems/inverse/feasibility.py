@@ -73,6 +73,7 @@ class Screen:
         """The screen of ``case`` (a :class:`~problems.inverse.case.Case`), or None when its
         fixed constants are invalid or its parameters are not the ones the screen knows (then
         the rule decides every point)."""
+        from problems.inverse.cases import ExponentStrength
         from problems.materials.drucker_prager import (
             _ATAN3_DEG,
             OPTIONAL_PARAMETERS,
@@ -82,6 +83,8 @@ class Screen:
         from problems.materials.hardening import reference_test
 
         names = tuple(case.names)
+        if case.derive is not None and not isinstance(case.derive, ExponentStrength):
+            return None
         try:
             validate_parameters(case.form, case.hardening, case.material_parameters(case.reference))
         except ValueError:

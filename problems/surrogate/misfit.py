@@ -29,6 +29,8 @@ class SurrogateMisfit:
         gp = model._packed_gp
         case = getattr(model.checker, "case", None)
         screen = Screen.of(case) if case is not None else None
+        if case is not None and tuple(case.names) != tuple(model.names):
+            screen = None  # not the case's own parameters: the rule decides every point
         if model.checker is not None and screen is None:
             gp = None  # a rule the screen does not know: every point through the rule (numpy)
         if screen is None:  # no material rule: the box alone
@@ -42,6 +44,11 @@ class SurrogateMisfit:
             a = self.affine
             self._compiled = (limits, screen.code, screen.idx, screen.consts) + gp.args
             self._compiled += (np.ascontiguousarray(a.T.T), a.g, a.c_perp)
+            if gp.n_outputs != a.n_coefficients:  # the kernel does not check bounds
+                raise ValueError(
+                    f"GP of {gp.n_outputs} outputs for {a.n_coefficients} POD coefficients"
+                )
+            self(np.array([0.5 * (model.lower + model.upper)]))  # compile / load now, not in a run
 
     def __call__(self, X) -> tuple[np.ndarray, np.ndarray, list]:
         """``(costs (q,), coefficients (q, r), reasons)`` at the physical points ``X`` (q, d):
@@ -54,7 +61,7 @@ class SurrogateMisfit:
             X = np.ascontiguousarray(X)
         q = len(X)
         if self._compiled is None:
-            reasons = [self.model.check(x) for x in X]
+            reasons = [self._check(x) for x in X]
             A = self.model.coefficients(self.model.to_scaled(X))
             return self.affine.costs(A), A, reasons
         A = np.empty((q, self.affine.n_coefficients))
@@ -63,8 +70,15 @@ class SurrogateMisfit:
         reasons = [None] * q
         if surrogate_costs(X, *self._compiled, A, costs, clear):
             for k in np.flatnonzero(~clear):
-                reasons[k] = self.model.check(X[k])
+                reasons[k] = self._check(X[k])
         return costs, A, reasons
+
+    def _check(self, x) -> str | None:
+        """The model's rule at ``x`` (an exception is a reason too, for that point only)."""
+        try:
+            return self.model.check(x)
+        except Exception as exc:
+            return f"check raised {type(exc).__name__}: {exc}"
 
     def messages(self, X) -> list[str]:
         """The note of each valid point (extrapolation), as the model's own call gives it."""
