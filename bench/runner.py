@@ -183,7 +183,7 @@ def is_analytic(case_name: str) -> bool:
 def dataset_for(config: RunConfig, *, progress: bool = False):
     """The measured data set of a run (FE cases): the shipped one, or the one made with the
     suite's ``[data]`` settings (computed on first use and cached by problems.inverse.data)."""
-    if is_analytic(config.case):
+    if config.problem or is_analytic(config.case):
         return None
     from problems.inverse.data import get_data, tier_settings
 
@@ -292,6 +292,11 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
     error = data_hash = None
     evaluations = [0]  # the objective's counter, kept for a crash report
     try:
+        if config.problem:  # a user problem (an entry point): bench.user_problems
+            from bench.user_problems import run_user
+
+            count = [lambda ev, _: evaluations.__setitem__(0, ev.n_evals)]
+            return run_user(config, mapper=mapper, observers=count), None, None
         from bench.identification import Identification, identify
         from problems.inverse.cases import get_case
 
@@ -581,8 +586,8 @@ def run_suite(
 def data_key(config: RunConfig) -> tuple[str, str, str, str] | None:
     """Runs with the same key share one data set (None: analytic, no data set): the case, the data
     tier, the inverse mesh (a consistent-tier data set is made on it) and the [data] settings."""
-    if is_analytic(config.case):
-        return None
+    if config.problem or is_analytic(config.case):
+        return None  # user problems and analytic cases have no data set
     from bench.suite import canonical_json
 
     return config.case, config.tier, config.mesh, canonical_json(config.data)

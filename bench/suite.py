@@ -23,6 +23,12 @@ The schema is documented in ``docs/suites.md``; in short::
 
     [options.lm]                     # optional, per-method solver options
     xtol = 1e-10
+
+    [problems.rosen]                 # optional: a user problem, listed in 'cases' by its name
+    entry = "mypkg.mod:factory"      # or "path/to/file.py:factory" (problems.user)
+    args = {n = 5}                   # keyword arguments of the factory (optional)
+    grid = {seed = [1, 2]}           # optional: one problem per combination, named
+                                     # rosen-seed1, rosen-seed2
 """
 
 from __future__ import annotations
@@ -69,7 +75,12 @@ SUITE_KEYS = {
     "polish_budget": "FE evaluations of the polish after a surrogate-track run (default 100)",
 }
 PART_KEYS = tuple(k for k in SUITE_KEYS if k not in ("name", "description"))
-TOP_KEYS = ("suite", "part", "data", "options")
+TOP_KEYS = ("suite", "part", "data", "options", "problems")
+PROBLEM_KEYS = {
+    "entry": "'package.module:factory' or 'path/to/file.py:factory' (problems.user)",
+    "args": "table of keyword arguments of the factory (optional)",
+    "grid": "table of lists: one problem per combination of these arguments (optional)",
+}
 
 
 @dataclass(frozen=True)
@@ -78,7 +89,9 @@ class RunConfig:
 
     ``start`` is ``"default"`` (the case's default start, ``start_index`` 0) or ``"random"``
     (the ``start_index``-th random start drawn for ``seed``). ``data`` and ``options`` hold
-    only the settings written in the suite (defaults are the library's).
+    only the settings written in the suite (defaults are the library's). ``problem`` is empty for
+    the FE and analytic cases; for a user problem it is ``{"entry": ..., "args": {...}}`` and
+    ``case`` is the problem's name in the suite.
     """
 
     case: str
@@ -97,6 +110,7 @@ class RunConfig:
     jacobian: str = "exact"
     budget_unit: str = "evaluations"
     polish_budget: int = 0
+    problem: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """The configuration as a dict; the keys added after schema 2 appear only when they differ
@@ -157,7 +171,13 @@ class RunConfig:
 
 #: Run-configuration keys added after schema 2, with their defaults (left out of the hash when
 #: default).
-_LATER_KEYS = {"track": "fe", "jacobian": "exact", "budget_unit": "evaluations", "polish_budget": 0}
+_LATER_KEYS = {
+    "track": "fe",
+    "jacobian": "exact",
+    "budget_unit": "evaluations",
+    "polish_budget": 0,
+    "problem": {},
+}
 TRACKS = ("fe", "surrogate")
 JACOBIANS = ("exact", "forward", "central")
 BUDGET_UNITS = ("evaluations", "forward-equivalents")
@@ -193,7 +213,7 @@ class Part:
     budget_unit: str = "evaluations"
     polish_budget: int = 100
 
-    def runs(self, data: dict, options: dict) -> list[RunConfig]:
+    def runs(self, data: dict, options: dict, problems: dict | None = None) -> list[RunConfig]:
         """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
         start index. The consistent tier is never corrected (it runs once, untreated, whatever
         the treatments); the Jacobian choice only multiplies
@@ -239,6 +259,7 @@ class Part:
                         jacobian=jac,
                         budget_unit=self.budget_unit,
                         polish_budget=self.polish_budget if track == "surrogate" else 0,
+                        problem=dict((problems or {}).get(case, {})),
                     )
                 )
         return out
@@ -254,12 +275,13 @@ class Suite:
     options: dict = field(default_factory=dict)  # method -> {option: value}
     description: str = ""
     source: str | None = None  # the TOML text it was read from, if any
+    problems: dict = field(default_factory=dict)  # name -> {"entry": ..., "args": {...}}
 
     def runs(self) -> list[RunConfig]:
         """All runs of all parts, each once (in part order)."""
         seen, out = set(), []
         for part in self.parts:
-            for r in part.runs(self.data, self.options):
+            for r in part.runs(self.data, self.options, self.problems):
                 if r.hash not in seen:
                     seen.add(r.hash)
                     out.append(r)
@@ -452,13 +474,15 @@ def parse_suite(
 
     from solvers.base import option_value_error
 
+    problems = _parse_problems(raw.get("problems", {}), err)
+
     parts_raw = raw.get("part", [])
     if not isinstance(parts_raw, list) or not all(isinstance(p, dict) for p in parts_raw):
         err("'part' must be an array of tables: [[part]]")
         parts_raw = []
     specs = []
     if not parts_raw:
-        specs.append(_parse_spec(s, err))
+        specs.append(_parse_spec(s, err, problems))
     else:
         for i, part in enumerate(parts_raw, 1):
             for key in part:
@@ -472,7 +496,7 @@ def parse_suite(
             def part_err(msg, i=i):
                 errors.append(msg.replace("[suite]", f"[[part]] {i}:", 1))
 
-            specs.append(_parse_spec(merged, part_err))
+            specs.append(_parse_spec(merged, part_err, problems))
     methods = list(dict.fromkeys(m for sp in specs for m in sp["methods"] if isinstance(m, str)))
 
     # [data]
@@ -566,18 +590,68 @@ def parse_suite(
         options=clean_options,
         description=description,
         source=source,
+        problems=problems,
     )
 
 
-def _parse_spec(s: dict, err) -> dict:
+def _parse_problems(raw, err) -> dict[str, dict]:
+    """Validate the ``[problems.<name>]`` tables; return ``name -> {"entry", "args"}`` with every
+    grid combination expanded (``<name>-<key><value>...``)."""
+    from problems.user import entry_point_error, load_factory
+
+    if not isinstance(raw, dict):
+        err("'problems' must be a table of [problems.<name>] tables")
+        return {}
+    out: dict[str, dict] = {}
+    for name, table in raw.items():
+        where = f"[problems.{_q(name)}]"
+        if not isinstance(table, dict):
+            err(f"{where} must be a table with 'entry' (and optionally 'args', 'grid')")
+            continue
+        for key in table:
+            if key not in PROBLEM_KEYS:
+                err(
+                    f"{where} unknown key {key!r}{_did_you_mean(key, PROBLEM_KEYS)}; allowed: "
+                    f"{', '.join(PROBLEM_KEYS)}"
+                )
+        entry = table.get("entry")
+        why = entry_point_error(entry) if entry is not None else f"{where} missing key 'entry'"
+        if why is None:
+            try:
+                load_factory(entry)
+            except ValueError as exc:
+                why = str(exc)
+        if why:
+            err(f"{where} {why}" if not why.startswith(where) else why)
+            continue
+        args, grid = table.get("args", {}), table.get("grid", {})
+        if not isinstance(args, dict):
+            err(f"{where} args must be a table of keyword arguments, got {args!r}")
+            continue
+        if not isinstance(grid, dict) or not all(isinstance(v, list) and v for v in grid.values()):
+            err(f"{where} grid must be a table of non-empty lists, got {grid!r}")
+            continue
+        keys = list(grid)
+        for combo in itertools.product(*(grid[k] for k in keys)):
+            full = name + "".join(f"-{k}{v}" for k, v in zip(keys, combo))
+            out[full] = {
+                "entry": entry,
+                "args": dict(sorted((args | dict(zip(keys, combo))).items())),
+            }
+    return out
+
+
+def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
     """Validate the run dimensions of a [suite] table (or a [[part]] merged over it); returns
-    them as a dict of clean values (errors go to ``err``)."""
+    them as a dict of clean values (errors go to ``err``). ``problems``: the suite's user
+    problems (names allowed in ``cases``; the default ``cases`` when there are any)."""
     # cases
     from problems.inverse.cases import CASES, all_cases
     from solvers import METHODS, find_method
 
-    known_cases = all_cases()
-    cases = s.get("cases")
+    problems = problems or {}
+    known_cases = list(all_cases()) + list(problems)
+    cases = s.get("cases", list(problems) or None)
     if cases is None:
         err("[suite] missing key 'cases' (\"all\" or a list of case names)")
         cases = []
@@ -660,9 +734,7 @@ def _parse_spec(s: dict, err) -> dict:
     jacobians = _choice_list(s, "jacobians", ["exact"], JACOBIANS, err)
     budget_unit = s.get("budget_unit", "evaluations")
     if budget_unit not in BUDGET_UNITS:
-        err(
-            f"[suite] budget_unit = {budget_unit!r} is unknown; allowed: {', '.join(BUDGET_UNITS)}"
-        )
+        err(f"[suite] budget_unit = {budget_unit!r} is unknown; allowed: {', '.join(BUDGET_UNITS)}")
         budget_unit = "evaluations"
     polish_budget = s.get("polish_budget", 100)
     if isinstance(polish_budget, bool) or not isinstance(polish_budget, int) or polish_budget < 1:

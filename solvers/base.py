@@ -39,6 +39,12 @@ from problems.io import jsonio
 from solvers.result import RunResult
 
 FAMILIES = ("local", "global", "sampling")
+
+#: Methods that need residuals (least squares) or a likelihood; they refuse a scalar objective
+#: (problems.user.ScalarProblem), whose cost is f itself
+LEAST_SQUARES_ONLY = (
+    "lm", "lm-minpack", "trf", "gauss-newton", "multistart-lm", "pso+lm", "mcmc"
+)
 STATUSES = ("converged", "budget", "max_iterations", "failed", "stalled")
 
 
@@ -404,6 +410,11 @@ def solve(
     ``METHODS[method].options``); unknown options raise ``ValueError``. See the module docstring.
     """
     info = get_method(method)
+    if getattr(objective, "scalar", False) and info.name in LEAST_SQUARES_ONLY:
+        raise ValueError(
+            f"method {info.name!r} needs a least-squares problem (residuals); this problem is a "
+            "scalar objective f(x): use a global or derivative-free method"
+        )
     opts = resolve_options(info, options)
     budget = int(budget)
     if budget < 1:

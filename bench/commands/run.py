@@ -54,7 +54,7 @@ def main(args) -> int:
     fe_evals = sum(
         r.polish_budget if r.track == "surrogate" else r.budget
         for r in pending
-        if not get_case(r.case).is_analytic
+        if not r.problem and not get_case(r.case).is_analytic
     )
     warn_if_long(
         NAME, fe_evals, suite.mesh, workers=args.workers, what=f"{len(pending)} pending runs"

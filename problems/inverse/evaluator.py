@@ -188,6 +188,9 @@ class Evaluator:
                 "(forward-equivalents of a response + Jacobian)"
             )
         self.problem = problem
+        # a scalar objective (problems.user.ScalarProblem): the cost is the model's one value f
+        # and the "residual" kept is [f] (what finite differences difference), not a residual
+        self.scalar = bool(getattr(problem, "scalar", False))
         self.mapper = mapper
         self.cache = cache
         self.exact_jacobian = exact_jacobian and provides_jacobian(problem.model)
@@ -335,8 +338,9 @@ class Evaluator:
         if r is None:
             return self._failure(x, why, res.wall_s)
         J = None if res.jacobian is None else self.problem.residual_jacobian(res.jacobian)
+        cost = float(r[0]) if self.scalar else float(r @ r)
         return Evaluation(
-            x, float(r @ r), r, True, True, res.message, False, res.wall_s, J, res.plain_wall_s
+            x, cost, r, True, True, res.message, False, res.wall_s, J, res.plain_wall_s
         )
 
     def _failure(self, x, message, wall_s=0.0, feasible=True) -> Evaluation:
@@ -624,11 +628,14 @@ class Evaluator:
         return J
 
     def gradient(self, z, **kw) -> tuple[float, np.ndarray]:
-        """``cost`` and its gradient ``2 J^T R`` in z (through :meth:`jacobian`)."""
+        """``cost`` and its gradient ``2 J^T R`` in z (through :meth:`jacobian`); of a scalar
+        problem, ``df/dz`` (the one row of the value's Jacobian)."""
         ev = self.evaluate(z, with_jacobian=self.exact_jacobian)
         if not ev.usable:
             return ev.cost, np.zeros(self.n_params)
         J = ev.jacobian if ev.jacobian is not None else self.jacobian(z, r0=ev.residual, **kw)
+        if self.scalar:
+            return ev.cost, J[0].copy()
         return ev.cost, 2.0 * J.T @ ev.residual
 
 

@@ -1,0 +1,176 @@
+"""User problems: entry points in suites and the CLI, scalar objectives, success rules, and the
+hashes of the shipped FE suites (unchanged by the new fields)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench import store
+from bench.runner import run_suite
+from bench.suite import load_suite, parse_suite
+from problems.inverse.evaluator import Evaluator
+from problems.user import ScalarProblem, UserProblem, correct_digits, least_squares, load_problem
+from solvers import solve
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+# --- factories used by the tests (entry points "tests.test_user_problems:...") -------------------
+def sphere(n: int = 3, shift: float = 0.5, infinite: bool = False):
+    """f(x) = sum (x - shift)^2 + 1 over [-5, 5]^n (or R^n): f_min = 1 at x = shift."""
+    lo, hi = (-np.inf, np.inf) if infinite else (-5.0, 5.0)
+    return UserProblem(
+        ScalarProblem(_Sphere(shift), np.full(n, lo), np.full(n, hi)),
+        x0=np.full(n, 2.0),
+        f_min=1.0,
+        success={"kind": "f-target", "target": 1e-6},
+    )
+
+
+class _Sphere:
+    def __init__(self, shift):
+        self.shift = shift
+
+    def __call__(self, x):
+        return float(np.sum((np.asarray(x) - self.shift) ** 2) + 1.0)
+
+
+def _exp_model(x):
+    t = np.linspace(0.0, 4.0, 20)
+    return x[0] * np.exp(-x[1] * t)
+
+
+def exponential():
+    """y = 2 exp(-0.7 t), noiseless: certified answer x = (2, 0.7)."""
+    data = _exp_model(np.array([2.0, 0.7]))
+    p = least_squares(_exp_model, data, [0.1, 0.01], [10.0, 5.0], sigma=0.01, names=["A", "k"])
+    return UserProblem(p, x0=[1.0, 0.3], x_ref=[2.0, 0.7], success={"kind": "digits", "digits": 4})
+
+
+# --- the shipped suites keep their hashes ---------------------------------------------------------
+@pytest.mark.parametrize("name", ["default", "comparison"])
+def test_shipped_suite_hashes_unchanged(name):
+    """Every run of the shipped suite still has its record in results/<name>/runs (the new
+    'problem' field stays out of the hash of FE runs)."""
+    suite = load_suite(ROOT / "suites" / f"{name}.toml")
+    have = {p.stem for p in store.runs_dir(ROOT / "results" / name).glob("*.json")}
+    runs = suite.runs()
+    missing = [r.label for r in runs if r.hash not in have]
+    assert len(runs) == len(have) and not missing, missing[:5]
+
+
+# --- entry points ---------------------------------------------------------------------------------
+def test_entry_point_by_module_and_by_file(tmp_path):
+    up = load_problem("tests.test_user_problems:sphere", {"n": 2})
+    assert up.kind == "scalar" and up.problem.n_params == 2
+    f = tmp_path / "myproblem.py"
+    f.write_text(
+        "import numpy as np\nfrom problems.user import ScalarProblem\n"
+        "def make(scale=1.0):\n"
+        "    return ScalarProblem(lambda x: scale * float(np.sum(x ** 2)), [-1, -1], [1, 1])\n"
+    )
+    up2 = load_problem(f"{f}:make", {"scale": 3.0})
+    assert up2.success.kind == "solver" and np.allclose(up2.x0, 0.0)
+    with pytest.raises(ValueError, match="has no function 'nope'"):
+        load_problem(f"{f}:nope")
+    with pytest.raises(ValueError, match="does not exist"):
+        load_problem("missing/file.py:make")
+
+
+def test_suite_validation_names_the_problem_table():
+    raw = {
+        "suite": {"methods": ["de"], "budgets": [10]},
+        "problems": {"s": {"entry": "tests.test_user_problems:nothing", "argz": {}}},
+    }
+    with pytest.raises(ValueError) as exc:
+        parse_suite(raw)
+    text = str(exc.value)
+    assert "[problems.s] unknown key 'argz'" in text and "has no function 'nothing'" in text
+
+
+def test_grid_expands_and_hash_carries_the_problem():
+    raw = {
+        "suite": {"methods": ["de"], "budgets": [10]},
+        "problems": {
+            "sph": {
+                "entry": "tests.test_user_problems:sphere",
+                "args": {"n": 2},
+                "grid": {"shift": [0.0, 1.0]},
+            }
+        },
+    }
+    suite = parse_suite(raw)
+    runs = suite.runs()
+    assert [r.case for r in runs] == ["sph-shift0.0", "sph-shift1.0"]
+    assert runs[0].to_dict()["problem"] == {
+        "entry": "tests.test_user_problems:sphere",
+        "args": {"n": 2, "shift": 0.0},
+    }
+    assert runs[0].hash != runs[1].hash
+
+
+# --- scalar objectives ----------------------------------------------------------------------------
+def test_scalar_cost_is_f_and_counts_are_real():
+    up = sphere(n=2)
+    calls = []
+    p = up.problem
+    inner = p.model.fn
+    p.model.fn = lambda x: calls.append(1) or inner(x)
+    ev = Evaluator(p)
+    res = solve(ev, "de", budget=300, seed=1, x0=up.x0)
+    assert res.cost == pytest.approx(1.0, abs=1e-3)  # f itself, not a sum of squares
+    assert res.n_evals == len(calls) <= 300
+
+
+def test_least_squares_methods_refuse_a_scalar_problem():
+    up = sphere(n=2)
+    with pytest.raises(ValueError, match="needs a least-squares problem"):
+        solve(Evaluator(up.problem), "lm", budget=20, x0=up.x0)
+
+
+def test_infinite_bounds_scalar_with_a_local_method():
+    up = sphere(n=3, infinite=True)
+    res = solve(Evaluator(up.problem), "nlopt:SBPLX", budget=600, x0=up.x0)
+    v = up.judge(np.asarray(res.x), res.cost, res.success)
+    assert v["success"] and v["f_gap"] <= 1e-6
+
+
+def test_sa_gradient_of_a_scalar_problem_is_df_dz():
+    up = sphere(n=2, shift=0.0)
+    ev = Evaluator(up.problem)
+    f, g = ev.gradient(np.array([1.0, -2.0]))
+    assert f == pytest.approx(6.0) and np.allclose(g, [2.0, -4.0], atol=1e-4)
+
+
+def test_correct_digits():
+    assert correct_digits([1.0001, 2.0], [1.0, 2.0]) == pytest.approx(4.0, abs=1e-6)
+    assert correct_digits([np.nan, 2.0], [1.0, 2.0]) == 0.0
+
+
+# --- a suite of user problems, run and judged ---
+def test_suite_of_user_problems_runs_and_judges(tmp_path):
+    raw = {
+        "suite": {"name": "user", "methods": ["cma", "lm"], "budgets": [400]},
+        "problems": {
+            "sphere": {"entry": "tests.test_user_problems:sphere", "args": {"n": 2}},
+            "expo": {"entry": "tests.test_user_problems:exponential"},
+        },
+    }
+    summary = run_suite(parse_suite(raw), tmp_path, workers=1, progress=False)
+    recs = {(r["config"]["case"], r["config"]["method"]): r for r in store.load_records(tmp_path)}
+    assert summary.total == 4 and summary.crashed == 1  # lm on the scalar sphere refuses
+    assert "needs a least-squares problem" in recs[("sphere", "lm")]["result"]["message"]
+    sph = recs[("sphere", "cma")]["result"]["extra"]["problem"]
+    assert sph["success"] and sph["kind"] == "scalar" and sph["success_text"] == "f − f_min ≤ 1e-06"
+    trace = sph["trace"]
+    assert trace[-1][1] == pytest.approx(recs[("sphere", "cma")]["result"]["cost"])
+    assert all(a[0] < b[0] and a[1] > b[1] for a, b in zip(trace, trace[1:]))
+    expo = recs[("expo", "lm")]["result"]["extra"]["problem"]
+    assert expo["kind"] == "least-squares" and expo["digits"] >= 4 and expo["success"]
+    json.dumps(sph)  # plain data
+    assert math.isfinite(recs[("expo", "cma")]["result"]["cost"])
