@@ -4,9 +4,10 @@ The CSR pattern and the map from element-matrix entries to CSR slots (:class:`Pa
 computed once per mesh. Two implementations use them:
 
 * :class:`FusedAssembler` (production): compiled (numba) kernels that loop over elements, form
-  each element matrix in a 24 x 24 local buffer and add it straight into the CSR data array through
-  the slot map; likewise the internal force and the strain increment. No per-element temporaries
-  of shape (ne, 24, 24) or (ne, 8, 6, 24) are created.
+  each element matrix in an nd x nd local buffer (nd = 3 n: 24 for the 8-node, 81 for the 27-node
+  hexahedron; the kernels read n off the arrays they are given) and add it straight into the CSR
+  data array through the slot map; likewise the internal force and the strain increment. No
+  per-element temporaries of shape (ne, nd, nd) are created.
 * :func:`element_matrices` / :func:`element_forces` + :meth:`Pattern.matrix` /
   :meth:`Pattern.vector` (reference): batched numpy products and one ``np.bincount``. They are what
   the fused kernels are tested against and the "numpy" assembly of
@@ -17,14 +18,15 @@ How the fused tangent saves work: every strain operator of this code has the for
 ``B_g = P Bs_g + (1/3) m c_g^T`` with ``Bs_g`` the standard (sparse) small-strain operator of the
 shape-function gradients at Gauss point g, ``m = [1, 1, 1, 0, 0, 0]``, ``P = I - m m^T / 3`` the
 deviatoric projector (P m = 0) and ``c_g`` the volumetric row (the element mean b-bar for the
-mean-dilatation element, the point's own divergence row for the standard element). Then
+mean-dilatation element, the projection onto {1, x, y, z} of the Q2-P1 element, the point's own
+divergence row for a standard element). Then
 
     B_g^T D B_g = Bs^T (P D P) Bs + (1/3) Bs^T P D m c^T + (1/3) c m^T D P Bs
                   + (1/9) (m^T D m) c c^T,
 
 and for B-bar (c the same at all Gauss points) the last three terms sum over g into two rank-one
 updates per element. The first term uses the sparsity of ``Bs`` (three non-zeros per column).
-That is about half the arithmetic of the dense ``B^T D B`` and vectorises over rows of 24.
+That is about half the arithmetic of the dense ``B^T D B`` and vectorises over rows of nd.
 
 Units: B in 1/mm, D and stress in MPa, dV in mm^3; K in N/mm, forces in N, strain dimensionless.
 """
@@ -44,8 +46,8 @@ _JIT = dict(cache=True, nogil=True, error_model="numpy")
 class Pattern:
     """CSR sparsity of the global matrix and the scatter map of element entries.
 
-    edofs   : (ne, 24) global dof numbers of each element
-    slot    : (ne * 24 * 24,) CSR data index of every element-matrix entry
+    edofs   : (ne, nd) global dof numbers of each element (nd = 3 x nodes per element)
+    slot    : (ne * nd * nd,) CSR data index of every element-matrix entry
     indptr, indices : the CSR structure, n_dofs x n_dofs
     """
 
@@ -56,12 +58,12 @@ class Pattern:
     n_dofs: int
 
     def matrix(self, Ke: np.ndarray) -> sp.csr_matrix:
-        """Global matrix from element matrices Ke (ne, 24, 24) (numpy reference path)."""
+        """Global matrix from element matrices Ke (ne, nd, nd) (numpy reference path)."""
         data = np.bincount(self.slot, weights=Ke.ravel(), minlength=len(self.indices))
         return self.csr(data)
 
     def vector(self, fe: np.ndarray) -> np.ndarray:
-        """Global vector from element vectors fe (ne, 24) (numpy reference path)."""
+        """Global vector from element vectors fe (ne, nd) (numpy reference path)."""
         return np.bincount(self.edofs.ravel(), weights=fe.ravel(), minlength=self.n_dofs)
 
     def csr(self, data: np.ndarray) -> sp.csr_matrix:
@@ -70,52 +72,53 @@ class Pattern:
 
 
 def build_pattern(elements: np.ndarray, n_nodes: int) -> Pattern:
-    """Sparsity pattern of 3-dof-per-node hexahedra (ne, 8) over ``n_nodes`` nodes."""
-    edofs = (3 * elements[:, :, None] + np.arange(3)).reshape(len(elements), 24)
+    """Sparsity pattern of 3-dof-per-node hexahedra (ne, 8) or (ne, 27) over ``n_nodes`` nodes."""
+    nd = 3 * elements.shape[1]
+    edofs = (3 * elements[:, :, None] + np.arange(3)).reshape(len(elements), nd)
     n = 3 * n_nodes
-    rows = np.repeat(edofs, 24, axis=1).ravel()
-    cols = np.tile(edofs, (1, 24)).ravel()
+    rows = np.repeat(edofs, nd, axis=1).ravel()
+    cols = np.tile(edofs, (1, nd)).ravel()
     keys, slot = np.unique(rows.astype(np.int64) * n + cols, return_inverse=True)
     indptr = np.searchsorted(keys // n, np.arange(n + 1)).astype(np.int64)
     return Pattern(edofs, slot.ravel(), indptr, (keys % n).astype(np.int64), n)
 
 
 def element_matrices(B: np.ndarray, D: np.ndarray, dV: np.ndarray) -> np.ndarray:
-    """Ke = sum_g B_g^T D_g B_g dV_g for B (ne, g, 6, 24), D (ne, g, 6, 6), dV (ne, g)
-    -> (ne, 24, 24).
+    """Ke = sum_g B_g^T D_g B_g dV_g for B (ne, g, 6, nd), D (ne, g, 6, 6), dV (ne, g)
+    -> (ne, nd, nd).
 
     Numpy reference of :meth:`FusedAssembler.tangent`.
     """
     DB = np.matmul(D, B) * dV[..., None, None]
-    ne, g = B.shape[:2]
-    # Contract over (g, 6) as one matrix product per element: (ne, 24, g*6) @ (ne, g*6, 24).
-    Bt = B.transpose(0, 3, 1, 2).reshape(ne, 24, g * 6)
-    return np.matmul(Bt, DB.reshape(ne, g * 6, 24))
+    ne, g, _, nd = B.shape
+    # Contract over (g, 6) as one matrix product per element: (ne, nd, g*6) @ (ne, g*6, nd).
+    Bt = B.transpose(0, 3, 1, 2).reshape(ne, nd, g * 6)
+    return np.matmul(Bt, DB.reshape(ne, g * 6, nd))
 
 
 def element_forces(B: np.ndarray, stress: np.ndarray, dV: np.ndarray) -> np.ndarray:
-    """fe = sum_g B_g^T sigma_g dV_g for stress (ne, g, 6) -> (ne, 24). Numpy reference."""
+    """fe = sum_g B_g^T sigma_g dV_g for stress (ne, g, 6) -> (ne, nd). Numpy reference."""
     return np.einsum("egia,egi->ea", B, stress * dV[..., None])
 
 
 def split_operator(B: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Write B (ne, g, 6, 24) as ``P Bs_g + (1/3) m c_g^T`` (see the module docstring).
+    """Write B (ne, g, 6, nd) as ``P Bs_g + (1/3) m c_g^T`` (see the module docstring).
 
-    Returns the shape-function gradients G (ne, g, 8, 3) 1/mm read off the shear rows of B, the
-    volumetric rows c (ne, g, 24) 1/mm, and whether c is the same at all Gauss points of each
+    Returns the shape-function gradients G (ne, g, n, 3) 1/mm read off the shear rows of B, the
+    volumetric rows c (ne, g, nd) 1/mm, and whether c is the same at all Gauss points of each
     element (mean dilatation). Raises ValueError if B does not have that form.
     """
     # xz/uz, yz/uz, yz/uy
     G = np.stack([B[:, :, 4, 2::3], B[:, :, 3, 2::3], B[:, :, 3, 1::3]], axis=-1)
     c = B[:, :, 0] + B[:, :, 1] + B[:, :, 2]
-    ne, ng = B.shape[:2]
-    Bs = np.zeros((ne, ng, 6, 8, 3))
+    ne, ng, _, nd = B.shape
+    Bs = np.zeros((ne, ng, 6, nd // 3, 3))
     gx, gy, gz = G[..., 0], G[..., 1], G[..., 2]
     Bs[:, :, 0, :, 0], Bs[:, :, 1, :, 1], Bs[:, :, 2, :, 2] = gx, gy, gz
     Bs[:, :, 3, :, 1], Bs[:, :, 3, :, 2] = gz, gy
     Bs[:, :, 4, :, 0], Bs[:, :, 4, :, 2] = gz, gx
     Bs[:, :, 5, :, 0], Bs[:, :, 5, :, 1] = gy, gx
-    Bs = Bs.reshape(ne, ng, 6, 24)
+    Bs = Bs.reshape(ne, ng, 6, nd)
     Bs[:, :, :3] -= (Bs[:, :, 0] + Bs[:, :, 1] + Bs[:, :, 2])[:, :, None] / 3.0
     Bs[:, :, :3] += c[:, :, None] / 3.0
     scale = max(np.abs(B).max(), 1e-300)
@@ -130,7 +133,7 @@ def split_operator(B: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
 class FusedAssembler:
     """Compiled assembly on one discretisation: tangent data, internal force, strain increment.
 
-    B  : (ne, g, 6, 24) strain operator, 1/mm (standard or B-bar)
+    B  : (ne, g, 6, nd) strain operator, 1/mm (standard or B-bar; nd = 24 or 81)
     dV : (ne, g) integration weights, mm^3
     pattern : the CSR pattern and slot map
     """
@@ -149,7 +152,7 @@ class FusedAssembler:
         """Sparse-matrix data of K = sum_e sum_g B^T D B dV, N/mm, for D (n_points, 6, 6) or one
         (6, 6) MPa.
 
-        By default the CSR data (nnz,) of the pattern. ``slot`` (ne * 576,) maps every element
+        By default the CSR data (nnz,) of the pattern. ``slot`` (ne * nd^2,) maps every element
         entry to a position in an array of ``nnz`` values instead, -1 dropping it: that assembles
         any sub-block (e.g. the free-free block, already permuted) without the full matrix.
         """
@@ -202,19 +205,22 @@ class FusedAssembler:
 @njit(**_JIT)
 def _tangent_kernel(G, c, c_const, D, dV, slot, data):
     """data[:] = values of sum_e sum_g B^T D B dV with B = P Bs(G) + m c^T / 3 (module docstring),
-    element entry (e, a, b) added to data[slot[576 e + 24 a + b]] unless that slot is -1."""
+    element entry (e, a, b) added to data[slot[nd^2 e + nd a + b]] unless that slot is -1
+    (nd = 3 n, n = G.shape[2] nodes per element)."""
     ne, ng = dV.shape
+    nn = G.shape[2]
+    nd = 3 * nn
     per_point = D.shape[0] > 1
     data[:] = 0.0
-    Ke = np.empty((24, 24))
-    X = np.empty((6, 24))
+    Ke = np.empty((nd, nd))
+    X = np.empty((6, nd))
     Dt = np.empty((6, 6))
     Dm = np.empty(6)
     mD = np.empty(6)
     pdm = np.empty(6)
     pmd = np.empty(6)
-    U = np.empty(24)
-    V = np.empty(24)
+    U = np.empty(nd)
+    V = np.empty(nd)
     third = 1.0 / 3.0
     for e in range(ne):
         Ke[:, :] = 0.0
@@ -242,7 +248,7 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
                 corr = third * mDm if i < 3 else 0.0
                 pdm[i] = w * third * (Dm[i] - corr)
                 pmd[i] = w * third * (mD[i] - corr)
-            for b in range(8):  # X = Dt Bs
+            for b in range(nn):  # X = Dt Bs
                 gx = G[e, g, b, 0]
                 gy = G[e, g, b, 1]
                 gz = G[e, g, b, 2]
@@ -250,11 +256,11 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
                     X[r, 3 * b] = gx * Dt[r, 0] + gz * Dt[r, 4] + gy * Dt[r, 5]
                     X[r, 3 * b + 1] = gy * Dt[r, 1] + gz * Dt[r, 3] + gx * Dt[r, 5]
                     X[r, 3 * b + 2] = gz * Dt[r, 2] + gy * Dt[r, 3] + gx * Dt[r, 4]
-            for a in range(8):  # Ke += Bs^T X
+            for a in range(nn):  # Ke += Bs^T X
                 gx = G[e, g, a, 0]
                 gy = G[e, g, a, 1]
                 gz = G[e, g, a, 2]
-                for k in range(24):
+                for k in range(nd):
                     Ke[3 * a, k] += gx * X[0, k] + gz * X[4, k] + gy * X[5, k]
                     Ke[3 * a + 1, k] += gy * X[1, k] + gz * X[3, k] + gx * X[5, k]
                     Ke[3 * a + 2, k] += gz * X[2, k] + gy * X[3, k] + gx * X[4, k]
@@ -268,23 +274,23 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
             if c_const:
                 s += sg
             else:  # rank-one terms of this point
-                for a in range(24):
+                for a in range(nd):
                     ua = U[a] + sg * c[e, g, a]
                     ca = c[e, g, a]
-                    for k in range(24):
+                    for k in range(nd):
                         Ke[a, k] += ua * c[e, g, k] + ca * V[k]
                 U[:] = 0.0
                 V[:] = 0.0
         if c_const:
-            for a in range(24):
+            for a in range(nd):
                 ua = U[a] + s * c[e, 0, a]
                 ca = c[e, 0, a]
-                for k in range(24):
+                for k in range(nd):
                     Ke[a, k] += ua * c[e, 0, k] + ca * V[k]
-        base = e * 576
-        for a in range(24):
-            for k in range(24):
-                j = slot[base + a * 24 + k]
+        base = e * nd * nd
+        for a in range(nd):
+            for k in range(nd):
+                j = slot[base + a * nd + k]
                 if j >= 0:
                     data[j] += Ke[a, k]
 
@@ -293,8 +299,9 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
 def _force_kernel(B, stress, dV, edofs, out):
     """out[:] = sum_e sum_g B^T sigma dV scattered to the global dofs."""
     ne, ng = dV.shape
+    nd = B.shape[3]
     out[:] = 0.0
-    fe = np.empty(24)
+    fe = np.empty(nd)
     for e in range(ne):
         fe[:] = 0.0
         for g in range(ng):
@@ -302,24 +309,24 @@ def _force_kernel(B, stress, dV, edofs, out):
             w = dV[e, g]
             for i in range(6):
                 si = stress[p, i] * w
-                for a in range(24):
+                for a in range(nd):
                     fe[a] += B[e, g, i, a] * si
-        for a in range(24):
+        for a in range(nd):
             out[edofs[e, a]] += fe[a]
 
 
 @njit(**_JIT)
 def _strain_kernel(B, u, edofs, out):
     """out[p] = B_p u_e: the strain at every Gauss point."""
-    ne, ng = B.shape[0], B.shape[1]
-    ue = np.empty(24)
+    ne, ng, _, nd = B.shape
+    ue = np.empty(nd)
     for e in range(ne):
-        for a in range(24):
+        for a in range(nd):
             ue[a] = u[edofs[e, a]]
         for g in range(ng):
             p = e * ng + g
             for i in range(6):
                 s = 0.0
-                for a in range(24):
+                for a in range(nd):
                     s += B[e, g, i, a] * ue[a]
                 out[p, i] = s

@@ -30,13 +30,16 @@ def measurement_grid(
 
 
 def front_face_operator(mesh: Mesh, points_mm) -> sp.csr_matrix:
-    """Sparse (m, n_nodes) bilinear interpolation from node values to front-face points (y, z) mm.
+    """Sparse (m, n_nodes) interpolation from node values to front-face points (y, z) mm: the
+    elements' own shape functions on the face, bilinear (8-node) or biquadratic (27-node).
 
-    Uses the structured grid of the front face x = max x (node coordinates of the undeformed mesh).
+    Uses the structured grid of the front face x = max x (node coordinates of the undeformed mesh;
+    the elements' faces are flat with straight edges, so the face map is affine per direction).
     """
     pts = np.atleast_2d(np.asarray(points_mm, float))
-    g = mesh.grid_index()[-1]  # (ny+1, nz+1) node indices on x = 75 mm
-    ys, zs = mesh.nodes[g[:, 0], 1], mesh.nodes[g[0, :], 2]
+    g = mesh.grid_index()[-1]  # (gy+1, gz+1) node indices on x = 75 mm
+    p = mesh.grid_shape[1] // mesh.shape[1]  # nodes per element edge - 1: 1 or 2
+    ys, zs = mesh.nodes[g[::p, 0], 1], mesh.nodes[g[0, ::p], 2]  # element corners
     y, z = pts[:, 0], pts[:, 1]
     if np.any((y < ys[0] - 1e-9) | (y > ys[-1] + 1e-9) | (z < zs[0] - 1e-9) | (z > zs[-1] + 1e-9)):
         raise ValueError(
@@ -47,7 +50,14 @@ def front_face_operator(mesh: Mesh, points_mm) -> sp.csr_matrix:
     k = np.clip(np.searchsorted(zs, z, side="right") - 1, 0, len(zs) - 2)
     s = (y - ys[j]) / (ys[j + 1] - ys[j])
     t = (z - zs[k]) / (zs[k + 1] - zs[k])
-    cols = np.stack([g[j, k], g[j + 1, k], g[j + 1, k + 1], g[j, k + 1]], axis=1)
-    w = np.stack([(1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t], axis=1)
-    rows = np.repeat(np.arange(len(pts)), 4)
+    if p == 1:
+        cols = np.stack([g[j, k], g[j + 1, k], g[j + 1, k + 1], g[j, k + 1]], axis=1)
+        w = np.stack([(1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t], axis=1)
+    else:  # quadratic Lagrange through the corners and the mid-node in each direction
+        ls = np.stack([(1 - s) * (1 - 2 * s), 4 * s * (1 - s), s * (2 * s - 1)], axis=1)
+        lt = np.stack([(1 - t) * (1 - 2 * t), 4 * t * (1 - t), t * (2 * t - 1)], axis=1)
+        a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        cols = g[2 * j[:, None] + a.ravel(), 2 * k[:, None] + b.ravel()]
+        w = ls[:, a.ravel()] * lt[:, b.ravel()]
+    rows = np.repeat(np.arange(len(pts)), w.shape[1])
     return sp.csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(len(pts), mesh.n_nodes))

@@ -46,7 +46,9 @@ class Mesh:
     """A structured hexahedral mesh.
 
     nodes    : (n_nodes, 3) coordinates, mm
-    elements : (n_elements, 8) node indices in :data:`HEX_CORNERS` order
+    elements : (n_elements, 8) node indices in :data:`HEX_CORNERS` order, or (n_elements, 27)
+               for the 27-node hexahedron (problems/fe/mesh_quadratic.py), whose nodes form the
+               structured grid of twice the element counts
     shape    : (nx, ny, nz) element counts
     """
 
@@ -66,10 +68,18 @@ class Mesh:
     def n_dofs(self) -> int:
         return 3 * len(self.nodes)
 
+    @property
+    def grid_shape(self) -> tuple[int, int, int]:
+        """Node intervals of the structured node grid along x, y, z: ``shape`` for 8-node
+        elements, twice it for 27-node elements (mid-edge, mid-face and centre nodes)."""
+        p = 2 if self.elements.shape[1] == 27 else 1
+        return tuple(p * n for n in self.shape)
+
     def grid_index(self) -> np.ndarray:
-        """Node indices arranged as the structured grid, shape (nx+1, ny+1, nz+1)."""
-        nx, ny, nz = self.shape
-        return np.arange(self.n_nodes).reshape(nz + 1, ny + 1, nx + 1).transpose(2, 1, 0)
+        """Node indices arranged as the structured grid, shape (gx+1, gy+1, gz+1) with
+        :attr:`grid_shape` (gx, gy, gz) (= (nx, ny, nz) for 8-node elements)."""
+        gx, gy, gz = self.grid_shape
+        return np.arange(self.n_nodes).reshape(gz + 1, gy + 1, gx + 1).transpose(2, 1, 0)
 
     def face(self, name: str) -> np.ndarray:
         """Node indices of a boundary face: ``x0, x1, y0, y1, z0, z1`` (x1 = front, z1 = top)."""
@@ -212,9 +222,10 @@ def mid_height_mirror(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
         raise ValueError(
             f"the mid-height mirror needs an even nz (a node plane at mid-height), got nz = {nz}"
         )
-    layer_n, layer_e = (nx + 1) * (ny + 1), nx * ny
+    gx, gy, gz = mesh.grid_shape
+    layer_n, layer_e = (gx + 1) * (gy + 1), nx * ny
     k = np.arange(mesh.n_nodes) // layer_n
-    node_src = np.arange(mesh.n_nodes) - (k - np.minimum(k, nz - k)) * layer_n
+    node_src = np.arange(mesh.n_nodes) - (k - np.minimum(k, gz - k)) * layer_n
     ke = np.arange(mesh.n_elements) // layer_e
     elem_src = np.arange(mesh.n_elements) - (ke - np.minimum(ke, nz - 1 - ke)) * layer_e
     z = mesh.nodes[:, 2]
@@ -222,11 +233,11 @@ def mid_height_mirror(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     if not (
         np.allclose(mesh.nodes[:, :2], mesh.nodes[node_src, :2], rtol=0, atol=1e-9 * (z1 - z0))
         and np.allclose(
-            np.where(k > nz // 2, z0 + z1 - z, z), z[node_src], rtol=0, atol=1e-9 * (z1 - z0)
+            np.where(k > gz // 2, z0 + z1 - z, z), z[node_src], rtol=0, atol=1e-9 * (z1 - z0)
         )
     ):
         raise ValueError("the mesh is not symmetric about its mid-height plane")
-    return node_src, k > nz // 2, elem_src, ke >= nz // 2
+    return node_src, k > gz // 2, elem_src, ke >= nz // 2
 
 
 def lower_half(mesh: Mesh) -> Mesh:
@@ -234,7 +245,8 @@ def lower_half(mesh: Mesh) -> Mesh:
     element size."""
     mid_height_mirror(mesh)  # checks nz even and the symmetry of the nodes
     nx, ny, nz = mesh.shape
-    n_nodes, n_elements = (nx + 1) * (ny + 1) * (nz // 2 + 1), nx * ny * (nz // 2)
+    gx, gy, gz = mesh.grid_shape
+    n_nodes, n_elements = (gx + 1) * (gy + 1) * (gz // 2 + 1), nx * ny * (nz // 2)
     return Mesh(mesh.nodes[:n_nodes].copy(), mesh.elements[:n_elements].copy(), (nx, ny, nz // 2))
 
 
@@ -285,7 +297,7 @@ def distort(mesh: Mesh, amount: float, seed: int = 0) -> Mesh:
     Boundary nodes stay on their faces so that boundary conditions keep their meaning.
     """
     rng = np.random.default_rng(seed)
-    h = min(L / n for L, n in zip(np.ptp(mesh.nodes, axis=0), mesh.shape))
+    h = min(L / n for L, n in zip(np.ptp(mesh.nodes, axis=0), mesh.grid_shape))
     g = mesh.grid_index()
     interior = g[1:-1, 1:-1, 1:-1].ravel()
     nodes = mesh.nodes.copy()

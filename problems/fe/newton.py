@@ -39,7 +39,7 @@ from problems.fe.assembly import (
     element_forces,
     element_matrices,
 )
-from problems.fe.element import GAUSS_WEIGHTS, b_bar, gradients, strain_operator
+from problems.fe.element import element_mean, strain_operators
 from problems.fe.linear_solver import (
     LINEAR_SOLVERS,
     Factor,
@@ -143,8 +143,8 @@ class Discretisation:
     """
 
     mesh: Mesh
-    B: np.ndarray  # (ne, 8, 6, 24)
-    dV: np.ndarray  # (ne, 8) mm^3
+    B: np.ndarray  # (ne, g, 6, nd): g = 8, nd = 24 (8-node) or g = 27, nd = 81 (27-node)
+    dV: np.ndarray  # (ne, g) mm^3
     pattern: Pattern
     symmetry: str = "quarter"
     full_mesh: Mesh | None = None
@@ -165,18 +165,17 @@ def discretise(mesh: Mesh, *, use_b_bar: bool = True, symmetry: str = "quarter")
     half (nz even, mesh symmetric about mid-height; exact for identical plates, which are the only
     option); runs still report on ``mesh``. Mesh specs choose it by default where it is exact
     (:func:`problems.fe.mesh.parse_mesh_spec`); this low-level call solves what it is given.
-    ``use_b_bar=False`` gives the standard fully integrated element, which locks under
-    (nearly) isochoric deformation; it exists to demonstrate that, not for production runs.
+    The element is the mesh's: 8-node hexahedra with mean dilatation or 27-node hexahedra with the
+    Q2-P1 B-bar (:func:`problems.fe.element.strain_operators`). ``use_b_bar=False`` gives the
+    standard fully integrated element, which locks under (nearly) isochoric deformation; it exists
+    to demonstrate that, not for production runs.
     """
     check_symmetry(symmetry, mesh.shape)
     full = mesh
     if symmetry == "eighth":
         mesh = lower_half(mesh)
-    dNdx, detJ = gradients(mesh.nodes[mesh.elements])
-    B = b_bar(dNdx, detJ) if use_b_bar else strain_operator(dNdx)
-    return Discretisation(
-        mesh, B, detJ * GAUSS_WEIGHTS, build_pattern(mesh.elements, mesh.n_nodes), symmetry, full
-    )
+    B, dV = strain_operators(mesh.nodes[mesh.elements], use_b_bar)
+    return Discretisation(mesh, B, dV, build_pattern(mesh.elements, mesh.n_nodes), symmetry, full)
 
 
 @dataclass(frozen=True, eq=False)
@@ -330,6 +329,7 @@ def run(
     bc = BoundaryConditions(disc, loading.plates)
     solver = _Newton(disc, material, bc, settings)
     ne, nn = disc.mesh.n_elements, disc.mesh.n_nodes
+    ng = disc.dV.shape[1]  # Gauss points per element
     u = np.zeros(disc.pattern.n_dofs)
     stress = np.zeros((disc.n_points, 6))
     state = material.initial_state(disc.n_points)
@@ -372,8 +372,8 @@ def run(
         if not converged:
             break
         out_u.append(u.reshape(nn, 3).copy())
-        out_s.append(stress.reshape(ne, 8, 6).mean(axis=1))
-        out_h.append(state.reshape(ne, 8, -1).mean(axis=1))
+        out_s.append(element_mean(stress.reshape(ne, ng, 6)))
+        out_h.append(element_mean(state.reshape(ne, ng, -1)))
         out_f.append(bc.plate_force_kN(f_int))
         out_d.append(lam * loading.displacement_mm)
         if ddm is not None:
@@ -556,11 +556,11 @@ class _Newton:
         if self._fused is not None:
             K = self._fused.matrix(D)
         else:
-            ne = self.disc.mesh.n_elements
+            ne, ng = self.disc.dV.shape
             K = self.disc.pattern.matrix(
                 element_matrices(
                     self.disc.B,
-                    np.broadcast_to(D, (self.disc.n_points, 6, 6)).reshape(ne, 8, 6, 6),
+                    np.broadcast_to(D, (self.disc.n_points, 6, 6)).reshape(ne, ng, 6, 6),
                     self.disc.dV,
                 )
             )
@@ -625,9 +625,8 @@ class _Newton:
     def _internal_force(self, stress):
         if self._fused is not None:
             return self._fused.internal_force(stress)
-        ne = self.disc.mesh.n_elements
         return self.disc.pattern.vector(
-            element_forces(self.disc.B, stress.reshape(ne, 8, 6), self.disc.dV)
+            element_forces(self.disc.B, stress.reshape(self.disc.dV.shape + (6,)), self.disc.dV)
         )
 
     def _factorise(self, Kff, D) -> Factor:

@@ -524,11 +524,11 @@ class RecycledGCR:
 @njit(**_JIT)
 def _strains_kernel(B, U, cols, edofs, out):
     """out[p, j] = B_p U[edofs_e, j] for the columns j in ``cols`` (others untouched)."""
-    ne, ng = B.shape[0], B.shape[1]
+    ne, ng, _, nd = B.shape
     k = cols.shape[0]
-    ue = np.empty((k, 24))
+    ue = np.empty((k, nd))
     for e in range(ne):
-        for a in range(24):
+        for a in range(nd):
             for q in range(k):
                 ue[q, a] = U[edofs[e, a], cols[q]]
         for g in range(ng):
@@ -537,7 +537,7 @@ def _strains_kernel(B, U, cols, edofs, out):
                 c = cols[q]
                 for i in range(6):
                     s = 0.0
-                    for a in range(24):
+                    for a in range(nd):
                         s += B[e, g, i, a] * ue[q, a]
                     out[p, c, i] = s
 
@@ -546,9 +546,10 @@ def _strains_kernel(B, U, cols, edofs, out):
 def _forces_kernel(B, S, cols, dV, edofs, out):
     """out[:, q] = sum_e sum_g B^T S[:, cols[q]] dV scattered to the global dofs."""
     ne, ng = dV.shape
+    nd = B.shape[3]
     k = cols.shape[0]
     out[:, :] = 0.0
-    fe = np.empty((k, 24))
+    fe = np.empty((k, nd))
     for e in range(ne):
         fe[:, :] = 0.0
         for g in range(ng):
@@ -558,9 +559,9 @@ def _forces_kernel(B, S, cols, dV, edofs, out):
                 c = cols[q]
                 for i in range(6):
                     si = S[p, c, i] * w
-                    for a in range(24):
+                    for a in range(nd):
                         fe[q, a] += B[e, g, i, a] * si
-        for a in range(24):
+        for a in range(nd):
             d = edofs[e, a]
             for q in range(k):
                 out[d, q] += fe[q, a]
@@ -572,13 +573,14 @@ def _affine_kernel(B, dV, edofs, U, c, h, T, eps, dstress, dstate, f):
     T[p, :6] eps[p, q], dstate[p, q] = h[p, q] + T[p, 6:] eps[p, q] and f[:, q] = sum B^T
     dstress[:, q] dV (a non-finite dstress makes f non-finite)."""
     ne, ng = dV.shape
+    nd = B.shape[3]
     k, ns = c.shape[1], h.shape[2]
     f[:, :] = 0.0
-    ue = np.empty((k, 24))
-    fe = np.empty((k, 24))
+    ue = np.empty((k, nd))
+    fe = np.empty((k, nd))
     ep = np.empty(6)
     for e in range(ne):
-        for a in range(24):
+        for a in range(nd):
             for q in range(k):
                 ue[q, a] = U[edofs[e, a], q]
         fe[:, :] = 0.0
@@ -588,7 +590,7 @@ def _affine_kernel(B, dV, edofs, U, c, h, T, eps, dstress, dstate, f):
             for q in range(k):
                 for i in range(6):
                     s = 0.0
-                    for a in range(24):
+                    for a in range(nd):
                         s += B[e, g, i, a] * ue[q, a]
                     ep[i] = s
                     eps[p, q, i] = s
@@ -598,14 +600,14 @@ def _affine_kernel(B, dV, edofs, U, c, h, T, eps, dstress, dstate, f):
                         s += T[p, r, j] * ep[j]
                     dstress[p, q, r] = s
                     sw = s * w
-                    for a in range(24):
+                    for a in range(nd):
                         fe[q, a] += B[e, g, r, a] * sw
                 for r in range(ns):
                     s = h[p, q, r]
                     for j in range(6):
                         s += T[p, 6 + r, j] * ep[j]
                     dstate[p, q, r] = s
-        for a in range(24):
+        for a in range(nd):
             d = edofs[e, a]
             for q in range(k):
                 f[d, q] += fe[q, a]

@@ -9,15 +9,17 @@ import numpy as np
 
 from problems.fe.newton import Response
 
-_VOIGT = ("xx", "yy", "zz", "yz", "xz", "xy")
+#: meshio cell type of the 8- and 27-node hexahedra (their node orders are VTK's)
+_CELL_TYPES = {8: "hexahedron", 27: "hexahedron27"}
 
 
 def write_vtu(response: Response, directory: str | Path, stem: str = "cube") -> list[Path]:
     """Write ``stem_NNNN.vtu`` for every snapshot and ``stem.pvd``; returns the VTU paths.
 
-    Point data: ``displacement`` (mm). Cell data: ``stress`` (6 Voigt components, MPa, in the
-    order xx, yy, zz, yz, xz, xy), ``von_mises`` (MPa), and every material history variable
-    (e.g. ``eqps``).
+    Cells are VTK hexahedra (type 12) or, for 27-node meshes, triquadratic hexahedra (type 29,
+    meshio ``hexahedron27``). Point data: ``displacement`` (mm). Cell data: ``stress`` (6 Voigt
+    components, MPa, in the order xx, yy, zz, yz, xz, xy), ``von_mises`` (MPa), and every
+    material history variable (e.g. ``eqps``); all element means.
     """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
@@ -35,7 +37,7 @@ def write_vtu(response: Response, directory: str | Path, stem: str = "cube") -> 
             path,
             meshio.Mesh(
                 mesh.nodes,
-                [("hexahedron", mesh.elements)],
+                [(_CELL_TYPES[mesh.elements.shape[1]], mesh.elements)],
                 point_data={"displacement": response.displacements[k]},
                 cell_data=cell_data,
             ),
