@@ -9,6 +9,10 @@ it passes satisfies every inequality by more than the margin, so the rule accept
 other point (outside a range, or within the margin of a boundary) is left to the rule, which
 decides and says why. So screen + rule classify every point exactly as the rule alone (tested on
 all nine cases, inside, on and far outside the boxes).
+
+The compiled screen (:func:`problems.surrogate._kernels.screen_points`) lives beside the
+surrogate's cost path kernel that calls it: numba's cache would not see a change to a kernel of
+another file.
 """
 
 from __future__ import annotations
@@ -17,44 +21,17 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-#: relative margin of the screen's inequalities
-MARGIN = 1e-9
+from problems.surrogate._kernels import (
+    EXPONENT,
+    EXPONENT_FROM_PT0,
+    HYPERBOLIC,
+    MARGIN,
+    NONE,
+    screen_points,
+)
 
-#: form conditions the screen knows
-NONE, HYPERBOLIC, EXPONENT_FROM_PT0, EXPONENT = 0, 1, 2, 3
-
-
-@njit(cache=True)
-def _clear(x, lo, hi, code, idx, consts) -> bool:
-    for j in range(x.size):
-        if not (x[j] > lo[j] and x[j] < hi[j]):
-            return False
-    if code == NONE:
-        return True
-    q_hat, p_hat = consts[0], consts[1]
-    s0 = x[idx[0]]
-    S = q_hat * s0
-    if code == HYPERBOLIC:
-        A = math.tan(math.radians(x[idx[1]])) * (x[idx[2]] + p_hat * s0)
-        return A > MARGIN * S and A < S * (1.0 - MARGIN)
-    if code == EXPONENT_FROM_PT0:
-        pt0, b = x[idx[1]], x[idx[2]]
-        num = pt0 + p_hat * s0  # a = num / S^b > 0
-        return num > MARGIN * (abs(pt0) + abs(p_hat * s0)) and math.isfinite(num / S**b)
-    if code == EXPONENT:
-        a, b = x[idx[1]], x[idx[2]]
-        aS = a * S**b
-        return math.isfinite(aS) and aS - p_hat * s0 > MARGIN * (abs(aS) + abs(p_hat * s0))
-    return False
-
-
-@njit(cache=True)
-def screen_points(X, lo, hi, code, idx, consts, out) -> None:
-    """``out[k]`` = row k of ``X`` passes the screen."""
-    for k in range(X.shape[0]):
-        out[k] = _clear(X[k], lo, hi, code, idx, consts)
+__all__ = ["EXPONENT", "EXPONENT_FROM_PT0", "HYPERBOLIC", "MARGIN", "NONE", "Screen"]
 
 
 @dataclass(frozen=True, eq=False)

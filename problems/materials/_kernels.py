@@ -1366,6 +1366,105 @@ def merge_update(
 
 
 @njit(**_JIT)
+def _point_sensitivity(
+    mp,
+    yp,
+    gp,
+    dth,
+    de,
+    sig_n,
+    st_n,
+    sig_tr,
+    plastic,
+    stress,
+    state,
+    ok,
+    dsig_n,
+    dst_n,
+    dde,
+    i,
+    dstress,
+    dstate,
+    x,
+    R,
+    J,
+    piv,
+    Rth,
+    rhs,
+):
+    """Row ``i`` of :func:`update_sensitivities` (its arguments, plus the row index and the
+    local work arrays ``x, R, J, piv, Rth, rhs``). Returns (good, apex, p_tr, dl): whether the
+    point's derivatives are finite, whether it returned to the apex of the cone and, if so, its
+    trial pressure (MPa) and plastic multiplier; at a smooth return ``J`` and ``piv`` hold the
+    LU factors of the local Jacobian."""
+    n_p, n_st = dth.shape[1], st_n.shape[1]
+    _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress)
+    good = not plastic[i] or ok[i]
+    is_apex = False
+    p_tr = 0.0
+    dl = 0.0
+    if plastic[i] and good:
+        st = (
+            sig_tr[i, 0],
+            sig_tr[i, 1],
+            sig_tr[i, 2],
+            sig_tr[i, 3],
+            sig_tr[i, 4],
+            sig_tr[i, 5],
+        )
+        en = st_n[i, 0]
+        if int(yp[0]) == LINEAR:
+            p_tr, s_tr = _deviator(st)
+            is_apex, _, dl, _ = _apex_return(mp, yp, gp, p_tr, s_tr, _j2(s_tr), en)
+            if is_apex:
+                _apex_sensitivity(mp, yp, gp, dth, p_tr, en, dl, dst_n, i, dstress, dstate)
+        if not is_apex:
+            sig = (
+                stress[i, 0],
+                stress[i, 1],
+                stress[i, 2],
+                stress[i, 3],
+                stress[i, 4],
+                stress[i, 5],
+            )
+            good = _smooth_sensitivity(
+                mp,
+                yp,
+                gp,
+                dth,
+                st,
+                en,
+                sig,
+                state[i, 0],
+                dst_n,
+                i,
+                dstress,
+                dstate,
+                x,
+                R,
+                J,
+                piv,
+                Rth,
+                rhs,
+            )
+        if good:
+            _plastic_strain_sensitivity(
+                mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate
+            )
+    elif good:  # elastic: the old state
+        for k in range(n_p):
+            for b in range(n_st):
+                dstate[i, k, b] = dst_n[i, k, b]
+    if not good:
+        for k in range(n_p):
+            for a in range(6):
+                dstress[i, k, a] = np.nan
+            for b in range(n_st):
+                dstate[i, k, b] = np.nan
+    return good, is_apex, p_tr, dl
+
+
+@njit(**_JIT)
 def update_sensitivities(
     mp, yp, gp, dth, de, sig_n, st_n, sig_tr, plastic, stress, state, ok, dsig_n, dst_n, dde
 ):
@@ -1384,7 +1483,6 @@ def update_sensitivities(
     n, n_p, n_st = de.shape[0], dth.shape[1], st_n.shape[1]
     dstress = np.empty((n, n_p, 6))
     dstate = np.empty((n, n_p, n_st))
-    cone = int(yp[0]) == LINEAR
     x = np.empty(8)
     R = np.empty(8)
     J = np.empty((8, 8))
@@ -1392,68 +1490,149 @@ def update_sensitivities(
     Rth = np.empty((8, TH_SIZE + 1))
     rhs = np.empty((8, n_p))
     for i in range(n):
-        _trial_sensitivity(mp, dth, de, dsig_n, dde, i, dstress)
-        good = not plastic[i] or ok[i]
-        if plastic[i] and good:
-            st = (
-                sig_tr[i, 0],
-                sig_tr[i, 1],
-                sig_tr[i, 2],
-                sig_tr[i, 3],
-                sig_tr[i, 4],
-                sig_tr[i, 5],
-            )
-            en = st_n[i, 0]
-            is_apex = False
-            if cone:
-                p_tr, s_tr = _deviator(st)
-                is_apex, _, dl, _ = _apex_return(mp, yp, gp, p_tr, s_tr, _j2(s_tr), en)
-                if is_apex:
-                    _apex_sensitivity(mp, yp, gp, dth, p_tr, en, dl, dst_n, i, dstress, dstate)
-            if not is_apex:
-                sig = (
-                    stress[i, 0],
-                    stress[i, 1],
-                    stress[i, 2],
-                    stress[i, 3],
-                    stress[i, 4],
-                    stress[i, 5],
-                )
-                good = _smooth_sensitivity(
-                    mp,
-                    yp,
-                    gp,
-                    dth,
-                    st,
-                    en,
-                    sig,
-                    state[i, 0],
-                    dst_n,
-                    i,
-                    dstress,
-                    dstate,
-                    x,
-                    R,
-                    J,
-                    piv,
-                    Rth,
-                    rhs,
-                )
-            if good:
-                _plastic_strain_sensitivity(
-                    mp, dth, stress, sig_n, dsig_n, dde, dst_n, i, dstress, dstate
-                )
-        elif good:  # elastic: the old state
-            for k in range(n_p):
-                for b in range(n_st):
-                    dstate[i, k, b] = dst_n[i, k, b]
-        if not good:
-            for k in range(n_p):
-                for a in range(6):
-                    dstress[i, k, a] = np.nan
-                for b in range(n_st):
-                    dstate[i, k, b] = np.nan
+        _point_sensitivity(
+            mp,
+            yp,
+            gp,
+            dth,
+            de,
+            sig_n,
+            st_n,
+            sig_tr,
+            plastic,
+            stress,
+            state,
+            ok,
+            dsig_n,
+            dst_n,
+            dde,
+            i,
+            dstress,
+            dstate,
+            x,
+            R,
+            J,
+            piv,
+            Rth,
+            rhs,
+        )
     return dstress, dstate
+
+
+@njit(**_JIT)
+def affine_sensitivities(
+    mp,
+    yp,
+    gp,
+    dth,
+    de,
+    sig_n,
+    st_n,
+    sig_tr,
+    plastic,
+    stress,
+    state,
+    ok,
+    tangent,
+    dsig_n,
+    dst_n,
+    dde,
+):
+    """(c, h, T) of :func:`problems.materials.ddm.affine_sensitivity`: :func:`update_sensitivities`
+    for the k parameter columns (c, h), plus T (n, 6 + n_state, 6) = d(stress, state)/d(strain
+    increment) per point: at a smooth return six unit strain increments (entering the local
+    residual as E e_j) solved with the LU factors the parameter columns formed; at the apex the
+    closed forms with six unit-strain columns; elastic points the update's ``tangent``; failed
+    points NaN."""
+    n, n_st = de.shape[0], st_n.shape[1]
+    k = dth.shape[1]
+    c = np.empty((n, k, 6))
+    h = np.empty((n, k, n_st))
+    T = np.zeros((n, 6 + n_st, 6))
+    E, nu = mp[M_E], mp[M_NU]
+    x = np.empty(8)
+    R = np.empty(8)
+    J = np.empty((8, 8))
+    piv = np.empty(8, np.int64)
+    Rth = np.empty((8, TH_SIZE + 1))
+    rhs = np.empty((8, k))
+    b6 = np.empty((8, 6))
+    # six unit strain increments of one point (index 0), for the apex's closed form
+    z6 = np.zeros((TH_SIZE, 6))
+    eye = np.zeros((1, 6, 6))
+    for j in range(6):
+        eye[0, j, j] = 1.0
+    zs6, zq6 = np.zeros((1, 6, 6)), np.zeros((1, 6, n_st))
+    ds6, dq6 = np.empty((1, 6, 6)), np.empty((1, 6, n_st))
+    for i in range(n):
+        good, is_apex, p_tr, dl = _point_sensitivity(
+            mp,
+            yp,
+            gp,
+            dth,
+            de,
+            sig_n,
+            st_n,
+            sig_tr,
+            plastic,
+            stress,
+            state,
+            ok,
+            dsig_n,
+            dst_n,
+            dde,
+            i,
+            c,
+            h,
+            x,
+            R,
+            J,
+            piv,
+            Rth,
+            rhs,
+        )
+        if not good:
+            for r in range(6 + n_st):
+                for j in range(6):
+                    T[i, r, j] = np.nan
+            continue
+        if is_apex:
+            one = slice(i, i + 1)
+            _trial_sensitivity(mp, z6, de[one], zs6, eye, 0, ds6)
+            _apex_sensitivity(mp, yp, gp, z6, p_tr, st_n[i, 0], dl, zq6, 0, ds6, dq6)
+            _plastic_strain_sensitivity(mp, z6, stress[one], sig_n[one], zs6, eye, zq6, 0, ds6, dq6)
+            for j in range(6):
+                for r in range(6):
+                    T[i, r, j] = ds6[0, j, r]
+                for r in range(n_st):
+                    T[i, 6 + r, j] = dq6[0, j, r]
+            continue
+        if not plastic[i]:  # elastic: T_s = D (the update's tangent), T_q = 0
+            for r in range(6):
+                for j in range(6):
+                    T[i, r, j] = tangent[i, r, j]
+            continue
+        # smooth return: the six unit strain increments enter the local residual as E e_j; one
+        # multi-column solve with the LU factors of the local Jacobian the parameter columns
+        # formed gives d sigma (rows 0-5) and E d eqps (row 7); the plastic strain rows are
+        # e_j - C d sigma
+        for a in range(8):
+            for j in range(6):
+                b6[a, j] = E if a == j else 0.0
+        if not _lu8_solve(J, piv, b6):
+            for r in range(6 + n_st):
+                for j in range(6):
+                    T[i, r, j] = np.nan
+            continue
+        for j in range(6):
+            t = b6[0, j] + b6[1, j] + b6[2, j]
+            T[i, 6, j] = b6[7, j] / E
+            for a in range(6):
+                v = b6[a, j]
+                T[i, a, j] = v
+                Sv = (1.0 + nu) * v - nu * t if a < 3 else 2.0 * (1.0 + nu) * v
+                T[i, 7 + a, j] = (1.0 if a == j else 0.0) - Sv / E
+    return c, h, T
 
 
 @njit(**_JIT)

@@ -35,7 +35,6 @@ import numpy as np
 
 from problems.materials import _kernels as _K
 from problems.materials.base import MaterialUpdate, isotropic_stiffness
-from problems.materials.ddm import kernel_parameter_jacobian
 from problems.materials.hardening import (
     HARDENINGS,
     LinearHardening,
@@ -44,6 +43,7 @@ from problems.materials.hardening import (
     linear_eqps_constant,
     reference_test,
 )
+from problems.materials.kernel_jacobian import kernel_parameter_jacobian
 from problems.materials.yield_surfaces import (
     ExponentYield,
     HyperbolicPotential,

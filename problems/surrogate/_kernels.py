@@ -31,8 +31,6 @@ import math
 import numpy as np
 from numba import njit, uint64
 
-from problems.inverse.feasibility import _clear
-
 _STEPS = 64.0
 #: the reach of the exponential's table: exp(-x) for 0 <= x <= EXP_REACH
 EXP_REACH = 40.0
@@ -192,6 +190,50 @@ def surrogate_costs(
             total += e[i] * e[i]
         costs[p] = c_perp + total
     return n_unclear
+
+
+# --------------------------------------------------------------------------------------------
+# The material screen (problems.inverse.feasibility.Screen)
+# --------------------------------------------------------------------------------------------
+
+#: relative margin of the screen's inequalities
+MARGIN = 1e-9
+
+#: form conditions the screen knows
+NONE, HYPERBOLIC, EXPONENT_FROM_PT0, EXPONENT = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _clear(x, lo, hi, code, idx, consts) -> bool:
+    """Point ``x`` passes the screen: inside the open ranges ``lo < x < hi`` and the form's
+    condition ``code`` (on the parameters at ``idx``; ``consts`` = q_hat, p_hat) by the margin."""
+    for j in range(x.size):
+        if not (x[j] > lo[j] and x[j] < hi[j]):
+            return False
+    if code == NONE:
+        return True
+    q_hat, p_hat = consts[0], consts[1]
+    s0 = x[idx[0]]
+    S = q_hat * s0
+    if code == HYPERBOLIC:
+        A = math.tan(math.radians(x[idx[1]])) * (x[idx[2]] + p_hat * s0)
+        return A > MARGIN * S and A < S * (1.0 - MARGIN)
+    if code == EXPONENT_FROM_PT0:
+        pt0, b = x[idx[1]], x[idx[2]]
+        num = pt0 + p_hat * s0  # a = num / S^b > 0
+        return num > MARGIN * (abs(pt0) + abs(p_hat * s0)) and math.isfinite(num / S**b)
+    if code == EXPONENT:
+        a, b = x[idx[1]], x[idx[2]]
+        aS = a * S**b
+        return math.isfinite(aS) and aS - p_hat * s0 > MARGIN * (abs(aS) + abs(p_hat * s0))
+    return False
+
+
+@njit(cache=True)
+def screen_points(X, lo, hi, code, idx, consts, out) -> None:
+    """``out[k]`` = row k of ``X`` passes the screen."""
+    for k in range(X.shape[0]):
+        out[k] = _clear(X[k], lo, hi, code, idx, consts)
 
 
 class PackedGP:

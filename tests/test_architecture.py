@@ -1,0 +1,298 @@
+"""Rules of the code's structure, checked on the sources (ast; nothing is imported):
+
+* a numba kernel compiled with ``cache=True`` calls no numba kernel defined in another file
+  (numba's cache is invalidated only when the caller's own file changes, so it would keep
+  running stale machine code of the callee);
+* no import circles among the modules of problems/, solvers/ and bench/ (module-level imports);
+  imports deferred into functions hide a circle from Python but not from the reader, so their
+  circles may only shrink (:data:`DEFERRED_CIRCLES`).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("problems", "solvers", "bench")
+
+
+def source_modules(root: Path = ROOT, packages=PACKAGES) -> dict[str, Path]:
+    """Dotted module name -> file of every module under ``packages``."""
+    out = {}
+    for pkg in packages:
+        for path in sorted((root / pkg).rglob("*.py")):
+            parts = list(path.relative_to(root).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join(parts)] = path
+    return out
+
+
+def _module_body(tree: ast.Module):
+    """The statements run at import (module level, through if/try blocks; ``if
+    TYPE_CHECKING:`` blocks left out)."""
+    stack = list(tree.body)
+    while stack:
+        node = stack.pop(0)
+        if isinstance(node, ast.If):
+            test = node.test
+            name = test.id if isinstance(test, ast.Name) else getattr(test, "attr", None)
+            if name != "TYPE_CHECKING":
+                stack[:0] = node.body + node.orelse
+        elif isinstance(node, ast.Try):
+            stack[:0] = node.body + node.orelse + node.finalbody
+            for h in node.handlers:
+                stack[:0] = h.body
+        else:
+            yield node
+
+
+def _bindings(tree: ast.Module, modules) -> tuple[dict, dict]:
+    """Module-level import bindings: (local name -> module, local name -> (module, name))."""
+    mods, names = {}, {}
+    for node in _module_body(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.asname:
+                    mods[a.asname] = a.name
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            for a in node.names:
+                local = a.asname or a.name
+                if f"{node.module}.{a.name}" in modules:
+                    mods[local] = f"{node.module}.{a.name}"
+                else:
+                    names[local] = (node.module, a.name)
+    return mods, names
+
+
+def _cache_dicts(tree: ast.Module) -> set[str]:
+    """Names of module-level dicts of jit options that set ``cache=True``."""
+    out = set()
+    for node in _module_body(tree):
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target, v = node.targets[0], node.value
+            if not isinstance(target, ast.Name):
+                continue
+            if isinstance(v, ast.Call) and getattr(v.func, "id", None) == "dict":
+                if any(_is_true(k.value) for k in v.keywords if k.arg == "cache"):
+                    out.add(target.id)
+            elif isinstance(v, ast.Dict):
+                for k, val in zip(v.keys, v.values):
+                    if isinstance(k, ast.Constant) and k.value == "cache" and _is_true(val):
+                        out.add(target.id)
+    return out
+
+
+def _is_true(node) -> bool:
+    return isinstance(node, ast.Constant) and node.value is True
+
+
+def _jit_kind(dec, cache_dicts) -> str | None:
+    """'cached', 'jit' or None for a decorator (numba's njit/jit/vectorize/guvectorize)."""
+    call = dec if isinstance(dec, ast.Call) else None
+    f = call.func if call else dec
+    name = f.id if isinstance(f, ast.Name) else getattr(f, "attr", None)
+    if name not in ("njit", "jit", "vectorize", "guvectorize", "generated_jit"):
+        return None
+    if call is None:
+        return "jit"
+    for k in call.keywords:
+        if (k.arg == "cache" and _is_true(k.value)) or (
+            k.arg is None and isinstance(k.value, ast.Name) and k.value.id in cache_dicts
+        ):
+            return "cached"
+    return "jit"
+
+
+def jit_functions(tree: ast.Module) -> dict[str, tuple[str, ast.FunctionDef]]:
+    """Module-level numba functions of a module: name -> (kind, node)."""
+    dicts = _cache_dicts(tree)
+    out = {}
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef):
+            kinds = [k for k in (_jit_kind(d, dicts) for d in node.decorator_list) if k]
+            if kinds:
+                out[node.name] = ("cached" if "cached" in kinds else "jit", node)
+    return out
+
+
+def cross_file_kernel_calls(sources: dict[str, str]) -> list[str]:
+    """Calls from a cached numba kernel to a numba kernel of another module; ``sources``:
+    dotted module name -> source text. One line per call: ``caller -> callee``."""
+    trees = {m: ast.parse(s) for m, s in sources.items()}
+    kernels = {m: jit_functions(t) for m, t in trees.items()}
+    found = []
+    for mod, tree in trees.items():
+        mods, names = _bindings(tree, sources)
+        for fname, (kind, node) in kernels[mod].items():
+            if kind != "cached":
+                continue
+            for call in (n for n in ast.walk(node) if isinstance(n, ast.Call)):
+                f, target = call.func, None
+                if isinstance(f, ast.Name) and f.id in names:
+                    target = names[f.id]
+                elif (
+                    isinstance(f, ast.Attribute)
+                    and isinstance(f.value, ast.Name)
+                    and f.value.id in mods
+                ):
+                    target = (mods[f.value.id], f.attr)
+                if target and target[0] != mod and target[1] in kernels.get(target[0], {}):
+                    found.append(f"{mod}.{fname} -> {target[0]}.{target[1]}")
+    return sorted(set(found))
+
+
+def import_graph(sources: dict[str, str], deferred: bool = False) -> dict[str, set[str]]:
+    """Module -> the modules of ``sources`` it imports at module level, with ``deferred`` also
+    inside functions (``from pkg import
+    name`` counts as importing ``pkg.name`` when that is a module, else ``pkg``; importing a
+    module runs its parent packages too; a module's own parent packages are left out)."""
+    graph = {}
+    for mod, src in sources.items():
+        deps = set()
+        tree = ast.parse(src)
+        for node in ast.walk(tree) if deferred else _module_body(tree):
+            if isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                for a in node.names:
+                    sub = f"{node.module}.{a.name}"
+                    deps.add(sub if sub in sources else node.module)
+        deps |= {p for d in deps for p in _parents(d)}
+        parents = _parents(mod)
+        graph[mod] = {d for d in deps if d in sources and d != mod and d not in parents}
+    return graph
+
+
+def _parents(mod: str) -> set[str]:
+    return {mod.rsplit(".", i)[0] for i in range(1, mod.count(".") + 1)}
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
+
+
+def _sources() -> dict[str, str]:
+    return {m: p.read_text(encoding="utf-8") for m, p in source_modules().items()}
+
+
+# --- the rules on this tree -------------------------------------------------------------------
+
+
+def test_cached_kernels_call_no_kernel_of_another_file():
+    assert cross_file_kernel_calls(_sources()) == []
+
+
+#: circles that close only through an import inside a function: problems.surrogate's package
+#: imports its model eagerly, whose cost path imports the material screen, which imports the
+#: compiled screen from problems.surrogate._kernels (beside the kernel that calls it)
+DEFERRED_CIRCLES = [
+    ["bench.commands.surrogate", "bench.surrogate_run"],
+    ["bench.report.figures", "bench.report.metrics", "bench.report.posterior"],
+    ["problems.fe.newton", "problems.fe.sensitivity"],
+    [
+        "problems.inverse.feasibility",
+        "problems.surrogate",
+        "problems.surrogate.build",
+        "problems.surrogate.misfit",
+        "problems.surrogate.model",
+        "problems.surrogate.store",
+    ],
+]
+
+
+def test_no_import_circles():
+    assert import_circles(import_graph(_sources())) == []
+
+
+def test_no_new_circles_through_deferred_imports():
+    found = import_circles(import_graph(_sources(), deferred=True))
+    assert [c for c in found if c not in DEFERRED_CIRCLES] == []
+
+
+# --- the checks themselves --------------------------------------------------------------------
+
+_KERNELS = """
+from numba import njit
+_JIT = dict(cache=True, nogil=True)
+
+@njit(cache=True)
+def leaf(x):
+    return x
+
+@njit(inline="always")
+def inlined(x):
+    return x
+"""
+
+_CALLER = """
+from numba import njit
+from pkg import kernels as K
+from pkg.kernels import leaf
+_JIT = dict(cache=True)
+
+@njit(**_JIT)
+def bad_attribute(x):
+    return K.inlined(x)
+
+@njit(cache=True)
+def bad_name(x):
+    return leaf(x)
+
+@njit
+def uncached(x):
+    return leaf(x)
+
+@njit(cache=True)
+def own(x):
+    return uncached(x) + K.helper(x)
+"""
+
+
+def test_cross_file_calls_found_through_names_and_module_aliases():
+    found = cross_file_kernel_calls({"pkg.kernels": _KERNELS, "pkg.caller": _CALLER})
+    assert found == [
+        "pkg.caller.bad_attribute -> pkg.kernels.inlined",
+        "pkg.caller.bad_name -> pkg.kernels.leaf",
+    ]
+
+
+def test_import_circles_found_at_module_level_only():
+    sources = {
+        "a": "from b import f\n",
+        "b": "import c\n",
+        "c": "from a import g\n",
+        "d": "def late():\n    import a\n",
+        "e": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import d\n",
+    }
+    assert import_circles(import_graph(sources)) == [["a", "b", "c"]]
+    sources["c"] = "def late():\n    from a import g\n"
+    assert import_circles(import_graph(sources)) == []
