@@ -85,8 +85,12 @@ def write_report(
     set_aside = store.set_aside_files(out_dir)
     for line in unreadable_lines(unreadable, set_aside):
         print(f"femubench report: {line}", file=sys.stderr)
+    from bench.report.extras import is_user_record, write_extras
+
+    user = [r for r in records if is_user_record(r)]  # user problems: their own report
+    records = [r for r in records if not is_user_record(r)]
     runs, history = store.to_frames(out_dir, records)
-    if not len(runs):
+    if not len(runs) and not user:
         raise ValueError(
             f"no run records in {store.runs_dir(out_dir)}"
             + (f" that could be read ({len(unreadable)} unreadable)" if unreadable else "")
@@ -102,22 +106,24 @@ def write_report(
         model_error_dirs = default_model_error_dirs(out_dir)
     tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=".report-"))
     try:
-        build_report(
-            runs,
-            history,
-            tmp,
-            formats,
-            tol=tol,
-            tol_a=tol_a,
-            figures=figures,
-            source=out_dir,
-            unreadable=unreadable,
-            set_aside=set_aside,
-            progress=progress,
-            records=records,
-            posterior_dirs=posterior_dirs,
-            model_error_dirs=model_error_dirs,
-        )
+        if len(runs):
+            build_report(
+                runs,
+                history,
+                tmp,
+                formats,
+                tol=tol,
+                tol_a=tol_a,
+                figures=figures,
+                source=out_dir,
+                unreadable=unreadable,
+                set_aside=set_aside,
+                progress=progress,
+                records=records,
+                posterior_dirs=posterior_dirs,
+                model_error_dirs=model_error_dirs,
+            )
+        write_extras(records + user, user, tmp, formats, source=out_dir)
         old = None
         if final.exists():
             old = final.parent / f".report-old-{os.getpid()}"
