@@ -287,6 +287,22 @@ class Suite:
                     out.append(r)
         return out
 
+    def with_problem(self, name: str, spec: dict) -> "Suite":
+        """This suite's methods, budgets, seeds and starts on the user problem ``spec``
+        (``{"entry", "args"}``) alone, as the suite ``<name of this suite>-<name>``; ValueError
+        when the entry point cannot be loaded."""
+        from problems.user import load_factory
+
+        load_factory(spec["entry"])
+        parts = tuple(dataclasses.replace(p, cases=(name,)) for p in self.parts)
+        return dataclasses.replace(
+            self,
+            name=f"{self.name}-{name}",
+            parts=parts,
+            problems={name: dict(spec)},
+            source=None,
+        )
+
     def _union(self, attr: str) -> tuple:
         return tuple(dict.fromkeys(v for p in self.parts for v in getattr(p, attr)))
 

@@ -174,3 +174,69 @@ def test_suite_of_user_problems_runs_and_judges(tmp_path):
     assert expo["kind"] == "least-squares" and expo["digits"] >= 4 and expo["success"]
     json.dumps(sph)  # plain data
     assert math.isfinite(recs[("expo", "cma")]["result"]["cost"])
+
+
+# --- the CLI ---
+def test_cli_identify_and_run_a_user_problem(tmp_path, capsys):
+    from bench.cli import main
+
+    rc = main(
+        [
+            "identify",
+            "--problem",
+            "tests.test_user_problems:exponential",
+            "--solver",
+            "lm",
+            "--budget",
+            "60",
+            "--quiet",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert rc == 0 and "success (≥ 4 correct digits of every parameter): yes" in out
+    assert (
+        main(
+            [
+                "identify",
+                "--problem",
+                "tests.test_user_problems:sphere",
+                "--solver",
+                "lm",
+                "--quiet",
+            ]
+        )
+        == 2
+    )
+    assert "needs a least-squares problem" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "identify",
+                "linear-shear",
+                "--problem",
+                "tests.test_user_problems:sphere",
+                "--solver",
+                "de",
+            ]
+        )
+        == 2
+    )
+    rc = main(
+        [
+            "run",
+            str(ROOT / "suites" / "smoke.toml"),
+            "--problem",
+            "tests.test_user_problems:exponential",
+            "--out",
+            str(tmp_path),
+            "--workers",
+            "1",
+            "--quiet",
+        ]
+    )
+    assert rc == 0
+    recs = store.load_records(tmp_path)
+    assert len(recs) == 6 and {r["config"]["case"] for r in recs} == {"exponential"}
+    assert all(
+        r["result"]["extra"]["problem"]["success"] for r in recs if r["config"]["method"] == "lm"
+    )

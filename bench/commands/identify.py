@@ -10,7 +10,10 @@ HELP = (
 
 
 def add_arguments(p) -> None:
-    p.add_argument("case", help="case name (see `femubench cases --analytic`)")
+    p.add_argument(
+        "case", nargs="?", help="case name (see `femubench cases --analytic`); or --problem"
+    )
+    add_problem_arguments(p)
     p.add_argument(
         "--solver", required=True, metavar="METHOD", help="method name (see `femubench solvers`)"
     )
@@ -117,7 +120,40 @@ def add_arguments(p) -> None:
     )
 
 
-def parse_options(items: list[str]) -> dict:
+def add_problem_arguments(p) -> None:
+    """``--problem ENTRY`` and ``--arg NAME=VALUE`` (a user problem, see problems.user)."""
+    p.add_argument(
+        "--problem",
+        metavar="ENTRY",
+        help="a user problem in place of a case: 'package.module:factory' or "
+        "'path/to/file.py:factory' (docs/user_problems.md)",
+    )
+    p.add_argument(
+        "--arg",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="NAME=VALUE",
+        help="keyword argument of the --problem factory (value parsed as JSON, else a string)",
+    )
+
+
+def problem_spec(args) -> dict | None:
+    """``{"entry", "args"}`` of ``--problem``/``--arg`` (None without --problem); ValueError
+    for --arg without --problem or a malformed entry point."""
+    from problems.user import entry_point_error
+
+    if not args.problem:
+        if args.arg:
+            raise ValueError("--arg is for the factory of --problem, which is not given")
+        return None
+    why = entry_point_error(args.problem)
+    if why:
+        raise ValueError(f"--problem {args.problem!r}: {why}")
+    return {"entry": args.problem, "args": parse_options(args.arg, flag="--arg")}
+
+
+def parse_options(items: list[str], flag: str = "--option") -> dict:
     """``["n_starts=4", "scheme=central"]`` -> ``{"n_starts": 4, "scheme": "central"}``."""
     import json
 
@@ -125,7 +161,7 @@ def parse_options(items: list[str]) -> dict:
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or not name.strip():
-            raise ValueError(f"--option {item!r} is malformed: expected NAME=VALUE")
+            raise ValueError(f"{flag} {item!r} is malformed: expected NAME=VALUE")
         try:
             out[name.strip()] = json.loads(value)
         except json.JSONDecodeError:
@@ -218,6 +254,13 @@ def main(args) -> int:
     from bench.identification import Identification, identify
     from problems.inverse.cases import get_case
 
+    spec = problem_spec(args)
+    if spec is not None:
+        if args.case:
+            raise ValueError(f"give a case or --problem, not both (case {args.case!r})")
+        return identify_problem(args, spec)
+    if not args.case:
+        raise ValueError("name a case (see `femubench cases --analytic`) or give --problem ENTRY")
     case = get_case(args.case)
     if args.correction == "default" and (
         args.plate_margin_mm is not None or args.hifi_mesh is not None
@@ -258,3 +301,56 @@ def main(args) -> int:
         Path(args.json).write_text(json.dumps(result_document(result), indent=1))
         print(f"  written {args.json}")
     return 0
+
+
+def identify_problem(args, spec: dict) -> int:
+    """``femubench identify --problem ENTRY``: one run of a user problem, printed with its own
+    success rule (evaluations, f − f_min, correct digits)."""
+    import json
+    from pathlib import Path
+
+    from bench.suite import RunConfig
+    from bench.user_problems import run_user
+
+    entry = spec["entry"]
+    config = RunConfig(
+        entry.rpartition(":")[2],
+        args.solver,
+        args.seed,
+        args.start,
+        0,
+        args.budget,
+        "coarse",
+        options=parse_options(args.option),
+        budget_unit=args.budget_unit,
+        problem=spec,
+    )
+    result = run_user(config)
+    print(format_problem_run(config, result))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=1))
+        print(f"  written {args.json}")
+    return 0
+
+
+def format_problem_run(config, result) -> str:
+    """Parameters (start, found, known optimum), then f, the problem's verdict, evaluations."""
+    prob = result.extra["problem"]
+    ref = prob.get("x_ref") or [None] * len(result.x)
+    lines = [
+        f"{config.case} ({prob['kind']}, {config.problem['entry']}): {result.method} "
+        f"(seed {result.seed}, budget {result.budget} evaluations)",
+        f"  {'parameter':10} {'start':>14} {'found':>14} {'optimum':>14}",
+    ]
+    for name, x0, x, xr in zip(result.parameter_names, result.x0, result.x, ref):
+        opt = f"{xr:14.8g}" if xr is not None else f"{'?':>14}"
+        lines.append(f"  {name:10} {x0:14.8g} {x:14.8g} {opt}")
+    gap = f", f − f_min {prob['f_gap']:.3g}" if "f_gap" in prob else ""
+    digits = f", {prob['digits']:.1f} correct digits" if "digits" in prob else ""
+    lines += [
+        f"  f {result.cost:.10g}{gap}{digits}; status {result.status}: {result.message}",
+        f"  success ({prob['success_text']}): {'yes' if prob['success'] else 'no'}",
+        f"  evaluations {result.n_evals} (failed {result.n_failed}, infeasible "
+        f"{result.n_infeasible}, cache hits {result.n_cache_hits}), wall {result.wall_s:.2f} s",
+    ]
+    return "\n".join(lines)

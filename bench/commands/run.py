@@ -8,8 +8,10 @@ HELP = "run a suite (TOML) of identifications; resumes where a previous run stop
 
 def add_arguments(parser) -> None:
     from bench.commands._args import add_cluster_arguments, output_dir
+    from bench.commands.identify import add_problem_arguments
 
     parser.add_argument("suite", metavar="SUITE", help="suite file, e.g. suites/default.toml")
+    add_problem_arguments(parser)
     parser.add_argument(
         "--out",
         metavar="DIR",
@@ -43,12 +45,16 @@ def main(args) -> int:
     import sys
     from pathlib import Path
 
+    from bench.commands.identify import problem_spec
     from bench.progress import enabled, warn_if_long
     from bench.runner import pending_runs
     from bench.suite import load_suite
     from problems.inverse.cases import get_case
 
     suite = load_suite(args.suite)  # ValueError -> message + exit 2 (bench.cli)
+    spec = problem_spec(args)
+    if spec is not None:  # the suite's methods, budgets and seeds on this problem
+        suite = suite.with_problem(spec["entry"].rpartition(":")[2], spec)
     out = Path(args.out) if args.out else Path("results") / suite.name
     runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
     fe_evals = sum(
@@ -69,7 +75,11 @@ def main(args) -> int:
                 f"{len(part.budgets)} budgets x {len(part.seeds)} seeds x starts "
                 f"{list(part.starts)}"
                 + (f" ({part.random_starts} random per seed)" if "random" in part.starts else "")
-                + f", tracks {list(part.tracks)}, tiers {list(part.tiers)}"
+                + (
+                    f", tracks {list(part.tracks)}, tiers {list(part.tiers)}"
+                    if not set(part.cases) <= set(suite.problems)
+                    else ""
+                )
             )
         print(
             f"{len(runs)} runs, {len(runs) - len(pending)} with a record in {out}, {len(pending)} "
