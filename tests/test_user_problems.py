@@ -240,3 +240,31 @@ def test_cli_identify_and_run_a_user_problem(tmp_path, capsys):
     assert all(
         r["result"]["extra"]["problem"]["success"] for r in recs if r["config"]["method"] == "lm"
     )
+
+
+# --- the documentation's example runs ---
+def _blocks(text: str, lang: str) -> list[str]:
+    import re
+
+    return re.findall(rf"```{lang}\n(.*?)```", text, flags=re.S)
+
+
+def test_docs_example_runs(tmp_path):
+    """docs/user_problems.md: its Python block is the factory file, its TOML block the suite."""
+    text = (ROOT / "docs" / "user_problems.md").read_text()
+    code, suite = _blocks(text, "python")[0], _blocks(text, "toml")[0]
+    assert len(code.strip().splitlines()) <= 25
+    (tmp_path / "rosenbrock.py").write_text(code)
+    suite = suite.replace("docs/examples/rosenbrock.py", str(tmp_path / "rosenbrock.py"))
+    (tmp_path / "mine.toml").write_text(suite)
+    summary = run_suite(
+        load_suite(tmp_path / "mine.toml"), tmp_path / "out", workers=1, progress=False
+    )
+    recs = {
+        (r["config"]["case"], r["config"]["method"]): r["result"]
+        for r in store.load_records(tmp_path / "out")
+    }
+    assert summary.total == 9 and summary.crashed == 2  # lm refuses the two Rosenbrocks
+    assert recs[("decay", "lm")]["extra"]["problem"]["success"]
+    assert recs[("rosenbrock-n2", "cma")]["extra"]["problem"]["success"]
+    assert recs[("rosenbrock-n4", "cma")]["extra"]["problem"]["f_gap"] <= 1e-6
