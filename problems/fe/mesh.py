@@ -20,7 +20,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SIZE_MM = (75.0, 75.0, 150.0)
+#: the whole specimen of the default test, (x, y, z) extents in mm: the 150 mm cube
+SPECIMEN_MM = (150.0, 150.0, 150.0)
+
+
+def quarter_size(specimen_mm=SPECIMEN_MM) -> tuple[float, float, float]:
+    """Extents (mm) of the quarter model [0, lx/2] x [0, ly/2] x [0, lz] of a rectangular
+    specimen of (x, y, z) extents ``specimen_mm``; ValueError unless all three are finite and
+    > 0."""
+    dims = tuple(float(v) for v in specimen_mm)
+    if len(dims) != 3 or not all(np.isfinite(v) and v > 0 for v in dims):
+        raise ValueError(
+            f"specimen_mm = {tuple(specimen_mm)!r} is out of range: three finite lengths > 0 mm"
+        )
+    return (dims[0] / 2.0, dims[1] / 2.0, dims[2])
+
+
+#: the quarter model of the default specimen
+SIZE_MM = quarter_size(SPECIMEN_MM)
 #: named presets: ``coarse`` ~ 400-600, ``paper`` ~ 5 000 (paper: 4 960), ``fine`` 15 000-20 000
 #: elements
 MESH_PRESETS: dict[str, tuple[int, int, int]] = {
@@ -141,8 +158,14 @@ class MeshSpec:
 
     @property
     def mesh(self) -> Mesh:
-        """The quarter mesh of the whole height (what responses are reported on)."""
-        return box_mesh(*self.shape)
+        """The quarter mesh of the whole height of the default specimen (what responses are
+        reported on)."""
+        return self.build()
+
+    def build(self, size_mm: tuple[float, float, float] = SIZE_MM) -> Mesh:
+        """The quarter mesh of the whole height of a quarter model of extents ``size_mm`` (mm;
+        :func:`quarter_size` of the specimen)."""
+        return box_mesh(*self.shape, size_mm=size_mm)
 
     def __str__(self) -> str:
         return f"{','.join(map(str, self.shape))}:{self.symmetry}"

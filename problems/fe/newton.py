@@ -89,8 +89,42 @@ class Loading:
             raise ValueError(f"plates = {self.plates!r} is unknown; allowed: {', '.join(PLATES)}")
 
     @property
+    def fractions(self) -> np.ndarray:
+        """(N,) fraction of ``displacement_mm`` at each snapshot: k / N, equally spaced."""
+        return np.arange(1, self.snapshots + 1) / self.snapshots
+
+    @property
     def snapshots_mm(self) -> np.ndarray:
-        return self.displacement_mm * np.arange(1, self.snapshots + 1) / self.snapshots
+        return self.displacement_mm * self.fractions
+
+
+@dataclass(frozen=True)
+class MachineLoading(Loading):
+    """Loading at the plate displacements a testing machine logged at each image (a real test).
+
+    levels_mm : (N,) top-plate displacement at each snapshot, mm, strictly increasing, > 0
+                (``displacement_mm`` and ``snapshots`` are its last value and length)
+    """
+
+    levels_mm: tuple[float, ...] = (1.5,)
+
+    def __init__(self, levels_mm, plates: str = "friction"):
+        levels = tuple(float(v) for v in np.ravel(levels_mm))
+        if (
+            not levels
+            or not np.all(np.isfinite(levels))
+            or levels[0] <= 0
+            or np.any(np.diff(levels) <= 0)
+        ):
+            raise ValueError(
+                f"levels_mm = {levels!r} is out of range: finite, > 0 mm and strictly increasing"
+            )
+        object.__setattr__(self, "levels_mm", levels)
+        super().__init__(levels[-1], len(levels), plates)
+
+    @property
+    def fractions(self) -> np.ndarray:
+        return np.array(self.levels_mm) / self.displacement_mm
 
 
 @dataclass(frozen=True)
@@ -343,8 +377,9 @@ def run(
     nominal = 1.0 / (loading.snapshots * settings.substeps)
     step, lam, increments, cuts, message = nominal, 0.0, 0, 0, "converged"
     converged = True
+    fractions = loading.fractions
     for k in range(1, loading.snapshots + 1):
-        target = k / loading.snapshots
+        target = fractions[k - 1]
         while lam < target - 1e-12:
             dlam = min(step, target - lam)
             inc = solver.increment(

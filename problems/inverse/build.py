@@ -31,7 +31,7 @@ DEFAULT_HIFI = {"coarse": "paper", "paper": "fine"}
 @dataclass(frozen=True)
 class Region:
     """Which front-face points the objective uses: those at least ``plate_margin_mm`` from both
-    plates (z in [margin, 150 - margin] mm). The force is always used."""
+    plates (z in [margin, height - margin] mm). The force is always used."""
 
     plate_margin_mm: float = 0.0
 
@@ -42,10 +42,11 @@ class Region:
                 f"0 <= margin < {SIZE_MM[2] / 2:g} mm"
             )
 
-    def mask(self, points) -> np.ndarray:
-        """Boolean mask over front-face points (m, 2) = (y, z) mm."""
+    def mask(self, points, height_mm: float = SIZE_MM[2]) -> np.ndarray:
+        """Boolean mask over front-face points (m, 2) = (y, z) mm of a specimen ``height_mm``
+        tall."""
         z = np.asarray(points, float)[:, 1]
-        return (z >= self.plate_margin_mm - 1e-9) & (z <= SIZE_MM[2] - self.plate_margin_mm + 1e-9)
+        return (z >= self.plate_margin_mm - 1e-9) & (z <= height_mm - self.plate_margin_mm + 1e-9)
 
 
 def hifi_mesh_for(mesh: str) -> str:
@@ -69,7 +70,7 @@ def resolve_data(case: Case, mesh: str, tier: str, data: Dataset | str | Path | 
 
 def subset(data: Dataset, region: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(points, values, sigma_displacement)`` of the data restricted to ``region``."""
-    keep = region.mask(data.points)
+    keep = region.mask(data.points, data.settings.specimen_mm[2])
     if not keep.any():
         raise ValueError(
             f"the measurement region (plate margin {region.plate_margin_mm:g} mm) leaves no point"
@@ -87,10 +88,14 @@ def model_pair(
     from problems.inverse.forward import FEForwardModel
 
     case = get_case(case) if isinstance(case, str) else case
-    points = data.points[region.mask(data.points)]
+    points = data.points[region.mask(data.points, data.settings.specimen_mm[2])]
     return (
-        FEForwardModel(case, hifi_mesh, data.settings.loading, points),
-        FEForwardModel(case, mesh, data.settings.loading, points),
+        FEForwardModel(
+            case, hifi_mesh, data.settings.loading, points, specimen_mm=data.settings.specimen_mm
+        ),
+        FEForwardModel(
+            case, mesh, data.settings.loading, points, specimen_mm=data.settings.specimen_mm
+        ),
     )
 
 
@@ -172,7 +177,9 @@ def build_objective(
     if not sigma_force_kN > 0:
         raise ValueError(f"sigma_force_kN = {sigma_force_kN!r} is out of range: must be > 0 kN")
     if forward is None:
-        model = FEForwardModel(case, mesh, ds.settings.loading, points)
+        model = FEForwardModel(
+            case, mesh, ds.settings.loading, points, specimen_mm=ds.settings.specimen_mm
+        )
     else:
         from problems.surrogate.model import restricted
 

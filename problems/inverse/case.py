@@ -42,6 +42,9 @@ class Case:
     derive     : picklable ``values -> (material values, d material / d identified)`` when the
                  identified parameters are not the material's own (e.g. the exponent form's
                  ``pt0`` in place of ``a``); None when they are
+    initial    : the start, when it is set rather than derived from the reference (a lab's case:
+                 problems/inverse/experiment.py, whose ``reference`` is that same start since no
+                 reference is known); None: :attr:`start`'s rule
     """
 
     name: str
@@ -51,6 +54,7 @@ class Case:
     fixed: dict = field(default_factory=dict)
     kind: str = "fe"
     derive: Callable | None = None
+    initial: tuple[float, ...] | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -78,7 +82,10 @@ class Case:
 
     @property
     def start(self) -> np.ndarray:
-        """Default start: reference x (1 + 0.25 s), s = +1, -1, +1, ... in listed order, clipped."""
+        """Default start: :attr:`initial` if set, else reference x (1 + 0.25 s),
+        s = +1, -1, +1, ... in listed order, clipped to the bounds."""
+        if self.initial is not None:
+            return np.clip(np.array(self.initial, float), self.lower, self.upper)
         s = np.where(np.arange(len(self.parameters)) % 2 == 0, 1.0, -1.0)
         return np.clip(self.reference * (1.0 + 0.25 * s), self.lower, self.upper)
 

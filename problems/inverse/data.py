@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from problems.fe.front_face import measurement_grid
-from problems.fe.newton import Loading
+from problems.fe.mesh import SPECIMEN_MM, quarter_size
+from problems.fe.newton import Loading, MachineLoading
 from problems.inverse.case import Case
 from problems.inverse.cases import get_case
 
@@ -47,6 +48,9 @@ DATA_DIR_ENV = "FEMUBENCH_DATA_DIR"
 #: Environment variable: directory of the cache of computed non-default data sets.
 CACHE_DIR_ENV = "FEMUBENCH_CACHE_DIR"
 TIERS = ("model-error", "consistent")
+#: the tier of data imported from a real (or virtual) test's files (problems/inverse/experiment.py):
+#: no model made them, so their ``mesh`` is empty
+EXPERIMENT_TIER = "experiment"
 #: the discretisation that makes the model-error tier (never used inside the inverse loop)
 MODEL_ERROR_MESH = "xfine"
 #: the inverse model's mesh of the shipped consistent tier
@@ -82,6 +86,13 @@ class DataSettings:
     seed                : seed of the noise generator
     displacement_mm, snapshots, plates : the loading
     spacing_mm, margin_mm : the front-face measurement grid
+    specimen_mm         : (x, y, z) extents of the whole specimen, mm (default the 150 mm cube;
+                          the grid covers the quarter's face y in [0, y/2], z in [0, z])
+    levels_mm           : top-plate displacement at each snapshot, mm, when not equally spaced
+                          (a machine log; then ``displacement_mm`` and ``snapshots`` are its last
+                          value and length); empty: ``snapshots`` equal steps
+    ``specimen_mm`` and ``levels_mm`` enter the file and its hash only when they are not the
+    default (:meth:`to_dict`), so every data set of the cube keeps its bytes and hash.
     """
 
     tier: str = "model-error"
@@ -96,8 +107,21 @@ class DataSettings:
     spacing_mm: float = 5.0
     margin_mm: float = 5.0
     route: str = "fe"
+    specimen_mm: tuple[float, float, float] = SPECIMEN_MM
+    levels_mm: tuple[float, ...] = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "specimen_mm", tuple(float(v) for v in self.specimen_mm))
+        object.__setattr__(self, "levels_mm", tuple(float(v) for v in self.levels_mm))
+        quarter_size(self.specimen_mm)  # validates the dimensions
+        if self.levels_mm and (
+            len(self.levels_mm) != self.snapshots or self.levels_mm[-1] != self.displacement_mm
+        ):
+            raise ValueError(
+                f"levels_mm has {len(self.levels_mm)} values ending at {self.levels_mm[-1]!r} mm; "
+                f"they must be the snapshots = {self.snapshots} levels ending at displacement_mm = "
+                f"{self.displacement_mm!r} mm"
+            )
         for name in ("resolution_um", "noise_um", "force_resolution_kN"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -110,20 +134,43 @@ class DataSettings:
             or self.seed < 0
         ):
             raise ValueError(f"seed = {self.seed!r} is out of range: a whole number >= 0")
-        if self.tier not in TIERS:
-            raise ValueError(f"tier = {self.tier!r} is unknown; allowed: {', '.join(TIERS)}")
-        from problems.fe.mesh import parse_mesh_spec
+        if self.tier not in TIERS + (EXPERIMENT_TIER,):
+            raise ValueError(
+                f"tier = {self.tier!r} is unknown; allowed: {', '.join(TIERS + (EXPERIMENT_TIER,))}"
+            )
+        if self.tier == EXPERIMENT_TIER:
+            if self.mesh:
+                raise ValueError(f"mesh = {self.mesh!r}: experiment data have no mesh (empty)")
+        else:
+            from problems.fe.mesh import parse_mesh_spec
 
-        parse_mesh_spec(self.mesh)  # validates the mesh spec
+            parse_mesh_spec(self.mesh)  # validates the mesh spec
         _ = self.loading  # validates displacement, snapshots, plates
 
     @property
     def loading(self) -> Loading:
+        if self.levels_mm:
+            return MachineLoading(self.levels_mm, self.plates)
         return Loading(self.displacement_mm, self.snapshots, self.plates)
 
     @property
     def points(self) -> np.ndarray:
-        return measurement_grid(self.spacing_mm, self.margin_mm)
+        _, half_y, height = quarter_size(self.specimen_mm)
+        return measurement_grid(self.spacing_mm, self.margin_mm, half_y, height)
+
+    def to_dict(self) -> dict:
+        """The fields as a JSON object, ``specimen_mm`` and ``levels_mm`` only when they are not
+        the default (the form of the file and of its hash)."""
+        d = asdict(self)
+        for name in ("specimen_mm", "levels_mm"):
+            if d[name] == _DEFAULTS[name]:
+                del d[name]
+            else:
+                d[name] = list(d[name])
+        return d
+
+
+_DEFAULTS = {"specimen_mm": SPECIMEN_MM, "levels_mm": ()}
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,7 +213,7 @@ class Dataset:
         return {
             "format": FORMAT,
             "case": self.case,
-            "settings": asdict(self.settings),
+            "settings": self.settings.to_dict(),
             "parameters": self.parameters,
             "points": self.points.tolist(),
             "snapshots_mm": self.snapshots_mm.tolist(),
@@ -230,7 +277,9 @@ def make_data(
     case = get_case(case) if isinstance(case, str) else case
     settings = DataSettings(**{**asdict(settings or DataSettings()), **overrides})
     x = case.reference if x is None else np.asarray(x, float)
-    model = FEForwardModel(case, settings.mesh, settings.loading, settings.points)
+    model = FEForwardModel(
+        case, settings.mesh, settings.loading, settings.points, specimen_mm=settings.specimen_mm
+    )
     resp = model.response(x, progress=progress)
     if not resp.converged:
         raise RuntimeError(
@@ -419,7 +468,7 @@ def is_default(settings: DataSettings) -> bool:
 
 def cached_path(case: str, settings: DataSettings) -> Path:
     """Cache file of a non-default data set, keyed by the settings (in :func:`cache_dir`)."""
-    key = hashlib.sha256(json.dumps(asdict(settings), sort_keys=True).encode()).hexdigest()[:12]
+    key = hashlib.sha256(json.dumps(settings.to_dict(), sort_keys=True).encode()).hexdigest()[:12]
     return cache_dir() / f"{case}__{key}.json"
 
 

@@ -15,7 +15,7 @@ from typing import ClassVar
 import numpy as np
 
 from problems.fe.front_face import front_face_operator, measurement_grid
-from problems.fe.mesh import parse_mesh_spec
+from problems.fe.mesh import SPECIMEN_MM, parse_mesh_spec, quarter_size
 from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.inverse import layout
 from problems.inverse.case import Case
@@ -33,18 +33,19 @@ FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
 JACOBIAN_COST = {"coarse": 1.7, "paper": 2.0}
 
 
-def discretisation(mesh: str) -> Discretisation:
+def discretisation(mesh: str, specimen_mm=SPECIMEN_MM) -> Discretisation:
     """Discretisation of a mesh spec (``coarse``, ``coarse:quarter``,
-    ``NX,NY,NZ[:eighth|:quarter]``), built once per process (workers reuse it across runs). Presets
-    and even NZ solve the eighth model by default (same answers as the quarter, see
-    docs/fe_model.md)."""
-    return _discretisation(str(parse_mesh_spec(mesh)))
+    ``NX,NY,NZ[:eighth|:quarter]``) of the quarter model of a rectangular specimen of (x, y, z)
+    extents ``specimen_mm`` (mm; default the 150 mm cube), built once per process (workers reuse
+    it across runs). Presets and even NZ solve the eighth model by default (same answers as the
+    quarter, see docs/fe_model.md)."""
+    return _discretisation(str(parse_mesh_spec(mesh)), quarter_size(specimen_mm))
 
 
 @lru_cache(maxsize=4)
-def _discretisation(canonical: str) -> Discretisation:
+def _discretisation(canonical: str, size_mm: tuple[float, float, float]) -> Discretisation:
     spec = parse_mesh_spec(canonical)
-    return discretise(spec.mesh, symmetry=spec.symmetry)
+    return discretise(spec.build(size_mm), symmetry=spec.symmetry)
 
 
 def case_material(case: Case, x):
@@ -88,6 +89,8 @@ class FEForwardModel:
                or ``:quarter``; by default the eighth model where it is exact)
     loading  : plate displacement, snapshots and plate condition
     points   : (m, 2) front-face measurement points (y, z), mm
+    specimen_mm : (x, y, z) extents of the whole specimen, mm (the camera sees the face
+               x = specimen_mm[0] / 2 of the quarter model; default the 150 mm cube)
 
     ``model(x, jacobian=True)`` returns the exact Jacobian dU/dx (m, n) too: rows the measurement
     vector (mm per unit of x for the displacements, kN per unit for the force), columns the
@@ -102,6 +105,7 @@ class FEForwardModel:
     loading: Loading = Loading()
     points: np.ndarray = field(default_factory=measurement_grid)
     settings: NewtonSettings = FORWARD_SETTINGS
+    specimen_mm: tuple[float, float, float] = SPECIMEN_MM
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -129,7 +133,7 @@ class FEForwardModel:
         """The full FE :class:`~problems.fe.Response` at ``x`` (with ``sensitivities``: see
         :func:`problems.fe.newton.run`; names are the material's parameters)."""
         return run(
-            discretisation(self.mesh),
+            discretisation(self.mesh, self.specimen_mm),
             case_material(self.case, x),
             self.loading,
             self.settings,
