@@ -246,24 +246,35 @@ def _num(v) -> float:
         return math.nan
 
 
-def method_label(config: dict) -> str:
+def case_facts(name: str) -> tuple[bool, str, float] | None:
+    """``(analytic, default treatment, its plate margin in mm)`` of case ``name`` from
+    :mod:`problems.inverse.cases`, None for an unknown case (the report passes its frozen table,
+    :func:`bench.report.catalogue.case_facts`, instead)."""
+    from problems.inverse.cases import all_cases, default_treatment
+
+    case = all_cases().get(name)
+    if case is None:
+        return None
+    if case.is_analytic:
+        return True, "none", 0.0
+    d = default_treatment(name)
+    return False, d.treatment, d.plate_margin_mm
+
+
+def method_label(config: dict, facts=case_facts) -> str:
     """How a run's method is shown in tables and figures: the solver with its data tier and, when
     there is one, its model-error treatment, finite-difference Jacobian and surrogate track, e.g.
     ``lm (model-error, iterated)``, ``lm (consistent, FD forward)``,
-    ``cma (consistent, surrogate + FE polish)``."""
-    from problems.inverse.cases import all_cases
-
-    case = all_cases().get(config["case"])
-    if case is None or case.is_analytic:  # analytic problems have no data tiers
+    ``cma (consistent, surrogate + FE polish)``. ``facts``: :func:`case_facts` or a function like
+    it (what ``default`` stands for)."""
+    known = facts(config["case"])
+    if known is None or known[0]:  # analytic problems have no data tiers
         return config["method"]
     tags = [config.get("tier", "model-error")]
     treatment = config.get("treatment", "none")
     if treatment == "default":
-        from problems.inverse.cases import default_treatment
-
-        d = default_treatment(config["case"])
-        margin = f" {d.plate_margin_mm:g} mm" if d.plate_margin_mm else ""
-        tags.append(f"default {d.treatment}{margin}")
+        margin = f" {known[2]:g} mm" if known[2] else ""
+        tags.append(f"default {known[1]}{margin}")
     elif treatment != "none":
         tags.append(treatment)
     if config.get("jacobian", "exact") != "exact":
@@ -273,7 +284,7 @@ def method_label(config: dict) -> str:
     return f"{config['method']} ({', '.join(tags)})"
 
 
-def to_frames(out_dir: str | Path, records: list[dict] | None = None):
+def to_frames(out_dir: str | Path, records: list[dict] | None = None, *, facts=case_facts):
     """Load a results directory into two tidy DataFrames ``(runs, history)``.
 
     ``runs``: one row per run — configuration columns (case, ``method`` = :func:`method_label`,
@@ -289,6 +300,8 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
     start_index, budget, ``step`` (the row's position in the run's history), ``phase`` (e.g.
     ``polish`` after a surrogate search; empty when the solver gives none), iteration, n_evals,
     cost, best_cost and ``xn.<p>``/``err.<p>``.
+
+    ``facts``: what the method labels take from the cases (:func:`method_label`).
     """
     import numpy as np
     import pandas as pd
@@ -311,7 +324,7 @@ def to_frames(out_dir: str | Path, records: list[dict] | None = None):
             "config_hash": rec["config_hash"],
             "suite": rec.get("suite"),
             "case": cfg["case"],
-            "method": method_label(cfg),
+            "method": method_label(cfg, facts),
             "seed": int(cfg["seed"]),
             "start": cfg["start"],
             "start_index": int(cfg["start_index"]),

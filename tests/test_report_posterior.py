@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from bench.report import posterior as P
+from bench.report.figures import posterior_figure
 from problems.inverse.cases import get_case
 
 EXP = "exponent-shear"
@@ -127,7 +128,7 @@ def test_posterior_figure_is_written(tmp_path):
     rec, _ = mcmc_record(EXP, 0, 60, rng=rng)
     post = P.posterior_frame(records=[rec], folders=[tmp_path / "post"])
     assert set(post["source"]) == {"posterior study", "mcmc run (fe, seed 0, 1 of 1)"}
-    p = P.posterior_figure(EXP, post, tmp_path / "fig")
+    p = posterior_figure(EXP, post, tmp_path / "fig")
     assert p.is_file() and p.stat().st_size > 5000
 
 

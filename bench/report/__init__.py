@@ -76,6 +76,7 @@ def write_report(
     over the figures.
     """
     from bench import store
+    from bench.report.catalogue import case_facts
     from bench.report.tables import SUCCESS_TOL
 
     out_dir = Path(out_dir)
@@ -89,7 +90,7 @@ def write_report(
 
     user = [r for r in records if is_user_record(r)]  # user problems: their own report
     records = [r for r in records if not is_user_record(r)]
-    runs, history = store.to_frames(out_dir, records)
+    runs, history = store.to_frames(out_dir, records, facts=case_facts)
     if not len(runs) and not user:
         raise ValueError(
             f"no run records in {store.runs_dir(out_dir)}"

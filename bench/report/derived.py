@@ -2,55 +2,42 @@
 
 The exponent cases identify the hydrostatic tension strength ``pt0`` in place of ``a``
 (:class:`problems.inverse.cases.ExponentStrength`); the paper's Table 1 reports ``a``. For every
-case with a ``derive`` rule, :func:`add_derived` computes each derived parameter through the
-case's own :meth:`~problems.inverse.case.Case.material_parameters` (the formula lives there only)
-at the identified point (``runs``: ``x.a``, ``xn.a``, ``err.a``) and at every history point
-(``history``: ``xn.a``, ``err.a``), with the reference ``a`` = the derived value at the case's
-reference point. Cases without a rule get NaN (the parameter is not part of them).
+case with a derivation in the report's frozen table
+(:meth:`bench.report.catalogue.CaseInfo.derived`, the formula as the case defined it when the
+table was frozen), :func:`add_derived` computes each derived parameter at the identified point
+(``runs``: ``x.a``, ``xn.a``, ``err.a``) and at every history point (``history``: ``xn.a``,
+``err.a``), with the reference ``a`` = the derived value at the case's reference point. Cases
+without a derivation get NaN (the parameter is not part of them).
 """
 
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 import pandas as pd
 
+from bench.report.catalogue import case_info
 from bench.store import parameter_order
-
-
-@lru_cache(maxsize=None)
-def _case(name: str):
-    from problems.inverse.cases import all_cases
-
-    return all_cases().get(name)
 
 
 def derived_names(case: str) -> tuple[str, ...]:
     """The material parameters the case derives from its identified ones (``("a",)`` for the
     exponent cases, ``()`` otherwise or for an unknown case)."""
-    c = _case(case)
-    if c is None or getattr(c, "derive", None) is None:
-        return ()
-    mat = c.material_parameters(c.reference)
-    return tuple(k for k in mat if k not in c.names and k not in c.fixed)
+    c = case_info(case)
+    return () if c is None else tuple(c.derived(c.reference))
 
 
 def derived_reference(case: str) -> dict[str, float]:
     """``{name: reference value}`` of the derived parameters of ``case``."""
-    c = _case(case)
-    names = derived_names(case)
-    if not names:
-        return {}
-    mat = c.material_parameters(c.reference)
-    return {n: float(mat[n]) for n in names}
+    c = case_info(case)
+    return {} if c is None else {n: float(v) for n, v in c.derived(c.reference).items()}
 
 
 def derive_points(case: str, X: np.ndarray) -> dict[str, np.ndarray]:
     """Derived parameters at the identified points ``X`` (physical, shape (n, n_params) in the
     case's parameter order); NaN rows stay NaN."""
-    c = _case(case)
+    c = case_info(case)
     names = derived_names(case)
     X = np.atleast_2d(np.asarray(X, float))
     out = {n: np.full(len(X), math.nan) for n in names}
@@ -60,7 +47,7 @@ def derive_points(case: str, X: np.ndarray) -> dict[str, np.ndarray]:
         if x.shape[0] != len(c.names) or not np.all(np.isfinite(x)):
             continue
         try:
-            mat = c.material_parameters(x)
+            mat = c.derived(x)
         except (ValueError, ZeroDivisionError, OverflowError):
             continue
         for n in names:
@@ -91,7 +78,7 @@ def add_derived(runs: pd.DataFrame, history: pd.DataFrame | None = None):
         names = derived_names(case)
         if not names:
             continue
-        c = _case(case)
+        c = case_info(case)
         ref = derived_reference(case)
         sel = runs["case"] == case
         cols = [f"x.{p}" for p in c.names]

@@ -8,9 +8,11 @@
 * :func:`ecdf_figure` — COCO-style runtime ECDFs, one column per (track, tier): the fraction of
   (run, target) pairs reached within a number of forward-equivalents (forward evaluations for
   frames not prepared by :func:`bench.report.metrics.prepare`); (a) cost targets
-  ``J - J_best <= 10^-k (J_init - J_best)`` per objective (:func:`cost_targets`), (b) parameter
-  targets ``max_i |x_i/x_i^REF - 1| <= 10 %, 1 %, 0.1 %``. One (run, target) pair counts once, at
-  the first point where the target is met; pairs never met keep the curve below 1.
+  ``J - J_best <= 10^-k (J_init - J_best)`` per objective
+  (:func:`bench.report.metrics.cost_targets`), (b) parameter targets ``max_i |x_i/x_i^REF - 1| <=
+  10 %, 1 %, 0.1 %``. One (run, target) pair counts once, at the first point where the target is
+  met; pairs never met keep the curve below 1.
+* :func:`posterior_figure` — per case the posterior intervals against the Laplace approximation.
 * :func:`convergence_figure` — per case: best cost so far against forward-equivalents (median
   over the runs of each method), one panel per (track, tier) (``write_figures(best_cost=True)``).
 * :func:`history_figure` — one run's (a) x_i/x_i^REF with the box as brackets and (b) cost.
@@ -39,6 +41,15 @@ from bench.plotting import (
     pyplot,
     save,
 )
+from bench.report.catalogue import LABELS, family
+from bench.report.metrics import (
+    COST_KS,
+    ERR_TARGETS,
+    FAMILIES,
+    cost_targets,
+    fe_at,
+    objective_targets,
+)
 from bench.report.tables import (
     BOUND_MARK,
     bound_side,
@@ -47,9 +58,8 @@ from bench.report.tables import (
     method_order,
     normalised_box,
 )
+from bench.store import parameter_order
 
-COST_KS = (1, 2, 3, 4, 6, 8)
-ERR_TARGETS = (10.0, 1.0, 0.1)
 COST_LABEL = "cost $J$ (-)"
 
 
@@ -323,7 +333,6 @@ def convergence_figure(
 ) -> list[Path]:
     """Best cost so far against forward-equivalents (forward evaluations for unprepared frames),
     median over the runs of each method; one panel per (track, tier)."""
-    from bench.report.metrics import fe_at
 
     fcs = facets(runs)
     nc = len(fcs)
@@ -375,27 +384,6 @@ def convergence_figure(
     return _save_fast(fig, path, pdf)
 
 
-def cost_targets(runs_case: pd.DataFrame, hist_case: pd.DataFrame) -> np.ndarray:
-    """The cost targets of one case (empty when they cannot be defined)."""
-    costs = [runs_case["cost"].to_numpy(float)]
-    if len(hist_case):
-        costs.append(hist_case["best_cost"].to_numpy(float))
-    allc = np.concatenate(costs)
-    allc = allc[np.isfinite(allc)]
-    if not len(allc) or not len(hist_case):
-        return np.array([])
-    first = (
-        hist_case.sort_values("iteration").groupby("config_hash")["cost"].first().to_numpy(float)
-    )
-    first = first[np.isfinite(first)]
-    if not len(first):
-        return np.array([])
-    f_best, f_init = float(allc.min()), float(np.median(first))
-    if not f_init > f_best:
-        return np.array([])
-    return np.array([f_best + 10.0 ** (-k) * (f_init - f_best) for k in COST_KS])
-
-
 def runtimes(runs: pd.DataFrame, history: pd.DataFrame) -> dict[str, dict[str, list]]:
     """Per method: the runtime to reach each (run, target) pair (inf if never) for the cost and
     parameter targets, pooled over the objectives present in ``runs``.
@@ -405,7 +393,6 @@ def runtimes(runs: pd.DataFrame, history: pd.DataFrame) -> dict[str, dict[str, l
     cost) and the runtime is in forward-equivalents (:func:`bench.report.metrics.fe_at`: charges
     up front, then the run's measured forward-equivalents per evaluation); otherwise per case and
     in forward evaluations."""
-    from bench.report.metrics import fe_at, objective_targets
 
     out: dict[str, dict[str, list]] = {}
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
@@ -585,8 +572,6 @@ def family_figures(
     :data:`FAMILY_ROWS` methods go onto further pages (``path__2`` ...). Returns the PNG paths."""
     from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
-
-    from problems.inverse.cases import LABELS
 
     hist_by = dict(tuple(history.groupby("config_hash"))) if len(history) else {}
     rows = []
@@ -781,8 +766,6 @@ def write_figures(
 
     from tqdm import tqdm
 
-    from bench.report.metrics import FAMILIES, family
-
     params = runs.attrs.get("parameters") or []
     cases, methods = case_order(runs["case"].unique()), method_order(runs["method"].unique())
     fams = runs["family"] if "family" in runs else runs["method"].map(lambda m: family(m))
@@ -844,8 +827,6 @@ def write_figures(
             pdf=pdf,
         )[0]
     if post_cases:
-        from bench.report.posterior import posterior_figure
-
         for case in case_order(post_cases):
             bar.update()
             out["posterior"][case] = posterior_figure(
@@ -856,3 +837,79 @@ def write_figures(
             )
     bar.close()
     return out
+
+
+def posterior_figure(case: str, post_case: pd.DataFrame, path: Path, *, pdf: bool = False):
+    """One panel per data tier; per parameter (rows) the posterior 95 % interval (line) and mean
+    (marker) divided by the reference, one line per source, with the Laplace mean ± 2 sd beside
+    it (dashed grey) where known. Returns the PNG path."""
+    from bench.plotting import REFERENCE_LINE
+
+    params = parameter_order(post_case["parameter"].unique())
+    tiers = sorted(post_case["tier"].astype(str).unique())
+    sources = sorted(post_case["source"].astype(str).unique())
+    ns = max(1, max(post_case[post_case["tier"] == t]["source"].nunique() for t in tiers))
+    fig, axes = grid(
+        1,
+        len(tiers),
+        panel=(3.6, 0.3 + len(params) * (0.2 + 0.22 * ns)),
+        top=0.55,
+        bottom=0.75 + 0.14 * (len(sources) + 1),
+        left=0.55,
+        sharey=True,
+    )
+    markers = ("o", "s", "^", "D", "v", "x", "P", "*")
+    step = 0.8 / ns
+    for ti, tier in enumerate(tiers):
+        ax = axes[0, ti]
+        pt = post_case[post_case["tier"] == tier]
+        srcs = [x for x in sources if x in set(pt["source"])]
+        for gi, source in enumerate(srcs):
+            gp = pt[pt["source"] == source].set_index("parameter")
+            mk = markers[sources.index(source) % len(markers)]
+            labelled = False
+            for pi, p in enumerate(params):
+                if p not in gp.index:
+                    continue
+                r = gp.loc[p]
+                y = pi + (gi - (ns - 1) / 2.0) * step - 0.15 * step
+                if np.isfinite(r["q025_n"]) and np.isfinite(r["q975_n"]):
+                    ax.plot([r["q025_n"], r["q975_n"]], [y, y], color="0.0", linewidth=1.6)
+                    ax.plot(
+                        [r["mean_n"]],
+                        [y],
+                        linestyle="none",
+                        marker=mk,
+                        color="0.0",
+                        markerfacecolor="white",
+                        label=None if labelled else f"95 % interval and mean: {source}",
+                    )
+                    labelled = True
+                if np.isfinite(r["laplace_lo_n"]) and np.isfinite(r["laplace_hi_n"]):
+                    yl = y + 0.35 * step
+                    ax.plot(
+                        [r["laplace_lo_n"], r["laplace_hi_n"]],
+                        [yl, yl],
+                        color="0.45",
+                        linestyle="--",
+                        linewidth=1.2,
+                        marker="|",
+                        label="Laplace mean ± 2 sd",
+                    )
+        ax.axvline(1.0, **REFERENCE_LINE)
+        ax.set_title(f"{tier} data", loc="left", fontsize=8)
+        ax.set_xlabel(r"$x_i/x_i^{\mathrm{REF}}$ (-)")
+    ax0 = axes[0, 0]
+    ax0.set_yticks(range(len(params)))
+    ax0.set_yticklabels([LABELS.get(p, p) for p in params])
+    ax0.set_ylim(len(params) - 0.5, -0.5)
+    handles, labels = [], []
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    if handles:
+        fig.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.02, 0.0), fontsize=7)
+    fig.suptitle(f"{case}: posterior (MCMC) and Laplace approximation", fontsize=9)
+    return _save_fast(fig, Path(path), pdf)[0]

@@ -1,5 +1,5 @@
 """The *Findings* section of report.md, computed from the frames (no number is typed in here except
-the paper's Table-1 range for a, :data:`problems.inverse.cases.PAPER_A_ERROR`).
+the paper's Table-1 range for a, :data:`bench.report.catalogue.PAPER_A_ERROR`).
 
 Each finding quotes the numbers it rests on:
 
@@ -243,7 +243,7 @@ def _verdict(gl: pd.DataFrame, groups: list, ok: pd.Series) -> str:
 
 
 def _worst_parameters(runs: pd.DataFrame, ok: pd.Series, post: pd.DataFrame | None) -> list[str]:
-    from problems.inverse.cases import PAPER_A_ERROR
+    from bench.report.catalogue import PAPER_A_ERROR
 
     params = runs.attrs.get("parameters") or [c[4:] for c in runs.columns if c.startswith("err.")]
     params = [p for p in params if f"err.{p}" in runs and runs[f"err.{p}"].notna().any()]

@@ -2,13 +2,14 @@
 
 * :func:`prepare` — the frames the report works on: run-config columns that older records lack get
   their defaults (:data:`DEFAULTS`: ``track`` "fe", ``jacobian`` "exact", ``polish`` False, ...),
-  each run gets its method ``family`` (local / global / sampling, from the solver registry), its
-  cost in forward-equivalents (``fe_solver``, ``fe_charged``, ``fe_total``: measured, charges
-  such as high-fidelity corrections, BAE statistics or surrogate training included), the
-  ``objective`` it minimised (case | tier | treatment: runs of different objectives never share
-  a best known cost), the derived parameter ``a`` of the exponent cases
-  (:mod:`bench.report.derived`), and a ``method`` label that names the track and Jacobian when
-  they are not the defaults (``"lm (consistent) [FD central]"``); ``label`` keeps the store's.
+  each run gets its method ``family`` (local / global / sampling, from the report's frozen
+  table, :mod:`bench.report.catalogue`), its cost in forward-equivalents (``fe_solver``,
+  ``fe_charged``, ``fe_total``: measured, charges such as high-fidelity corrections, BAE
+  statistics or surrogate training included), the ``objective`` it minimised (case | tier |
+  treatment: runs of different objectives never share a best known cost), the derived
+  parameter ``a`` of the exponent cases (:mod:`bench.report.derived`), and a ``method`` label
+  that names the track and Jacobian when they are not the defaults (``"lm (consistent) [FD
+  central]"``); ``label`` keeps the store's.
 * :func:`ert_table` — expected running time to success per method and case (COCO): the total
   forward-equivalents spent by all runs, successful or not, over the number of successes (∞ when
   none), with a seeded bootstrap 95 % confidence interval over the runs.
@@ -24,6 +25,13 @@ import zlib
 
 import numpy as np
 import pandas as pd
+
+from bench.report.catalogue import family, is_analytic
+
+#: the cost targets J_best + 10^-k (J_init - J_best) of the ERT tables and runtime ECDFs
+COST_KS = (1, 2, 3, 4, 6, 8)
+#: the parameter targets max_i |x_i/x_i^REF - 1| (percent) of the runtime ECDFs
+ERR_TARGETS = (10.0, 1.0, 0.1)
 
 #: Run-config columns and the value a record without them had.
 DEFAULTS = {
@@ -50,15 +58,6 @@ PAIR_KEYS = (
     "budget",
     "mesh",
 )
-
-
-def family(solver: str) -> str:
-    """``local``, ``global`` or ``sampling`` (the solver registry's family), ``other`` if
-    unknown."""
-    from solvers import find_method
-
-    info = find_method(str(solver))
-    return getattr(info, "family", None) or "other"
 
 
 def variant_label(label: str, track: str, jacobian: str, polish: bool) -> str:
@@ -96,7 +95,7 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
         else:
             runs[col] = runs[col].where(runs[col].notna(), d)
     runs["polish"] = runs["polish"].map(_bool)
-    analytic = runs["case"].map(_is_analytic)
+    analytic = runs["case"].map(is_analytic)
     runs.loc[analytic, "tier"] = "analytic"  # analytic test problems have no data tiers
     if "solver" not in runs:
         runs["solver"] = runs["method"].map(lambda m: str(m).split(" (")[0])
@@ -194,13 +193,6 @@ def add_surrogate_optimum(runs: pd.DataFrame, records) -> pd.DataFrame:
     runs["sur_max_err"] = runs["config_hash"].map(err).astype(float)
     runs["polish_evals"] = runs["config_hash"].map(polish).astype(float)
     return runs
-
-
-def _is_analytic(case: str) -> bool:
-    from problems.inverse.cases import all_cases
-
-    c = all_cases().get(str(case))
-    return bool(c is not None and c.is_analytic)
 
 
 def _col(df: pd.DataFrame, col: str, default: float) -> np.ndarray:
@@ -330,12 +322,31 @@ def winners(ert_df: pd.DataFrame) -> pd.DataFrame:
 # --- cost targets ------------------------------------------------------------------------------
 
 
+def cost_targets(runs_case: pd.DataFrame, hist_case: pd.DataFrame) -> np.ndarray:
+    """The cost targets of one case (empty when they cannot be defined)."""
+    costs = [runs_case["cost"].to_numpy(float)]
+    if len(hist_case):
+        costs.append(hist_case["best_cost"].to_numpy(float))
+    allc = np.concatenate(costs)
+    allc = allc[np.isfinite(allc)]
+    if not len(allc) or not len(hist_case):
+        return np.array([])
+    first = (
+        hist_case.sort_values("iteration").groupby("config_hash")["cost"].first().to_numpy(float)
+    )
+    first = first[np.isfinite(first)]
+    if not len(first):
+        return np.array([])
+    f_best, f_init = float(allc.min()), float(np.median(first))
+    if not f_init > f_best:
+        return np.array([])
+    return np.array([f_best + 10.0 ** (-k) * (f_init - f_best) for k in COST_KS])
+
+
 def objective_targets(runs_obj: pd.DataFrame, hist_obj: pd.DataFrame) -> np.ndarray:
-    """The cost targets of one objective (:func:`bench.report.figures.cost_targets`), from the
+    """The cost targets of one objective (:func:`cost_targets`), from the
     runs whose final cost is an FE cost (surrogate-track runs count only with their FE polish) and
     the FE-track histories (a surrogate's history costs are not FE costs)."""
-    from bench.report.figures import cost_targets
-
     fe_final = runs_obj[(runs_obj["track"] == "fe") | runs_obj["polish"].astype(bool)]
     h = hist_obj
     if len(h) and "track" in h:
@@ -347,7 +358,6 @@ def objective_targets(runs_obj: pd.DataFrame, hist_obj: pd.DataFrame) -> np.ndar
 def target_table(runs: pd.DataFrame, history: pd.DataFrame) -> pd.DataFrame:
     """Per (track, tier, case, method): the percentage of runs whose final cost reaches each cost
     target ``k`` (columns ``k1``, ``k2``, ...; NaN when the objective's targets are undefined)."""
-    from bench.report.figures import COST_KS
     from bench.report.tables import case_order, method_order
 
     rows = []

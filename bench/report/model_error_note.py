@@ -74,9 +74,9 @@ def default_model_error_dirs(out_dir: Path) -> list[Path]:
 
 def run_settings(runs: pd.DataFrame, records=()) -> dict[str, Setting]:
     """Case -> the :class:`Setting` of its first run in ``runs``: from the record's provenance
-    when there is one, else from the run's configuration (``default`` resolved through
-    :func:`problems.inverse.cases.default_treatment`)."""
-    from problems.inverse.cases import default_treatment
+    when there is one, else from the run's configuration (``default`` resolved through the
+    report's frozen table, :data:`bench.report.catalogue.CASES`)."""
+    from bench.report.catalogue import case_info
 
     by_hash = {r.get("config_hash"): r for r in records or () if isinstance(r, dict)}
     out: dict[str, Setting] = {}
@@ -88,15 +88,13 @@ def run_settings(runs: pd.DataFrame, records=()) -> dict[str, Setting]:
         cfg = rec.get("config") or {}
         prov = (rec.get("result") or {}).get("provenance") or {}
         requested = str(prov.get("treatment_requested") or r.get("treatment") or "none")
-        try:
-            d = default_treatment(case) if requested == "default" else None
-        except ValueError:
-            d = None
-        treatment = prov.get("treatment") or (d.treatment if d else requested)
+        info = case_info(case) if requested == "default" else None
+        d = info.default_treatment if info else None  # (treatment, plate margin mm, hifi mesh)
+        treatment = prov.get("treatment") or (d[0] if d else requested)
         margin = prov.get("region_plate_margin_mm")
         if margin is None:
-            margin = d.plate_margin_mm if d else cfg.get("plate_margin_mm", 0.0)
-        hifi = prov.get("hifi_mesh") or (d.hifi_mesh if d else "")
+            margin = d[1] if d else cfg.get("plate_margin_mm", 0.0)
+        hifi = prov.get("hifi_mesh") or (d[2] if d else "")
         mesh = prov.get("inverse_mesh") or r.get("mesh") or ""
         dh = prov.get("data_hash") or r.get("data_hash")
         out[case] = Setting(

@@ -14,7 +14,8 @@ The exponent cases' ``a`` is derived from the chain when the record keeps it (th
 :data:`MAX_SAMPLES` samples) through the case's own rule (:mod:`bench.report.derived`).
 
 :func:`posterior_frame` gives one row per (case, tier, source, parameter) with everything divided
-by the reference; :func:`width_table` the 95 % widths; :func:`posterior_figure` the panel.
+by the reference; :func:`width_table` the 95 % widths; the panel is
+:func:`bench.report.figures.posterior_figure`.
 """
 
 from __future__ import annotations
@@ -26,23 +27,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.report.catalogue import PAPER_A_ERROR, case_info, is_analytic
 from bench.report.derived import derive_points, derived_reference
 from bench.store import parameter_order
-from problems.inverse.cases import PAPER_A_ERROR
 
 MAX_SAMPLES = 20_000
 SUMMARY = "summary.json"
 
 
-def _case(name: str):
-    from problems.inverse.cases import all_cases
-
-    return all_cases().get(name)
-
-
 def references(case: str) -> dict[str, float]:
     """Reference values of the case's identified and derived parameters."""
-    c = _case(case)
+    c = case_info(case)
     if c is None:
         return {}
     ref = {n: float(v) for n, v in zip(c.names, c.reference)}
@@ -204,7 +199,7 @@ def _derived_from_chain(case: str, names, chain, burn: int) -> dict[str, dict]:
         return {}
     if arr.ndim != 3 or arr.shape[2] != len(names) or arr.shape[0] <= burn:
         return {}
-    c = _case(case)
+    c = case_info(case)
     if c is None or list(c.names) != list(names):
         return {}
     flat = arr[burn:].reshape(-1, len(names))
@@ -238,7 +233,7 @@ def posterior_frame(records=(), folders=()) -> pd.DataFrame:
     df = pd.DataFrame(rows)
     if not len(df):
         return df
-    analytic = {c: bool(_case(c) is not None and _case(c).is_analytic) for c in df["case"].unique()}
+    analytic = {c: is_analytic(c) for c in df["case"].unique()}
     df.loc[df["case"].map(analytic), "tier"] = "analytic"  # no data tiers (as in the runs)
     refs = {c: references(c) for c in df["case"].unique()}
     df["reference"] = [refs[c].get(p, math.nan) for c, p in zip(df["case"], df["parameter"])]
@@ -289,81 +284,3 @@ def width_table(post: pd.DataFrame) -> pd.DataFrame:
     order = case_order(df["case"])
     df["_c"] = df["case"].map(order.index)
     return df.sort_values(["_c", "tier", "source"]).drop(columns="_c").reset_index(drop=True)
-
-
-def posterior_figure(case: str, post_case: pd.DataFrame, path: Path, *, pdf: bool = False):
-    """One panel per data tier; per parameter (rows) the posterior 95 % interval (line) and mean
-    (marker) divided by the reference, one line per source, with the Laplace mean ± 2 sd beside
-    it (dashed grey) where known. Returns the PNG path."""
-    from bench.plotting import REFERENCE_LINE
-    from bench.report.figures import _save_fast, grid
-    from problems.inverse.cases import LABELS
-
-    params = parameter_order(post_case["parameter"].unique())
-    tiers = sorted(post_case["tier"].astype(str).unique())
-    sources = sorted(post_case["source"].astype(str).unique())
-    ns = max(1, max(post_case[post_case["tier"] == t]["source"].nunique() for t in tiers))
-    fig, axes = grid(
-        1,
-        len(tiers),
-        panel=(3.6, 0.3 + len(params) * (0.2 + 0.22 * ns)),
-        top=0.55,
-        bottom=0.75 + 0.14 * (len(sources) + 1),
-        left=0.55,
-        sharey=True,
-    )
-    markers = ("o", "s", "^", "D", "v", "x", "P", "*")
-    step = 0.8 / ns
-    for ti, tier in enumerate(tiers):
-        ax = axes[0, ti]
-        pt = post_case[post_case["tier"] == tier]
-        srcs = [x for x in sources if x in set(pt["source"])]
-        for gi, source in enumerate(srcs):
-            gp = pt[pt["source"] == source].set_index("parameter")
-            mk = markers[sources.index(source) % len(markers)]
-            labelled = False
-            for pi, p in enumerate(params):
-                if p not in gp.index:
-                    continue
-                r = gp.loc[p]
-                y = pi + (gi - (ns - 1) / 2.0) * step - 0.15 * step
-                if np.isfinite(r["q025_n"]) and np.isfinite(r["q975_n"]):
-                    ax.plot([r["q025_n"], r["q975_n"]], [y, y], color="0.0", linewidth=1.6)
-                    ax.plot(
-                        [r["mean_n"]],
-                        [y],
-                        linestyle="none",
-                        marker=mk,
-                        color="0.0",
-                        markerfacecolor="white",
-                        label=None if labelled else f"95 % interval and mean: {source}",
-                    )
-                    labelled = True
-                if np.isfinite(r["laplace_lo_n"]) and np.isfinite(r["laplace_hi_n"]):
-                    yl = y + 0.35 * step
-                    ax.plot(
-                        [r["laplace_lo_n"], r["laplace_hi_n"]],
-                        [yl, yl],
-                        color="0.45",
-                        linestyle="--",
-                        linewidth=1.2,
-                        marker="|",
-                        label="Laplace mean ± 2 sd",
-                    )
-        ax.axvline(1.0, **REFERENCE_LINE)
-        ax.set_title(f"{tier} data", loc="left", fontsize=8)
-        ax.set_xlabel(r"$x_i/x_i^{\mathrm{REF}}$ (-)")
-    ax0 = axes[0, 0]
-    ax0.set_yticks(range(len(params)))
-    ax0.set_yticklabels([LABELS.get(p, p) for p in params])
-    ax0.set_ylim(len(params) - 0.5, -0.5)
-    handles, labels = [], []
-    for ax in axes[0]:
-        for h, lab in zip(*ax.get_legend_handles_labels()):
-            if lab not in labels:
-                handles.append(h)
-                labels.append(lab)
-    if handles:
-        fig.legend(handles, labels, loc="lower left", bbox_to_anchor=(0.02, 0.0), fontsize=7)
-    fig.suptitle(f"{case}: posterior (MCMC) and Laplace approximation", fontsize=9)
-    return _save_fast(fig, Path(path), pdf)[0]

@@ -227,7 +227,8 @@ def section_success(rep: Report) -> list[str]:
 
     from bench.report import metrics as M
     from bench.report import tables as T
-    from bench.report.figures import COST_KS, facets
+    from bench.report.figures import facets
+    from bench.report.metrics import COST_KS
 
     runs, ert_df, rule = rep.runs, rep.ert_df, rep.rule
     tgt = M.target_table(runs, rep.history)
@@ -438,7 +439,8 @@ def section_figures(rep: Report) -> list[str]:
         return []
     from bench.report import metrics as M
     from bench.report import tables as T
-    from bench.report.figures import COST_KS, ERR_TARGETS, write_figures
+    from bench.report.figures import write_figures
+    from bench.report.metrics import COST_KS, ERR_TARGETS
 
     dest, cases = rep.dest, rep.cases
     figs = write_figures(

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.report.catalogue import CASE_ORDER, LABELS, METHOD_FAMILIES, case_info
 from bench.store import PARAMETER_ORDER, parameter_order
-from problems.inverse.cases import LABELS
 
 DASH = "–"  # en dash: inactive parameter
 BOUND_MARK = "†"  # a final parameter on a bound of its box
@@ -33,14 +33,8 @@ BOUND_TOL = 1e-6  # "on a bound": within this fraction of the box width (upper -
 def case_box(case: str) -> dict[str, tuple[float, float, float]]:
     """``{parameter: (lower, upper, reference)}`` of a case (physical units); empty for an unknown
     case."""
-    from problems.inverse.cases import all_cases
-
-    c = all_cases().get(case)
-    return (
-        {}
-        if c is None
-        else {p.name: (float(p.lower), float(p.upper), float(p.reference)) for p in c.parameters}
-    )
+    c = case_info(case)
+    return {} if c is None else {name: (lo, hi, ref) for name, lo, hi, ref in c.parameters}
 
 
 def normalised_box(case: str) -> dict[str, tuple[float, float]]:
@@ -91,9 +85,7 @@ def bound_hits(runs: pd.DataFrame) -> pd.DataFrame:
 
 def case_order(cases) -> list[str]:
     """The nine FE cases in the study's order, then the others alphabetically."""
-    from problems.inverse.cases import CASES
-
-    canon = list(CASES)
+    canon = list(CASE_ORDER)
     cases = list(dict.fromkeys(cases))
     return [c for c in canon if c in cases] + sorted(c for c in cases if c not in canon)
 
@@ -105,15 +97,12 @@ def base_method(label: str) -> str:
 
 def method_order(methods) -> list[str]:
     """Methods by family (local, global, sampling), then in the order of the study's list."""
-    from solvers import METHODS, find_method
-
     rank = {"local": 0, "global": 1, "sampling": 2}
-    canon = list(METHODS)  # registration order
+    canon = list(METHOD_FAMILIES)  # registration order
 
     def key(m):
         base = base_method(m)  # labels carry the data tier and track: "lm (consistent) [FD]"
-        info = find_method(base)
-        fam = rank.get(getattr(info, "family", None), 3)
+        fam = rank.get(METHOD_FAMILIES.get(base), 3)
         return fam, canon.index(base) if base in canon else len(canon), m
 
     return sorted(dict.fromkeys(methods), key=key)
