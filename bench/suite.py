@@ -160,10 +160,14 @@ class RunConfig:
     @property
     def label(self) -> str:
         """Short human-readable label, e.g.
-        ``linear-shear/lm/s0/default0/b200/model-error/none``."""
+        ``linear-shear/lm/s0/default0/b200/model-error/none`` (a user problem has no data tier
+        and treatment: ``rosenbrock/cma/s0/default0/b3000``)."""
+        start = f"{self.start}{self.start_index}"
+        head = f"{self.case}/{self.method}/s{self.seed}/{start}/b{self.budget}"
+        if self.problem:
+            return head
         return (
-            f"{self.case}/{self.method}/s{self.seed}/{self.start}{self.start_index}/b{self.budget}/"
-            f"{self.tier}/{self.treatment}"
+            f"{head}/{self.tier}/{self.treatment}"
             + (f"/{self.track}" if self.track != "fe" else "")
             + (f"/jac-{self.jacobian}" if self.jacobian != "exact" else "")
         )

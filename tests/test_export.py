@@ -44,7 +44,7 @@ def test_coco_export_is_read_by_cocopp(bbob_dir, tmp_path):
     import cocopp
 
     records = store.load_records(bbob_dir)
-    write_coco(records, tmp_path / "coco")
+    assert write_coco(records, tmp_path / "coco")[1] == 0
     ds = cocopp.load(str(tmp_path / "coco" / "cma"))
     assert sorted((d.funcId, d.dim) for d in ds) == [(1, 2), (3, 2)]
     runs = [r for r in export_runs(records) if r.method == "cma" and r.function == 3]

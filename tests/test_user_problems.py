@@ -112,6 +112,7 @@ def test_grid_expands_and_hash_carries_the_problem():
         "args": {"n": 2, "shift": 0.0},
     }
     assert runs[0].hash != runs[1].hash
+    assert runs[0].label == "sph-shift0.0/de/s0/default0/b10"
 
 
 # --- scalar objectives ----------------------------------------------------------------------------

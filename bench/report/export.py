@@ -8,15 +8,17 @@
   and one at the run's last evaluation; ``raw_y = f - f_opt``), which IOHanalyzer reads;
 * ``coco/<method>/bbobexp_f<id>.info`` and ``coco/<method>/data_f<id>/bbobexp_f<id>_DIM<n>.dat``
   (and ``.tdat``): the format of ``cocoex.Observer("bbob")`` (``bbob-new2``), which ``cocopp``
-  reads (``cocopp.main("coco/<method>")``).
+  reads (``cocopp.main("coco/<method>")``); only the runs of BBOB problems, as cocopp knows
+  COCO's own suites only.
 
 What a run contributes is its improvement trace ``[[evaluations, best f], ...]``: exact per call
 for user problems (``result.extra.problem.trace``), from the history rows (one per iteration or
-generation) for the FE cases. ``f_opt`` is the problem's known ``f_min``; without one, the best
-cost any run of the problem reached (FE cases: 0, a least-squares cost being >= 0). A BBOB
-problem (factory arguments ``function`` and ``instance``) keeps its function and instance
-numbers; any other problem gets the function number of its position among the problems in
-alphabetical order, and instance 1 for every run (repeated runs).
+generation) for the FE cases, whose problems are the case with its data tier and treatment and
+whose algorithms the solver with its track and Jacobian when not the defaults. ``f_opt`` is the
+problem's known ``f_min``; without one, the best cost any run of the problem reached (FE cases: 0,
+a least-squares cost being >= 0). A BBOB problem (factory arguments ``function`` and
+``instance``) keeps its function and instance numbers; any other problem gets the function number
+of its position among the problems in alphabetical order, and instance 1 for every run.
 
 The report reads records only: nothing here imports problems/ or solvers/.
 """
@@ -84,8 +86,8 @@ def export_runs(records) -> list[ExportRun]:
         args = (cfg.get("problem") or {}).get("args") or {}
         rows.append(
             dict(
-                problem=cfg["case"],
-                method=cfg["method"],
+                problem=_problem_key(cfg),
+                method=_method_key(cfg),
                 dimension=len(res.get("parameter_names") or []) or int(prob.get("n_params", 0)),
                 bbob=_bbob_numbers(cfg),
                 args=args,
@@ -122,6 +124,26 @@ def export_runs(records) -> list[ExportRun]:
             )
         )
     return out
+
+
+def _problem_key(cfg) -> str:
+    """A user problem's name; an FE case with its data tier and model-error treatment (they are
+    different objectives)."""
+    if cfg.get("problem"):
+        return cfg["case"]
+    treatment = cfg.get("treatment", "none")
+    return f"{cfg['case']}-{cfg.get('tier', 'model-error')}" + (
+        f"-{treatment}" if treatment != "none" else ""
+    )
+
+
+def _method_key(cfg) -> str:
+    """The solver, with its track and Jacobian when not the defaults (different algorithms)."""
+    return (
+        cfg["method"]
+        + (f"-{cfg['track']}" if cfg.get("track", "fe") != "fe" else "")
+        + (f"-jac-{cfg['jacobian']}" if cfg.get("jacobian", "exact") != "exact" else "")
+    )
 
 
 def _bbob_numbers(cfg) -> tuple[int, int] | None:
@@ -239,14 +261,16 @@ def coco_blocks(run: ExportRun) -> tuple[str, str]:
     return head + body, head + body
 
 
-def write_coco(records, dest: str | Path) -> list[Path]:
-    """Write the COCO data folders of ``records`` under ``dest`` (one folder per method, the
-    argument of ``cocopp.main``); return the ``.info`` files written."""
+def write_coco(records, dest: str | Path) -> tuple[list[Path], int]:
+    """Write the COCO data folders of the BBOB runs among ``records`` under ``dest`` (one folder
+    per method, the argument of ``cocopp.main``); return the ``.info`` files written and the
+    number of runs left out: cocopp reads COCO's own suites only (its testbeds are hard-wired),
+    so the runs of other problems go to the IOH export alone."""
     dest = Path(dest)
     written = []
-    for (method, fid), runs in sorted(
-        _groups(export_runs(records), lambda r: (r.method, r.function)).items()
-    ):
+    every = export_runs(records)
+    bbob = [r for r in every if r.suite == "bbob"]
+    for (method, fid), runs in sorted(_groups(bbob, lambda r: (r.method, r.function)).items()):
         folder = dest / _safe(method)
         info = []
         for dim, rs in sorted(_groups(runs, lambda r: r.dimension).items()):
@@ -266,4 +290,4 @@ def write_coco(records, dest: str | Path) -> list[Path]:
         path = folder / f"bbobexp_f{fid}.info"
         _atomic(path, "".join(info))
         written.append(path)
-    return written
+    return written, len(every) - len(bbob)

@@ -37,10 +37,16 @@ def write_extras(records, user, dest: Path, formats, *, source: Path) -> list[st
             f"({n} function files)"
         )
     if "coco" in formats:
-        n = len(export.write_coco(records, dest / "coco"))
+        files, skipped = export.write_coco(records, dest / "coco")
         done.append(
             f"COCO (`bbob-new2`, read by `cocopp.main('coco/<method>')`): [coco/](coco) "
-            f"({n} .info files)"
+            f"({len(files)} .info files)"
+            + (
+                f"; {skipped} runs of problems outside COCO's suites left out (cocopp reads its "
+                "own suites only; they are in the IOH export)"
+                if skipped
+                else ""
+            )
         )
     if done:
         md += ["## Exports\n", "".join(f"- {d}\n" for d in done)]
