@@ -34,7 +34,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from problems.inverse.problem import FAILURE_COST, LeastSquaresProblem
+from problems.inverse.problem import FAILURE_COST, LeastSquaresProblem, outer_box
 from problems.inverse.protocol import ForwardResult
 
 RULE_KINDS = ("f-target", "digits", "solver")
@@ -110,11 +110,7 @@ class ScalarProblem:
             if callable(getattr(self.objective, "check", None))
             else FunctionModel(self.objective, self.names)
         )
-        width = np.where(np.isfinite(self.upper - self.lower), self.upper - self.lower, 0.0)
-        from problems.inverse.problem import BOX_TOL
-
-        tol = BOX_TOL * np.maximum(width, np.abs(self.reference) * 1e-12)
-        self._outer = (self.lower - tol, self.upper + tol)
+        self._outer = outer_box(self.lower, self.upper, self.reference)
         zl, zu = self.lower / self.reference, self.upper / self.reference
         self.lower_z, self.upper_z = np.minimum(zl, zu), np.maximum(zl, zu)
         self.blocks = {"f": slice(0, 1)}

@@ -269,3 +269,11 @@ def test_docs_example_runs(tmp_path):
     assert recs[("decay", "lm")]["extra"]["problem"]["success"]
     assert recs[("rosenbrock-n2", "cma")]["extra"]["problem"]["success"]
     assert recs[("rosenbrock-n4", "cma")]["extra"]["problem"]["f_gap"] <= 1e-6
+
+
+def test_half_infinite_bounds_reject_points_below_the_finite_side():
+    p = least_squares(lambda x: x, [1.0, 2.0], [0.0, 0.0], [np.inf, np.inf])
+    (_, inside), (_, below) = p.classify(np.array([[5.0, 1e9], [-0.5, 1.0]]))
+    assert inside is None and below.startswith("outside the bounds: x0 = -0.5")
+    s = ScalarProblem(lambda x: float(x[0]), [0.0], [np.inf])
+    assert s.classify(np.array([[-1.0]]))[0][1].startswith("outside the bounds")

@@ -31,6 +31,16 @@ BOX_TOL = 1e-9
 """Points outside the box by less than ``BOX_TOL * (upper - lower)`` are clipped, not rejected."""
 
 
+def outer_box(lower, upper, reference) -> tuple[np.ndarray, np.ndarray]:
+    """The box widened by ``BOX_TOL`` of its width (of ``1e-12 |reference|`` where the width is
+    zero or infinite: a half-infinite bound gets no tolerance from its infinite side); beyond it
+    a point is outside the box, within it clipped."""
+    width = np.asarray(upper, float) - np.asarray(lower, float)
+    width = np.where(np.isfinite(width), width, 0.0)
+    tol = BOX_TOL * np.maximum(width, np.abs(reference) * 1e-12)
+    return lower - tol, upper + tol
+
+
 @dataclass(eq=False)
 class LeastSquaresProblem:
     """Data, weights, box and scaling of one identification problem over a forward model.
@@ -75,8 +85,7 @@ class LeastSquaresProblem:
             raise ValueError("reference values must be finite and non-zero (z = x / reference)")
         if np.any(self.lower > self.upper):
             raise ValueError("a lower bound is above its upper bound")
-        tol = BOX_TOL * np.maximum(self.upper - self.lower, np.abs(self.reference) * 1e-12)
-        self._outer = (self.lower - tol, self.upper + tol)  # beyond: outside the box
+        self._outer = outer_box(self.lower, self.upper, self.reference)
         zl, zu = self.lower / self.reference, self.upper / self.reference
         self.lower_z, self.upper_z = np.minimum(zl, zu), np.maximum(zl, zu)
         self._chol = self._sigma = None
