@@ -219,7 +219,6 @@ def test_cached_kernels_call_no_kernel_of_another_file():
 #: compiled screen from problems.surrogate._kernels (beside the kernel that calls it)
 DEFERRED_CIRCLES = [
     ["bench.commands.surrogate", "bench.surrogate_run"],
-    ["problems.fe.newton", "problems.fe.sensitivity"],
     [
         "problems.inverse.feasibility",
         "problems.surrogate",

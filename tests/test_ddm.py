@@ -8,6 +8,7 @@ Newton tolerance shows); small meshes keep the file well under a minute.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ import problems.fe.sensitivity as sensitivity
 from problems.fe.linear_solver import superlu_factor
 from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Loading, NewtonSettings, discretise, run
+from problems.fe.sensitivity import SensitivitySettings
 from problems.inverse import layout
 from problems.inverse.cases import get_case
 from problems.inverse.forward import FORWARD_SETTINGS, FEForwardModel, case_material
@@ -25,6 +27,11 @@ from problems.materials import LinearElastic
 #: one case per yield surface; the exponent case identifies pt0 in place of a (chain rule)
 CASES = ("linear-compression", "hyperbolic-shear", "exponent-tension")
 STEP, STEP_SMALL = 1e-4, 1e-5  # relative central-difference steps, both in the clean range
+
+
+def with_sensitivity(**kw) -> NewtonSettings:
+    """FORWARD_SETTINGS with these :class:`SensitivitySettings` fields."""
+    return replace(FORWARD_SETTINGS, sensitivity=SensitivitySettings(**kw))
 
 
 def central(model, x, j, step):
@@ -72,7 +79,7 @@ def test_jacobian_away_from_the_reference_on_a_finer_mesh():
 
 
 @pytest.mark.parametrize("name", ["linear-tension", "hyperbolic-shear", "exponent-compression"])
-def test_one_material_pass_gives_the_jacobian_of_two_calls(name, monkeypatch):
+def test_one_material_pass_gives_the_jacobian_of_two_calls(name):
     """The one-pass affine split (problems.materials.ddm.affine_sensitivity, the default) and the
     two ``sensitivity`` calls per increment of the material interface give the same Jacobian,
     and the run itself is the plain run bit for bit."""
@@ -81,22 +88,21 @@ def test_one_material_pass_gives_the_jacobian_of_two_calls(name, monkeypatch):
     x = case.start
     out = {}
     for affine in (True, False):
-        monkeypatch.setattr(sensitivity, "DEFAULT_AFFINE", affine)
-        out[affine] = model(x, jacobian=True)
+        two = FEForwardModel(case, "2,2,4", settings=with_sensitivity(affine=affine))
+        out[affine] = two(x, jacobian=True)
         assert out[affine].ok
     np.testing.assert_array_equal(out[True].values, model(x).values)
     for j in range(len(x)):
         assert rel(out[True].jacobian[:, j], out[False].jacobian[:, j]) < 1e-10, case.names[j]
 
 
-def test_krylov_and_direct_sensitivity_solves_agree(monkeypatch):
+def test_krylov_and_direct_sensitivity_solves_agree():
     case = get_case("hyperbolic-shear")
     disc = discretise(parse_mesh_spec("3,3,6").mesh, symmetry="eighth")
     mat = case_material(case, case.reference)
     out = {}
     for mode in ("direct", "krylov"):
-        monkeypatch.setattr(sensitivity, "DEFAULT_MODE", mode)
-        r = run(disc, mat, Loading(), FORWARD_SETTINGS, sensitivities=True)
+        r = run(disc, mat, Loading(), with_sensitivity(mode=mode), sensitivities=True)
         assert r.sensitivities.timing["mode"] == mode and r.sensitivities.ok
         out[mode] = r.sensitivities
     assert out["krylov"].timing["krylov_iterations"] > 0
@@ -106,18 +112,16 @@ def test_krylov_and_direct_sensitivity_solves_agree(monkeypatch):
     assert out["direct"].residual < 1e-9 and out["krylov"].residual < 1e-6
 
 
-def test_mixed_precision_direct_solves_give_the_double_lu_jacobian(monkeypatch):
-    """Above MIXED_MIN_DOFS (forced here on a small mesh) the direct solves factorise in single
+def test_mixed_precision_direct_solves_give_the_double_lu_jacobian():
+    """Above mixed_min_dofs (forced here on a small mesh) the direct solves factorise in single
     precision and refine: the Jacobian is the double LU's (without handing the LU to the Newton
     predictor, which keeps the response bit for bit; the hand-over is tested below)."""
     case = get_case("hyperbolic-shear")
-    model = FEForwardModel(case, "3,3,6")
     x = case.reference
-    monkeypatch.setattr(sensitivity, "DEFAULT_MODE", "direct")
-    monkeypatch.setattr(sensitivity, "HAND_OVER", False)
     out, timing = {}, {}
     for name, threshold in (("double", 10**9), ("mixed", 0)):
-        monkeypatch.setattr(sensitivity, "MIXED_MIN_DOFS", threshold)
+        settings = with_sensitivity(mode="direct", hand_over=False, mixed_min_dofs=threshold)
+        model = FEForwardModel(case, "3,3,6", settings=settings)
         out[name] = model(x, jacobian=True)
         sens = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities
         assert out[name].ok and sens.ok and sens.residual < 1e-9
@@ -132,7 +136,7 @@ def test_mixed_precision_direct_solves_give_the_double_lu_jacobian(monkeypatch):
 
 
 def test_coarse_keeps_the_double_lu(monkeypatch):
-    """coarse (749 free dofs) is below MIXED_MIN_DOFS: its direct solves are the double SuperLU
+    """coarse (749 free dofs) is below mixed_min_dofs: its direct solves are the double SuperLU
     ones of before (its shipped records are reproduced bit for bit)."""
     case = get_case("linear-compression")
     model = FEForwardModel(case, "coarse")
@@ -153,23 +157,21 @@ def test_coarse_keeps_the_double_lu(monkeypatch):
     s = resp.sensitivities
     assert s.ok and s.timing["mode"] == "direct"
     assert resp.timing["handed_predictors"] == 0  # the Newton solves are the plain run's
-    assert calls and set(calls) == {749} and 749 <= sensitivity.MIXED_MIN_DOFS
+    assert calls and set(calls) == {749} and 749 <= SensitivitySettings().mixed_min_dofs
     assert len(calls) == s.timing["factorisations"] and s.timing["mixed_factorisations"] == 0
 
 
-def test_factor_handed_to_the_newton_predictor_keeps_the_response_and_the_jacobian(monkeypatch):
-    """Above MIXED_MIN_DOFS (forced here on a small mesh) the direct solves hand their LU of the
+def test_factor_handed_to_the_newton_predictor_keeps_the_response_and_the_jacobian():
+    """Above mixed_min_dofs (forced here on a small mesh) the direct solves hand their LU of the
     converged tangent to the next increment's Newton predictor: the response is the plain run's
     to the Newton tolerance and the Jacobian the one without the hand-over to 1e-8."""
     case = get_case("hyperbolic-shear")
-    model = FEForwardModel(case, "3,3,6")
     x = case.reference
-    monkeypatch.setattr(sensitivity, "DEFAULT_MODE", "direct")
-    monkeypatch.setattr(sensitivity, "MIXED_MIN_DOFS", 0)
-    plain = model.response(x)
+    plain = FEForwardModel(case, "3,3,6").response(x)
     resp, out = {}, {}
     for hand in (False, True):
-        monkeypatch.setattr(sensitivity, "HAND_OVER", hand)
+        settings = with_sensitivity(mode="direct", mixed_min_dofs=0, hand_over=hand)
+        model = FEForwardModel(case, "3,3,6", settings=settings)
         resp[hand] = model.response(x, sensitivities=model.material_chain(x)[0])
         out[hand] = model(x, jacobian=True)
         assert resp[hand].converged and resp[hand].sensitivities.ok and out[hand].ok

@@ -13,8 +13,8 @@ steadier when other processes share the cores); where the sensitivity time went 
 material pass(es) per increment and the affine update; assem: pseudo-loads, strains,
 internal-force sensitivities and converged tangents; solve: factorisations + back-substitutions
 or Krylov iterations, ``its``; ``ref``: refinement steps of the mixed-precision direct solves
-above ``sensitivity.MIXED_MIN_DOFS`` free dofs); then, unless ``--no-fd``, the largest relative
-2-norm error of a Jacobian column against central differences of plain runs with relative step
+above ``mixed_min_dofs`` free dofs); then, unless ``--no-fd``, the largest relative 2-norm
+error of a Jacobian column against central differences of plain runs with relative step
 ``--step`` (default 1e-5) and the parameter it belongs to, and the same with a step 100 times
 smaller (``err/100``): where a Gauss point starts to yield within the first step of the reference
 (a kink of the discrete response: the one-sided differences converge to the DDM column from one
@@ -23,54 +23,47 @@ side only), the smaller step is in the clean range again.
 measured choice behind ``auto``); ``--modes auto,auto-2pass`` the one material pass per increment
 against the two ``sensitivity`` calls of the first implementation; ``--modes auto,auto-f64`` the
 direct solves with a double LU at every size against the default (``-f32``: mixed precision at
-every size; the measured choice behind ``MIXED_MIN_DOFS``); ``--modes auto-keep,auto`` without
+every size; the measured choice behind ``mixed_min_dofs``); ``--modes auto-keep,auto`` without
 and with the hand-over of that factorisation to the next increment's Newton predictor
-(``sensitivity.HAND_OVER``). ``coarse`` runs all nine
+(``hand_over``). Each mode is a :class:`~problems.fe.sensitivity.SensitivitySettings` of the
+model's Newton settings. ``coarse`` runs all nine
 cases, ``paper`` only ``--paper-cases``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
 
-import problems.fe.sensitivity as sensitivity
 from bench.perf.linear_solvers import split_specs
+from problems.fe.sensitivity import SOLVE_MODES, SensitivitySettings
 from problems.inverse.cases import CASES
 from problems.inverse.forward import FEForwardModel, discretisation
 
 PAPER_CASES = "linear-compression,hyperbolic-shear,exponent-tension"
 
-#: ``--modes`` values: (sensitivity solve mode, one material pass per increment, MIXED_MIN_DOFS);
-#: the ``-2pass`` variants time the two ``sensitivity`` calls per increment of the first
-#: implementation, ``-f64`` direct solves with a double LU whatever the size, ``-f32`` with the
-#: single-precision LU and refinement whatever the size, ``-keep`` without handing the direct
-#: solves' factorisation to the next increment's Newton predictor (``sensitivity.HAND_OVER``)
-DEFAULTS = (
-    sensitivity.DEFAULT_MODE,
-    sensitivity.DEFAULT_AFFINE,
-    sensitivity.MIXED_MIN_DOFS,
-    sensitivity.HAND_OVER,
-)
+#: ``--modes`` values, as sensitivity settings: the ``-2pass`` variants time the two
+#: ``sensitivity`` calls per increment of the first implementation, ``-f64`` direct solves with a
+#: double LU whatever the size, ``-f32`` with the single-precision LU and refinement whatever the
+#: size, ``-keep`` without handing the direct solves' factorisation to the next increment's Newton
+#: predictor
 MODES = {
-    **{m: (m, True, DEFAULTS[2], DEFAULTS[3]) for m in sensitivity.SOLVE_MODES},
-    **{f"{m}-2pass": (m, False, DEFAULTS[2], DEFAULTS[3]) for m in sensitivity.SOLVE_MODES},
-    **{f"{m}-f64": (m, True, 2**62, DEFAULTS[3]) for m in ("auto", "direct")},
-    **{f"{m}-f32": (m, True, 0, DEFAULTS[3]) for m in ("auto", "direct")},
-    **{f"{m}-keep": (m, True, DEFAULTS[2], False) for m in ("auto", "direct")},
+    **{m: SensitivitySettings(mode=m) for m in SOLVE_MODES},
+    **{f"{m}-2pass": SensitivitySettings(mode=m, affine=False) for m in SOLVE_MODES},
+    **{f"{m}-f64": SensitivitySettings(mode=m, mixed_min_dofs=2**62) for m in ("auto", "direct")},
+    **{f"{m}-f32": SensitivitySettings(mode=m, mixed_min_dofs=0) for m in ("auto", "direct")},
+    **{f"{m}-keep": SensitivitySettings(mode=m, hand_over=False) for m in ("auto", "direct")},
 }
 
 
-def set_mode(values) -> None:
-    """Set (DEFAULT_MODE, DEFAULT_AFFINE, MIXED_MIN_DOFS, HAND_OVER) of problems.fe.sensitivity."""
-    (
-        sensitivity.DEFAULT_MODE,
-        sensitivity.DEFAULT_AFFINE,
-        sensitivity.MIXED_MIN_DOFS,
-        sensitivity.HAND_OVER,
-    ) = values
+def with_mode(model: FEForwardModel, mode: str) -> FEForwardModel:
+    """``model`` with the sensitivity settings of ``--modes`` value ``mode``."""
+    return dataclasses.replace(
+        model, settings=dataclasses.replace(model.settings, sensitivity=MODES[mode])
+    )
 
 
 def timed(fn):
@@ -88,15 +81,14 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
     best_plain, best = np.inf, {m: np.inf for m in modes}
     cpu_plain, cpu = np.inf, {m: np.inf for m in modes}
     out = {}
+    models = {mode: with_mode(model, mode) for mode in modes}
     for _ in range(repeat):
         t, c, plain = timed(lambda: model(x))
         best_plain, cpu_plain = min(best_plain, t), min(cpu_plain, c)
         for mode in modes:
-            set_mode(MODES[mode])
-            t, c, res = timed(lambda: model(x, jacobian=True))
+            t, c, res = timed(lambda: models[mode](x, jacobian=True))
             best[mode], cpu[mode] = min(best[mode], t), min(cpu[mode], c)
             out[mode] = res
-    set_mode(DEFAULTS)
     if not plain.ok or any(not r.ok or r.jacobian is None for r in out.values()):
         return [f"{mesh:8} {name:22} failed: {plain.message or next(iter(out.values())).message}"]
     err, worst, err_small = np.nan, "", np.nan
@@ -115,9 +107,8 @@ def measure(mesh: str, name: str, modes, repeat: int, step: float | None) -> lis
         worst = case.names[int(np.argmax(errs[step]))]
     rows = []  # the split of the sensitivity time: one more run per mode
     for mode in modes:
-        set_mode(MODES[mode])
-        tm = model.response(x, sensitivities=model.material_chain(x)[0]).sensitivities.timing
-        set_mode(DEFAULTS)
+        m = models[mode]
+        tm = m.response(x, sensitivities=m.material_chain(x)[0]).sensitivities.timing
         solve = tm["factor_s"] + tm["solve_s"]
         rows.append(
             f"{mesh:8} {3 * discretisation(mesh).mesh.n_nodes:>6} {name:22} {mode:9} "

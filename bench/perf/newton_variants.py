@@ -15,7 +15,9 @@ increment:
   (its converged increment minus its own tangent predictor), scaled by the step ratio.
 
 Printed per case and variant: linear solves (Newton iterations counted as in ``Response``),
-material updates (residual evaluations), cuts and wall seconds. For a line search, from the
+material updates (residual evaluations, plus the one virgin tangent of a run), cuts and wall
+seconds. The variants plug into the production Newton solver through its public predictor hook
+(``problems.fe.newton.run(predictor=...)``). For a line search, from the
 production runs' residual histories: the Newton steps whose residual did not fall (ratio >= 1,
 where a backtracking line search would act at all) and the largest ratio r_{k+1}/r_k; where none
 rises, a line search can only add residual evaluations.
@@ -28,99 +30,61 @@ import time
 
 import numpy as np
 
-import problems.fe.newton as fe_newton
-from problems.fe.newton import _Increment, forcing_term
+from problems.fe.newton import run
 from problems.inverse.cases import CASES
-from problems.inverse.forward import FEForwardModel
+from problems.inverse.forward import FEForwardModel, case_material, discretisation
 
 
-class _VariantNewton(fe_newton._Newton):
-    """The production Newton with another predictor (see the module docstring)."""
+class VariantPredictor:
+    """A :class:`problems.fe.newton.Predictor`: ``variant`` one of :data:`VARIANTS` (see the
+    module docstring)."""
 
-    variant = "tangent"
-
-    def __init__(self, *a, **kw):
-        super().__init__(*a, **kw)
-        self.material_updates = 0
+    def __init__(self, variant: str):
+        self.variant = variant
         self._prev = None  # (du of the last converged increment, its predictor, its dtop)
+        self._pending = (None, 0.0)  # (predictor, dtop) of the increment under way
 
-    def increment(self, u_n, stress_n, state_n, D_n, dtop_mm):
-        s, bc = self.settings, self.bc
-        du = np.zeros_like(u_n)
-        du[bc.top_z] = dtop_mm
-        pred = None
+    def predict(self, du, dtop_mm, tangent):
         if self.variant == "extrapolated" and self._prev is not None:
-            du = self._prev[0] * (dtop_mm / self._prev[2])
-            corr = du[bc.free].copy()
-        else:
-            if D_n is None:
-                D_n = self._virgin_tangent()
-            Kff, rhs = self._predictor(D_n, du)
-            corr, why = self._solve(Kff, rhs, D_n, fe_newton.ETA_PREDICTOR)
-            self.iterations += 1
-            if why:
-                return _Increment(False, why)
-            du[bc.free] += corr
-            pred = du.copy()
-            if self.variant == "tangent+corr" and self._prev is not None:
-                du_prev, pred_prev, dtop_prev = self._prev
-                if pred_prev is not None:
-                    du += (du_prev - pred_prev) * (dtop_mm / dtop_prev)
-        norms = []
-        for _ in range(s.max_iterations):
-            deps = self._strain(du)
-            upd = self.material.update(deps, stress_n, state_n)
-            self.material_updates += 1
-            if not np.all(upd.ok):
-                return _Increment(False, "material return mapping failed")
-            f_int = self._internal_force(upd.stress)
-            r_free = f_int[bc.free]
-            scale = max(np.linalg.norm(f_int[bc.fixed]), 1e-30)
-            rel_r = np.linalg.norm(r_free) / scale
-            rel_u = np.linalg.norm(corr) / max(np.linalg.norm(du), 1e-30)
-            norms.append(rel_r)
-            if not np.isfinite(rel_r):
-                return _Increment(False, "residual is not finite")
-            if rel_r <= s.rtol_force * (1.0 if rel_u <= s.rtol_displacement else s.linear_rtol):
-                self.residual_history.append(norms)
-                self._prev = (du.copy(), pred, dtop_mm)
-                return self._converged(
-                    u=u_n + du,
-                    stress=upd.stress,
-                    state=upd.state,
-                    tangent=upd.tangent,
-                    f_int=f_int,
-                    strain_increment=deps,
-                )
-            corr, why = self._solve(
-                self._tangent_free(upd.tangent), -r_free, upd.tangent, forcing_term(rel_r, s)
-            )
-            self.iterations += 1
-            if why or not np.all(np.isfinite(corr)):
-                return _Increment(False, why or "non-finite correction")
-            du[bc.free] += corr
-        return _Increment(False, "no convergence")
+            self._pending = (None, dtop_mm)
+            return self._prev[0] * (dtop_mm / self._prev[2]), ""
+        du, why = tangent()
+        self._pending = (du.copy(), dtop_mm)
+        if not why and self.variant == "tangent+corr" and self._prev is not None:
+            du_prev, pred_prev, dtop_prev = self._prev
+            if pred_prev is not None:
+                du = du + (du_prev - pred_prev) * (dtop_mm / dtop_prev)
+        return du, why
+
+    def converged(self, du) -> None:
+        self._prev = (du.copy(), self._pending[0], self._pending[1])
+
+
+class CountingMaterial:
+    """``material`` with its ``update`` calls counted (material updates = residual
+    evaluations)."""
+
+    def __init__(self, material):
+        self._material = material
+        self.updates = 0
+
+    def update(self, *args, **kw):
+        self.updates += 1
+        return self._material.update(*args, **kw)
+
+    def __getattr__(self, name):
+        return getattr(self._material, name)
 
 
 def _run(model, x, variant):
-    """One forward run with the predictor ``variant``: (response, material updates, wall s)."""
-    made = []
-
-    class Newton(_VariantNewton):
-        def __init__(self, *a, **kw):
-            super().__init__(*a, **kw)
-            self.variant = variant
-            made.append(self)
-
-    saved = fe_newton._Newton
-    fe_newton._Newton = Newton
-    try:
-        t = time.perf_counter()
-        r = model.response(x)
-        wall = time.perf_counter() - t
-    finally:
-        fe_newton._Newton = saved
-    return r, made[0].material_updates, wall
+    """One forward run of ``model`` at ``x`` with the predictor ``variant``: (response, material
+    updates, wall s)."""
+    material = CountingMaterial(case_material(model.case, x))
+    predictor = None if variant == "tangent" else VariantPredictor(variant)
+    t = time.perf_counter()
+    disc = discretisation(model.mesh, model.specimen_mm)
+    r = run(disc, material, model.loading, model.settings, predictor=predictor)
+    return r, material.updates, time.perf_counter() - t
 
 
 VARIANTS = ("tangent", "extrapolated", "tangent+corr")

@@ -18,7 +18,7 @@ One small interface, two implementations, chosen by ``NewtonSettings.linear_solv
 Not a Newton solver: :func:`mixed_superlu_factor`, SuperLU of the matrix rounded to single
 precision whose solves are refined in double to a requested relative residual (falling back to
 the double LU where that stalls); the direct sensitivity solves use it above
-``problems.fe.sensitivity.MIXED_MIN_DOFS`` free dofs, where it is measured faster.
+``SensitivitySettings.mixed_min_dofs`` free dofs, where it is measured faster.
 
 Both take the free-free block already permuted into the nested-dissection elimination order
 (:meth:`problems.fe.newton.BoundaryConditions.free_block`), which CHOLMOD uses as its ordering and
@@ -256,7 +256,7 @@ class LUGmresFactor:
     same pattern (a :class:`MixedSuperLUFactor` or :class:`SuperLUFactor` of the converged tangent
     of the previous increment, from the sensitivity solves).
 
-    The Newton solver of a run with sensitivities above ``sensitivity.MIXED_MIN_DOFS`` free dofs
+    The Newton solver of a run with sensitivities above ``mixed_min_dofs`` free dofs
     solves each increment's predictor with it (:meth:`problems.fe.newton._Newton.adopt_factor`):
     the predictor matrix *is* the factorised tangent, so one Krylov iteration reaches the
     predictor's tolerance. A solve that does not converge falls back to an exact SuperLU of ``A``

@@ -24,10 +24,9 @@ from __future__ import annotations
 
 import math
 import time
-import weakref
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,6 +38,7 @@ from problems.fe.assembly import (
     element_forces,
     element_matrices,
 )
+from problems.fe.cache import shared
 from problems.fe.element import element_mean, strain_operators
 from problems.fe.linear_solver import (
     LINEAR_SOLVERS,
@@ -56,10 +56,13 @@ from problems.fe.mesh import (
     nested_dissection_order,
     unfold_mid_height,
 )
+from problems.fe.sensitivity import (
+    GlobalDDM,
+    Sensitivities,
+    SensitivitySettings,
+    select_parameters,
+)
 from problems.materials.base import Material
-
-if TYPE_CHECKING:
-    from problems.fe.sensitivity import Sensitivities
 
 PLATES = ("friction", "frictionless")
 ASSEMBLIES = ("fused", "numpy")
@@ -144,6 +147,8 @@ class NewtonSettings:
                         new LU per iteration, the old path); see problems/fe/linear_solver.py
     assembly          : ``fused`` (compiled kernels straight into the free-free block) or ``numpy``
                         (the batched numpy reference and a full CSR matrix, the old path)
+    sensitivity       : how a run with sensitivities solves them
+                        (:class:`problems.fe.sensitivity.SensitivitySettings`)
     """
 
     rtol_force: float = 1e-8
@@ -154,6 +159,7 @@ class NewtonSettings:
     linear_rtol: float = 1e-4
     linear_solver: str = "auto"
     assembly: str = "fused"
+    sensitivity: SensitivitySettings = SensitivitySettings()
 
     def __post_init__(self):
         if self.linear_solver not in LINEAR_SOLVERS:
@@ -344,6 +350,7 @@ def run(
     *,
     progress: bool = False,
     sensitivities=False,
+    predictor: Predictor | None = None,
 ) -> Response:
     """Run the plate-compression test on ``disc`` with ``material``; never raises on
     non-convergence.
@@ -353,6 +360,8 @@ def run(
     names) also computes the exact derivatives of the displacements and plate forces with respect
     to those parameters by direct differentiation (problems/fe/sensitivity.py) into
     ``Response.sensitivities``; the response itself is the same as without them.
+    ``predictor``: another predictor of each increment (:class:`Predictor`, for experiments;
+    default the tangent predictor).
     """
     t0 = time.perf_counter()
     bar = None
@@ -361,7 +370,7 @@ def run(
 
         bar = tqdm(total=loading.snapshots, desc="snapshots", unit="snap")
     bc = BoundaryConditions(disc, loading.plates)
-    solver = _Newton(disc, material, bc, settings)
+    solver = _Newton(disc, material, bc, settings, predictor)
     ne, nn = disc.mesh.n_elements, disc.mesh.n_nodes
     ng = disc.dV.shape[1]  # Gauss points per element
     u = np.zeros(disc.pattern.n_dofs)
@@ -370,9 +379,8 @@ def run(
     D = None
     ddm = None
     if sensitivities is not False and sensitivities is not None:
-        from problems.fe.sensitivity import GlobalDDM, select_parameters
-
-        ddm = GlobalDDM(solver, material, select_parameters(material, sensitivities))
+        columns = select_parameters(material, sensitivities)
+        ddm = GlobalDDM(solver, material, columns, settings.sensitivity)
     out_u, out_s, out_h, out_f, out_d = [], [], [], [], []
     nominal = 1.0 / (loading.snapshots * settings.substeps)
     step, lam, increments, cuts, message = nominal, 0.0, 0, 0, "converged"
@@ -489,15 +497,21 @@ def forcing_term(rel_r: float, settings: NewtonSettings) -> float:
     return min(ETA_MAX, max(ETA_MIN, FORCING * rel_r, FORCING * final / max(rel_r, 1e-300)))
 
 
-_SHARED: "weakref.WeakKeyDictionary[Discretisation, dict]" = weakref.WeakKeyDictionary()
+class Predictor(Protocol):
+    """Another predictor of the Newton increments (``run(predictor=...)``; an experiment's hook,
+    e.g. bench/perf/newton_variants.py). The Newton iterations, their tests and counters stay the
+    production ones.
 
+    ``predict(du, dtop_mm, tangent)``: the displacement increment (all dofs, mm) the iterations
+    start from; ``du`` has the prescribed part of an increment of ``dtop_mm`` (mm) set and zeros
+    elsewhere, ``tangent()`` gives the production tangent predictor as ``(du, why)`` (one linear
+    solve, counted). Returns ``(du, why)``, ``why`` non-empty when the prediction failed (the
+    increment is then cut). ``converged(du)``: the converged increment (mm), after each converged
+    increment."""
 
-def _shared(disc: Discretisation, key, make):
-    """Per-discretisation cache (fused assembler, linear solvers with their symbolic analysis)."""
-    d = _SHARED.setdefault(disc, {})
-    if key not in d:
-        d[key] = make()
-    return d[key]
+    def predict(self, du, dtop_mm, tangent) -> tuple[np.ndarray, str]: ...
+
+    def converged(self, du) -> None: ...
 
 
 def _perm_position(bc: BoundaryConditions) -> np.ndarray:
@@ -532,8 +546,10 @@ class _Newton:
         material: Material,
         bc: BoundaryConditions,
         settings: NewtonSettings,
+        predictor: Predictor | None = None,
     ):
         self.disc, self.material, self.bc, self.settings = disc, material, bc, settings
+        self.predictor = predictor
         self.iterations = 0
         self.timing = {
             "assembly_s": 0.0,
@@ -548,21 +564,19 @@ class _Newton:
         self.residual_history: list[list[float]] = []
         # elimination order -> index in bc.free (cached: the ordering is computed once per mesh and
         # plates)
-        self._perm_position = _shared(
-            disc, ("perm position", bc.plates), lambda: _perm_position(bc)
-        )
-        self.linear: LinearSolver = _shared(
+        self._perm_position = shared(disc, ("perm position", bc.plates), lambda: _perm_position(bc))
+        self.linear: LinearSolver = shared(
             disc,
             ("linear", bc.plates, settings.linear_solver),
             lambda: make_linear_solver(settings.linear_solver),
         )
         self._fused = (
-            _shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
+            shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
             if settings.assembly == "fused"
             else None
         )
         self._free_slot = (
-            _shared(disc, ("free slot", bc.plates), lambda: _free_block_slot(bc))
+            shared(disc, ("free slot", bc.plates), lambda: _free_block_slot(bc))
             if self._fused is not None
             else None
         )
@@ -770,14 +784,11 @@ class _Newton:
         )
         return _Increment(True, factor=self._factor, factor_at_converged=bool(at), **kw)
 
-    def increment(self, u_n, stress_n, state_n, D_n, dtop_mm) -> _Increment:
-        s, bc = self.settings, self.bc
-        du = np.zeros_like(u_n)
-        du[bc.top_z] = dtop_mm
-        # Predictor: linearise about the converged state, so the prescribed jump is spread
-        # over the body instead of being concentrated in the boundary layer of elements.
-        if D_n is None:
-            D_n = self._virgin_tangent()
+    def _tangent_predictor(self, du, D_n):
+        """The tangent predictor's correction of the free dofs for the prescribed part of ``du``:
+        linearised about the converged state (tangents ``D_n``), so the prescribed jump is spread
+        over the body instead of being concentrated in the boundary layer of elements. Returns
+        (correction, why it failed or "")."""
         Kff, rhs = self._predictor(D_n, du)
         handed, self._predictor_factor = self._predictor_factor, None
         if handed is not None and handed[1] is D_n and handed[0].A is Kff:
@@ -785,9 +796,32 @@ class _Newton:
         else:
             corr, why = self._solve(Kff, rhs, D_n, ETA_PREDICTOR)
         self.iterations += 1
-        if why:
-            return _Increment(False, why)
-        du[bc.free] += corr
+        return corr, why
+
+    def increment(self, u_n, stress_n, state_n, D_n, dtop_mm) -> _Increment:
+        s, bc = self.settings, self.bc
+        du = np.zeros_like(u_n)
+        du[bc.top_z] = dtop_mm
+        if D_n is None:
+            D_n = self._virgin_tangent()
+        if self.predictor is None:
+            corr, why = self._tangent_predictor(du, D_n)
+            if why:
+                return _Increment(False, why)
+            du[bc.free] += corr
+        else:
+
+            def tangent():
+                d = du.copy()
+                c, why = self._tangent_predictor(d, D_n)
+                if not why:
+                    d[bc.free] += c
+                return d, why
+
+            du, why = self.predictor.predict(du, dtop_mm, tangent)
+            if why:
+                return _Increment(False, why)
+            corr = du[bc.free].copy()
         norms = []
         for it in range(s.max_iterations):
             t = time.perf_counter()
@@ -813,6 +847,8 @@ class _Newton:
                 return _Increment(False, "residual is not finite")
             if rel_r <= s.rtol_force * (1.0 if rel_u <= s.rtol_displacement else s.linear_rtol):
                 self.residual_history.append(norms)
+                if self.predictor is not None:
+                    self.predictor.converged(du)
                 return self._converged(
                     u=u_n + du,
                     stress=upd.stress,

@@ -20,18 +20,20 @@ U_n = du_n/dp, S_n = dsigma_n/dp, H_n = dstate_n/dp known (zero before the first
 3. S_{n+1} and H_{n+1} (the history for the next increment) by the affine map of step 1, in one
    pass over the elements (:func:`_affine_kernel`) that also forms B U_{n+1} and the
    internal-force sensitivity of step 4. A material without the one-pass split (or
-   ``DEFAULT_AFFINE = False``) is called twice through its ``sensitivity`` interface: before the
-   solve with ``-B U_n``, after it with ``B (U_{n+1} - U_n)``; same Jacobian to round-off;
+   ``SensitivitySettings(affine=False)``) is called twice through its ``sensitivity``
+   interface: before the solve with ``-B U_n``, after it with ``B (U_{n+1} - U_n)``; same
+   Jacobian to round-off;
 4. the plate-force sensitivity is the plate force of the internal-force sensitivity
    ``sum B^T S_{n+1} dV`` (same definition and factor as the plate force).
 
 The converged tangent's free block assembled for step 2 is the next increment's predictor
 matrix; the Newton solver keeps it (``_Newton._tangent_free``), so the run's own work is one
-assembly lighter and, up to MIXED_MIN_DOFS free dofs, its answers bit for bit those of a plain
-run. Above MIXED_MIN_DOFS the direct solves also hand their LU of that matrix to the Newton
-solver (``HAND_OVER``, ``_Newton.adopt_factor``), which solves the next predictor with it (one
-Krylov iteration instead of 7-9 with its CHOLMOD preconditioner, and at times a factorisation):
-the response is then the plain run's to the Newton tolerance, no longer bit for bit.
+assembly lighter and, up to ``mixed_min_dofs`` free dofs (:class:`SensitivitySettings`), its
+answers bit for bit those of a plain run. Above it the direct solves also hand their LU of that
+matrix to the Newton solver (``hand_over``, ``_Newton.adopt_factor``), which solves the next
+predictor with it (one Krylov iteration instead of 7-9 with its CHOLMOD preconditioner, and at
+times a factorisation): the response is then the plain run's to the Newton tolerance, no longer
+bit for bit.
 
 Bisected increments are increments like the others: only converged ones reach step 1. Only the
 columns asked for are carried (the one-pass path) or solved (the two-call path, where the
@@ -49,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from problems.fe.cache import shared
 from problems.fe.linear_solver import SingularMatrixError, mixed_superlu_factor, superlu_factor
 from problems.materials.base import MaterialUpdate
 from problems.materials.ddm import affine_sensitivity
@@ -59,49 +62,52 @@ from problems.materials.ddm import affine_sensitivity
 #: 1e-12 costs 1.9x the Krylov iterations of 1e-8 (bench/perf/jacobian.py, docs/fe_model.md).
 SENSITIVITY_RTOL = 1e-8
 
-#: how the sensitivity equations are solved: ``direct`` (a SuperLU factorisation of the converged
-#: tangent, P back-substitutions; in single precision + one refinement step above MIXED_MIN_DOFS),
-#: ``krylov`` (GCR for the P columns with a shared, growing search space, preconditioned by the
-#: Newton solver's current CHOLMOD factorisation; no factorisation) or ``auto``: direct for
-#: ``superlu`` Newton runs and for up to DIRECT_MAX_DOFS free dofs (coarse 749, paper 8 160:
-#: measured, direct solves 15-40 % less than krylov on paper with a double LU, docs/fe_model.md; the
-#: single-precision LU above MIXED_MIN_DOFS has widened that since), krylov above (fine, ~25 000:
-#: fill-in grows faster; not re-measured with the single-precision LU)
+#: how the sensitivity equations can be solved (:attr:`SensitivitySettings.mode`)
 SOLVE_MODES = ("auto", "direct", "krylov")
+#: ``auto`` solves directly up to this many free dofs (coarse 749, paper 8 160), with Krylov
+#: above (fine, ~25 000, where the LU's fill-in grows faster); docs/fe_model.md
 DIRECT_MAX_DOFS = 10_000
-#: the mode :func:`problems.fe.newton.run` uses (bench/perf/jacobian.py sets it to compare)
-DEFAULT_MODE = "auto"
-
-#: ``direct`` solves above this many free dofs factorise the converged tangent in single
-#: precision and refine in double to MIXED_RTOL (:func:`problems.fe.linear_solver.
-#: mixed_superlu_factor`); up to it, the double SuperLU LU of before (``coarse``, 749 free dofs,
-#: stays bit for bit on it). Measured, linear-compression, factorisations + six-column solves of
-#: a run, double / mixed, best of 3 alternated (``bench/perf/jacobian.py --modes auto-f64,auto-f32
-#: --no-fd``): coarse (749) 0.034 / 0.038 s, 8,8,16 (1 719) 0.132 / 0.127, 10,10,20 (3 289)
-#: 0.373 / 0.343, 12,12,24 (5 603) 0.97 / 0.77, paper (8 160) 1.97 / 1.52 (cost ratio 1.96 ->
-#: 1.73). UMFPACK (kvxopt) was measured for this use and left: through kvxopt's interface (its
-#: own ordering) its factorisation takes 1.5x SuperLU's time and six solves 13-17x; with the
-#: nested-dissection order kept (not reachable through kvxopt's interface) 0.8x, but it solves
-#: one column at a time (six: 2.4x SuperLU's): 4-14 % off the solve phase, against 23-29 % here
-MIXED_MIN_DOFS = 3_000
-#: relative residual of each column of the mixed-precision solves: the single-precision solve
-#: reaches ~1e-5 and one refinement step 3e-12-7e-12 (paper), so this costs one step per
-#: increment; the Jacobians are the double LU's to 3e-11 per column (paper, three cases; the
-#: Krylov path's SENSITIVITY_RTOL is 1e-8)
+#: relative residual of each column of the mixed-precision solves: one refinement step of the
+#: single-precision solve per increment reaches it (3e-12-7e-12 on paper), and the Jacobians are
+#: the double LU's to 3e-11 per column (docs/fe_model.md)
 MIXED_RTOL = 1e-10
 
-#: whether the direct solves above MIXED_MIN_DOFS hand their factorisation of the converged tangent
-#: to the Newton solver, which preconditions the next increment's predictor (same matrix) with it
-#: (``_Newton.adopt_factor``): one Krylov iteration (5 ms on ``paper``) instead of 7-9 with the
-#: CHOLMOD preconditioner and at times a CHOLMOD factorisation (22-68 ms); the Newton solves of a
-#: paper run with sensitivities take ~0.25 s less than a plain run's. Only for the predictor: as
-#: the corrections' preconditioner one application of the single-precision LU costs 1.6x a CHOLMOD
-#: one and saves too few iterations (measured, ``bench/perf/jacobian.py --modes auto-keep,auto``)
-HAND_OVER = True
 
-#: whether :func:`problems.fe.newton.run` uses the one-pass material sensitivities where the
-#: material offers them (tests and bench/perf/jacobian.py set it to False for the two-call path)
-DEFAULT_AFFINE = True
+@dataclass(frozen=True)
+class SensitivitySettings:
+    """How the sensitivity equations of a run are solved (a field of
+    :class:`problems.fe.newton.NewtonSettings`; measurements in docs/fe_model.md and
+    bench/perf/jacobian.py).
+
+    mode           : ``direct`` (a SuperLU factorisation of the converged tangent, P
+                     back-substitutions), ``krylov`` (GCR for the P columns with a shared, growing
+                     search space, preconditioned by the Newton solver's CHOLMOD factorisation; no
+                     factorisation) or ``auto``: direct for ``superlu`` Newton runs and up to
+                     :data:`DIRECT_MAX_DOFS` free dofs, krylov above
+    affine         : one material pass per increment where the material offers it
+                     (:func:`problems.materials.ddm.affine_sensitivity`); False: the two
+                     ``sensitivity`` calls of the material interface (same Jacobian to round-off)
+    mixed_min_dofs : above this many free dofs the direct solves factorise in single precision and
+                     refine in double to :data:`MIXED_RTOL` (faster there: paper 1.52 s against
+                     1.97 s); up to it the double LU (``coarse``, 749 dofs, stays bit for bit)
+    hand_over      : above ``mixed_min_dofs``, hand each direct solve's LU of the converged tangent
+                     to the Newton solver, which solves the next increment's predictor (same
+                     matrix) with it: one Krylov iteration instead of 7-9; the response is then the
+                     plain run's to the Newton tolerance, no longer bit for bit
+    """
+
+    mode: str = "auto"
+    affine: bool = True
+    mixed_min_dofs: int = 3_000
+    hand_over: bool = True
+
+    def __post_init__(self):
+        if self.mode not in SOLVE_MODES:
+            raise ValueError(
+                f"sensitivity solve mode {self.mode!r} is unknown; allowed: "
+                f"{', '.join(SOLVE_MODES)}"
+            )
+
 
 #: memory of the Krylov search space (U and A U), bytes; GCR restarts when it is full
 KRYLOV_MEMORY = 64 * 2**20
@@ -178,35 +184,27 @@ class GlobalDDM:
     ``newton`` is the run's ``_Newton`` solver: its assembly, boundary conditions and linear
     solver are reused, its state (the factorisation its iterations reuse, its counters) is never
     changed, so the run's answers are bit for bit those of a run without sensitivities -- except
-    above MIXED_MIN_DOFS free dofs with HAND_OVER, where each direct solve's factorisation is
-    handed to the Newton solver for the next predictor (same answers to the Newton tolerance).
-    ``columns`` are the indices of the parameters to solve for; ``mode`` one of SOLVE_MODES
-    (default DEFAULT_MODE); ``affine=False`` forces the two ``sensitivity`` calls per increment
-    even where the material offers the one-pass split (the reference path of the tests).
+    above ``mixed_min_dofs`` free dofs with ``hand_over``, where each direct solve's factorisation
+    is handed to the Newton solver for the next predictor (same answers to the Newton tolerance).
+    ``columns`` are the indices of the parameters to solve for; ``settings`` a
+    :class:`SensitivitySettings`.
     """
 
-    def __init__(
-        self, newton, material, columns, mode: str | None = None, affine: bool | None = None
-    ):
+    def __init__(self, newton, material, columns, settings: SensitivitySettings):
         from problems.fe.assembly import FusedAssembler
-        from problems.fe.newton import _shared
 
-        mode = DEFAULT_MODE if mode is None else mode
-        if mode not in SOLVE_MODES:
-            raise ValueError(
-                f"sensitivity solve mode {mode!r} is unknown; allowed: {', '.join(SOLVE_MODES)}"
-            )
+        self.settings = settings
+        mode = settings.mode
         self.newton, self.material = newton, material
         self.bc, self.disc = newton.bc, newton.disc
         disc = self.disc
-        self._fused = _shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
+        self._fused = shared(disc, "fused", lambda: FusedAssembler(disc.B, disc.dV, disc.pattern))
         self.names = tuple(material.parameter_names)
         self.columns = np.asarray(columns, dtype=np.int64)
         # one material pass per increment (problems.materials.ddm.affine_sensitivity) where the
         # material offers it, with only the columns asked for; else two ``sensitivity`` calls
         # per increment with all P columns (the material's interface)
-        affine = DEFAULT_AFFINE if affine is None else affine
-        self.affine = bool(affine) and _has_affine_pass(material)
+        self.affine = settings.affine and _has_affine_pass(material)
         P = len(self.columns) if self.affine else len(self.names)
         # the solved columns' positions in the carried arrays below
         self.cols = np.arange(P) if self.affine else self.columns
@@ -229,7 +227,7 @@ class GlobalDDM:
             "factor_s": 0.0,
             "solve_s": 0.0,
             "factorisations": 0,
-            # of them in single precision with refinement (MIXED_MIN_DOFS), its refinement
+            # of them in single precision with refinement (mixed_min_dofs), its refinement
             # steps, and those that fell back to a double LU
             "mixed_factorisations": 0,
             "refinements": 0,
@@ -369,7 +367,7 @@ class GlobalDDM:
             return X
         if self.mode == "direct" and not (kept is not None and _symmetric(inc.tangent)):
             Kff = self._converged_tangent(inc)
-            mixed = Kff.shape[0] > MIXED_MIN_DOFS
+            mixed = Kff.shape[0] > self.settings.mixed_min_dofs
             t = time.perf_counter()
             factor = mixed_superlu_factor(Kff) if mixed else superlu_factor(Kff)
             self.timing["factor_s"] += time.perf_counter() - t
@@ -381,7 +379,9 @@ class GlobalDDM:
                 self.timing["mixed_factorisations"] += 1
                 self.timing["refinements"] += getattr(factor, "refinements", 0)
                 self.timing["fallbacks"] += bool(getattr(factor, "fallback", True))
-                if HAND_OVER:  # the next increment's Newton solves start from this factor
+                if (
+                    self.settings.hand_over
+                ):  # the next increment's Newton solves start from this factor
                     self.newton.adopt_factor(factor, Kff, inc.tangent)
             return X
         # krylov (or a symmetric tangent whose CHOLMOD factor the increment kept: then exact, one
