@@ -498,6 +498,8 @@ def solve(
         n_failed=obj.n_failed,
         n_infeasible=obj.n_infeasible,
         n_cache_hits=obj.n_cache_hits,
+        n_repeats=obj.n_repeats,
+        repeats=obj.repeats_rule,
         n_iterations=int(out.n_iterations if out.n_iterations is not None else run.n_iterations),
         wall_s=wall,
         forward_equivalents=obj.forward_equivalents(),
@@ -509,6 +511,7 @@ def solve(
         },
         provenance=jsonio.plain(dict(obj.provenance)),
         history=run.history,
+        trace=[[int(n), float(c)] for n, c in obj.trace],
         extra=extra,
     )
 

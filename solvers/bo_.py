@@ -141,7 +141,7 @@ def run_bo(r: Run) -> Outcome:
         u, hyper = _suggest(np.array(U), np.array(C), np.array(ok), o, how, scale, seed, hyper)
         u = np.clip(u, 0.0, 1.0)
         if _is_cached(obj, np.clip(r.lower + u * width, r.lower, r.upper)):
-            u = rng.uniform(0.0, 1.0, n)  # a repeat would be a free cache hit: explore instead
+            u = rng.uniform(0.0, 1.0, n)  # a repeat is charged for nothing new: explore instead
         before = obj.n_evals
         evaluate(u[None, :])
         iterations += 1

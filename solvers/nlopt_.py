@@ -106,7 +106,7 @@ def _make_run(full: str):
             try:
                 if grad.size > 0:
                     c, g = obj.gradient(
-                        z, scheme=o.get("scheme", "forward"), rel_step=o.get("rel_step", 1e-6)
+                        z, scheme=o.get("scheme", "forward"), rel_step=o.get("rel_step")
                     )
                     grad[:] = g
                 else:

@@ -16,8 +16,14 @@ class RunResult:
     Points are lists of floats in physical units (MPa, degrees, ...), in the order of
     ``parameter_names``; ``x_normalised = x / reference``.
 
-    ``n_evals`` counts *every* forward-model evaluation the run triggered (Jacobian columns,
-    failed and infeasible points included); cache hits are counted apart in ``n_cache_hits``.
+    ``n_evals`` counts *every* call the run made (Jacobian columns, failed and infeasible points
+    and, under ``repeats = "charged"`` (COCO's rule, the default), repeated points served from
+    the cache); ``n_cache_hits`` counts the calls served from the cache and ``n_repeats`` those
+    of them charged (the model ran ``n_evals - n_repeats`` times); ``repeats = "free"`` when the
+    run was made with ``free_repeats`` (repeats not counted; records made before the rule
+    existed read as "free", the rule they were made under).
+    ``trace``: ``[[n_evals, best cost], ...]`` at every charged evaluation that lowered the best
+    cost (the best-so-far cost after every evaluation, exactly; see the evaluator).
     ``forward_equivalents`` is ``n_evals`` in plain-forward-run units (a run with exact
     sensitivities weighs its measured wall time over the median plain run);
     ``forward_equivalents_nominal`` the same with the declared price of such a run (the model's
@@ -48,6 +54,8 @@ class RunResult:
     n_failed: int = 0
     n_infeasible: int = 0
     n_cache_hits: int = 0
+    n_repeats: int = 0
+    repeats: str = "free"
     n_iterations: int = 0
     wall_s: float = 0.0
     forward_equivalents: float = 0.0
@@ -56,6 +64,7 @@ class RunResult:
     charges: dict[str, Any] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
     history: list[dict[str, Any]] = field(default_factory=list)
+    trace: list[list[float]] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:

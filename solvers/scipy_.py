@@ -9,7 +9,12 @@ from solvers.base import Outcome, Run, register
 
 JAC_OPTIONS = {
     "scheme": ("forward", "finite-difference scheme of the parallel Jacobian: forward | central"),
-    "rel_step": (1e-6, "finite-difference step, relative to max(|z|, 1) in the scaled space"),
+    "rel_step": (
+        None,
+        "finite-difference step relative to |z| (z = x / reference; where z = 0, the reference "
+        "scale); None: the model's declared step, else scipy's sqrt(eps) = 1.5e-8 (forward) or "
+        "eps^(1/3) = 6.1e-6 (central)",
+    ),
 }
 
 LM_OPTIONS = {
@@ -62,11 +67,16 @@ def run_lm(r: Run) -> Outcome:
         return Outcome("failed", f"start point failed: {ev0.message}")
     n_jac = [0]
 
+    first = [True]
+
     def fun(z):
-        return obj.evaluate(z, with_jacobian=eager).residual.copy()
+        # least_squares' first call is at z0, which was evaluated above on its behalf
+        reuse = first[0] and np.array_equal(z, z0)
+        first[0] = False
+        return obj.evaluate(z, with_jacobian=eager, reuse=reuse).residual.copy()
 
     def jac(z):
-        ev = obj.evaluate(z, with_jacobian=eager)  # the point just evaluated: a cache hit
+        ev = obj.evaluate(z, with_jacobian=eager, reuse=True)  # the point just evaluated
         r.record(z, ev.cost)
         n_jac[0] += 1
         return obj.jacobian(z, scheme=o["scheme"], rel_step=o["rel_step"], r0=ev.residual)
@@ -83,7 +93,7 @@ def run_lm(r: Run) -> Outcome:
         x_scale=o["x_scale"],
         max_nfev=o["max_nfev"] or r.budget,
     )
-    r.record(res.x, obj.cost(res.x))
+    r.record(res.x, obj.evaluate(res.x, reuse=True).cost)
     return Outcome(
         _LS_STATUS.get(res.status, "failed"),
         res.message,
@@ -120,7 +130,8 @@ def run_sa(r: Run) -> Outcome:
     start = len(obj.log)
 
     def grad(z):
-        return obj.gradient(z, scheme=o["scheme"], rel_step=o["rel_step"])[1]
+        # L-BFGS-B asks for the gradient at the point whose cost it just had: a reuse
+        return obj.gradient(z, reuse=True, scheme=o["scheme"], rel_step=o["rel_step"])[1]
 
     try:
         res = dual_annealing(

@@ -6,9 +6,14 @@ from problems.inverse.evaluator import Evaluator
 from problems.inverse.problem import LeastSquaresProblem
 
 
-def evaluator(model, data, *, mapper=None, cache=True, **problem):
+def evaluator(model, data, *, mapper=None, cache=True, free_repeats=False, **problem):
     """An :class:`Evaluator` over ``LeastSquaresProblem(model, data, **problem)``."""
-    return Evaluator(LeastSquaresProblem(model, data, **problem), mapper=mapper, cache=cache)
+    return Evaluator(
+        LeastSquaresProblem(model, data, **problem),
+        mapper=mapper,
+        cache=cache,
+        free_repeats=free_repeats,
+    )
 
 
 def material(form: str, hardening: str, **overrides):

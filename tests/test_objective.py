@@ -118,17 +118,60 @@ def test_scaling_and_bounds():
     assert obj.n_params == 2 and obj.n_residuals == 4 and obj.names == ("x0", "x1")
 
 
-def test_counting_cache_hits_apart():
+def test_counting_repeats_charged_cache_hits_apart():
     obj, model = make()
+    assert obj.repeats_rule == "charged"
+    z = np.array([1.1, 0.9])
+    c1 = obj.cost(z)
+    c2 = obj.cost(z.copy())  # a repeat: served from the cache, but a call: charged
+    assert c1 == c2
+    assert (obj.n_evals, obj.n_cache_hits, obj.n_repeats, model.calls) == (2, 1, 1, 1)
+    assert [e["cached"] for e in obj.log] == [False, True]
+    assert [e["charged"] for e in obj.log] == [True, True]
+    costs = obj.costs([z, z, [1.2, 0.9], [1.2, 0.9]])  # two hits from before, one new + its repeat
+    assert (obj.n_evals, obj.n_cache_hits, obj.n_repeats, model.calls) == (6, 4, 4, 2)
+    assert costs[0] == costs[1] == c1 and costs[2] == costs[3] != c1
+    assert obj.nominal_equivalents() == 6
+    obj.evaluate(z, reuse=True)  # the wrapper asking again for what it holds: free
+    assert (obj.n_evals, obj.n_cache_hits) == (6, 5)
+
+
+def test_free_repeats_restore_fe_economy():
+    obj, model = make(free_repeats=True)
+    assert obj.repeats_rule == "free"
     z = np.array([1.1, 0.9])
     c1 = obj.cost(z)
     c2 = obj.cost(z.copy())
     assert c1 == c2
-    assert (obj.n_evals, obj.n_cache_hits, model.calls) == (1, 1, 1)
-    assert [e["cached"] for e in obj.log] == [False, True]
+    assert (obj.n_evals, obj.n_cache_hits, obj.n_repeats, model.calls) == (1, 1, 0, 1)
+    assert [e["charged"] for e in obj.log] == [True, False]
     costs = obj.costs([z, z, [1.2, 0.9], [1.2, 0.9]])  # two hits from before, one new + its repeat
     assert (obj.n_evals, obj.n_cache_hits, model.calls) == (2, 4, 2)
     assert costs[0] == costs[1] == c1 and costs[2] == costs[3] != c1
+
+
+def test_charged_repeats_stop_at_the_budget():
+    obj, model = make()
+    obj.set_budget(3)
+    z = np.array([1.1, 0.9])
+    obj.cost(z)
+    with pytest.raises(BudgetExhausted):
+        obj.costs([z, z, z])  # two repeats fit, the third does not
+    assert (obj.n_evals, obj.n_repeats, model.calls) == (3, 2, 1)
+    obj, model = make(free_repeats=True)
+    obj.set_budget(1)
+    obj.cost(z)
+    assert len(obj.costs([z, z, z])) == 3 and obj.n_evals == 1  # free: never exhausted
+
+
+def test_trace_is_exact_per_evaluation():
+    obj, _ = make()
+    obj.costs([[1.5, 1.5], [1.2, 0.9], [1.4, 1.4], [1.0, 1.0], [1.0, 1.0]])
+    costs = [e["cost"] for e in obj.log]
+    assert [n for n, _ in obj.trace] == [1, 2, 4]
+    best = np.minimum.accumulate(costs)
+    for n, c in obj.trace:
+        assert c == best[n - 1]
 
 
 def test_cache_off_counts_every_call():
@@ -180,15 +223,15 @@ def test_budget_single_and_batch():
     obj, model = make()
     obj.set_budget(3)
     obj.cost([1.0, 1.0])
-    obj.cost([1.0, 1.0])  # cache hit: free
+    obj.evaluate([1.0, 1.0], reuse=True)  # a reuse: free
     with pytest.raises(BudgetExhausted):
         obj.costs([[1.1, 1.0], [1.2, 1.0], [1.3, 1.0], [1.4, 1.0]])
     # the two points that fitted were evaluated and recorded, in order
     assert obj.n_evals == 3 and model.calls == 3
     np.testing.assert_allclose([e["x"][0] for e in obj.log if not e["cached"]], [1.0, 1.1, 1.2])
-    assert obj.cost([1.2, 1.0]) > 0  # still served from the cache
+    assert obj.evaluate([1.2, 1.0], reuse=True).cost > 0  # still served from the cache
     with pytest.raises(BudgetExhausted):
-        obj.cost([1.5, 1.0])
+        obj.cost([1.2, 1.0])  # a repeat is a call: it needs budget
     assert obj.n_evals == 3
 
 
@@ -314,11 +357,11 @@ def test_exact_jacobian_is_used_and_charged_as_one_run_in_forward_equivalents():
     assert obj.n_evals == 2  # the run with sensitivities is one evaluation ...
     assert obj.forward_equivalents() == pytest.approx(1.0 + 3.0)  # ... costing 3 plain runs
     assert obj.log[-1]["kind"] == "jacobian"
-    obj.jacobian(z)  # cached with its Jacobian: no new run
+    obj.jacobian(z)  # cached with its Jacobian: no new run, and a reuse: free
     assert obj.n_evals == 2 and obj.n_cache_hits == 1
-    cost, grad = obj.gradient(z)
+    cost, grad = obj.gradient(z, reuse=True)
     np.testing.assert_allclose(grad, 2.0 * J.T @ obj.residual(z), rtol=1e-14)
-    assert obj.n_evals == 2
+    assert obj.n_evals == 3  # the residual(z) call is a repeat: charged
 
 
 def test_low_rank_plus_diagonal_covariance_whitens_like_the_full_one():
@@ -366,7 +409,7 @@ def test_observers_see_every_recorded_evaluation():
     seen = []
     obj.observers.append(lambda ev_, e: seen.append((ev_.n_evals, e.cached)))
     obj.costs([[1.0, 1.0], [1.1, 1.0], [1.0, 1.0]])
-    assert seen == [(1, False), (2, False), (2, True)]
+    assert seen == [(1, False), (2, False), (3, True)]
 
 
 def exact_objective(**kw):

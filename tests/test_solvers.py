@@ -77,12 +77,15 @@ def test_budget_never_exceeded_and_counts_match(method, budget):
         x0 = case.reference * np.array([0.8, 1.18, 1.2, 1.6])
         res = solve(obj, method, budget=budget, seed=1, x0=x0)
         assert res.n_evals <= budget
-        assert res.n_evals == obj.n_evals == sum(1 for e in obj.log if not e["cached"])
-        assert (res.n_failed, res.n_infeasible, res.n_cache_hits) == (
+        assert res.n_evals == obj.n_evals == sum(1 for e in obj.log if e["charged"])
+        assert res.n_evals - res.n_repeats == sum(1 for e in obj.log if not e["cached"])
+        assert (res.n_failed, res.n_infeasible, res.n_cache_hits, res.n_repeats) == (
             obj.n_failed,
             obj.n_infeasible,
             obj.n_cache_hits,
+            obj.n_repeats,
         )
+        assert res.repeats == "charged"
         assert res.status in ("converged", "budget", "max_iterations", "failed", "stalled")
         if obj.best is not None:
             assert res.cost == obj.best.cost and np.allclose(res.x, obj.best.x, rtol=0, atol=0)

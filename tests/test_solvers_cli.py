@@ -20,7 +20,7 @@ def test_solvers_json_lists_every_method(capsys):
     assert (
         lm["library"] == "scipy"
         and lm["family"] == "local"
-        and lm["options"]["rel_step"]["default"] == 1e-6
+        and lm["options"]["rel_step"]["default"] is None
     )
 
 

@@ -187,7 +187,7 @@ def format_identification(case, result) -> str:
     lines += [
         f"  cost {result.cost:.6g}   status {result.status}: {result.message}",
         f"  forward evaluations {result.n_evals} (failed {result.n_failed}, infeasible "
-        f"{result.n_infeasible}; cache hits {result.n_cache_hits} not counted), iterations "
+        f"{result.n_infeasible}; repeats {result.n_repeats} {result.repeats}), iterations "
         f"{result.n_iterations}, wall {result.wall_s:.2f} s",
         f"  forward-equivalents {result.forward_equivalents:.1f} measured, "
         f"{result.forward_equivalents_nominal:.1f} nominal (budget in {result.budget_unit})"

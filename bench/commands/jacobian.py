@@ -2,9 +2,10 @@
 
 ``--method analytic`` (default) is one FE run with exact sensitivities by direct differentiation
 (problems/fe/sensitivity.py); ``forward`` (n + 1 runs) and ``central`` (2 n + 1 runs, the base run
-being the response) are finite differences of plain runs for comparison, with relative steps
-FORWARD_STEP and CENTRAL_STEP (h_j = step * |x_j|). Every method's wall time (response included)
-is reported against one plain forward run of the same point timed in the same command.
+being the response) are finite differences of plain runs for comparison, with the FE model's
+relative steps (problems.inverse.forward.FD_REL_STEP, h_j = step * |x_j|). Every method's wall
+time (response included) is reported against one plain forward run of the same point timed in
+the same command.
 """
 
 from __future__ import annotations
@@ -18,12 +19,14 @@ HELP = (
 
 METHODS = ("analytic", "forward", "central")
 
-#: relative finite-difference steps. Forward: the truncation error (~h) and the noise of runs
-#: converged to 1e-10 (~1e-10 / h) balance near 1e-5..1e-6; 1e-6 keeps columns within ~1e-5 of
-#: the exact ones. Central: truncation ~h^2, so 1e-4 leaves ~1e-8 (measured on coarse against the
-#: DDM Jacobian: clean from 1e-3 down to 1e-5; see docs/fe_model.md).
-FORWARD_STEP = 1e-6
-CENTRAL_STEP = 1e-4
+
+
+def _steps() -> dict[str, float]:
+    """The FE model's relative finite-difference steps by scheme
+    (:data:`problems.inverse.forward.FD_REL_STEP`; imported when used: the FE stack is heavy)."""
+    from problems.inverse.forward import FD_REL_STEP
+
+    return FD_REL_STEP
 
 #: a tiny mesh run once before the timings, so that loading the compiled (numba) kernels is not
 #: charged to the first timed run
@@ -47,9 +50,9 @@ def add_arguments(p) -> None:
         "--method",
         choices=METHODS,
         default="analytic",
-        help=f"analytic: one run with exact sensitivities (DDM); forward: n + 1 runs, "
-        f"relative step {FORWARD_STEP:g}; central: 2 n + 1 runs, relative step "
-        f"{CENTRAL_STEP:g} (default: analytic)",
+        help="analytic: one run with exact sensitivities (DDM); forward: n + 1 runs, "
+        "central: 2 n + 1 runs, with the FE model's relative steps (problems.inverse.forward."
+        "FD_REL_STEP) (default: analytic)",
     )
     p.add_argument(
         "--json",
@@ -77,7 +80,7 @@ def finite_difference(model, x, base, scheme: str):
     it made; ValueError naming the column when a perturbed run fails."""
     import numpy as np
 
-    step = FORWARD_STEP if scheme == "forward" else CENTRAL_STEP
+    step = _steps()[scheme]
     cols, runs = [], 0
     for j, name in enumerate(model.names):
         h = step * max(abs(x[j]), 1e-8)
@@ -171,7 +174,7 @@ def main(args) -> int:
             "x": x.tolist(),
             "jacobian": J.tolist(),
             "rows": {"u_h": [n_s, n_p], "u_v": [n_s, n_p], "reaction_kN": n_s},
-            "rel_step": {"forward": FORWARD_STEP, "central": CENTRAL_STEP}.get(args.method),
+            "rel_step": _steps().get(args.method),
             "runs": runs,
             "wall_s": wall,
             "forward_wall_s": forward_wall,

@@ -5,14 +5,31 @@ The :class:`Evaluator` is what a solver sees as its objective. It wraps a
 way pymoo's ``core/evaluator.py`` and scipy's ``_differentiable_functions.py`` keep counting apart
 from the problem. Every public method takes scaled points ``z = x / reference``.
 
-Accounting (honest: what a user pays for)
------------------------------------------
-* ``n_evals`` counts every forward evaluation: finite-difference columns, runs with exact
-  sensitivities, failed points (``ok=False``) and infeasible points (``check`` returned a message,
+Accounting (honest: what a user pays for; COCO's rule by default)
+-----------------------------------------------------------------
+* ``n_evals`` counts every call a method makes: finite-difference columns, runs with exact
+  sensitivities, failed points (``ok=False``), infeasible points (``check`` returned a message,
   or the point lies outside the box; the model is *not* called, but the point still counts, and is
-  also counted in ``n_infeasible``). ``n_failed`` counts the ``ok=False`` results.
-* Exact repeats of a point already evaluated are served from a cache; they are counted apart in
-  ``n_cache_hits`` and are *not* in ``n_evals``, nor charged to the budget.
+  also counted in ``n_infeasible``) and **repeats**: a point proposed again is served from the
+  cache (no model run) but charged like a new evaluation. ``n_cache_hits`` counts every call
+  served from the cache; ``n_repeats`` those of them that were charged (so the model ran
+  ``n_evals - n_repeats`` times). ``n_failed`` counts the ``ok=False`` results.
+* ``free_repeats=True`` restores the FE-economy rule: repeats are served free (not in
+  ``n_evals``, not charged to the budget). :attr:`repeats_rule` (``"charged"`` or ``"free"``) says
+  which rule applied; every result records it.
+* A *reuse* is not a call of the method: the wrapper asking again for a value it already holds
+  (``evaluate(..., reuse=True)``: the base point of a finite-difference Jacobian or gradient, the
+  final point recorded in a history) is served free from the cache, as scipy reuses ``f(x0)``
+  in its finite differences; a point not yet evaluated is charged as usual.
+* Jacobian columns, one rule for every method: a finite-difference Jacobian or gradient costs
+  one evaluation per column it runs (n forward, up to 2n central; a failed column's retry is
+  one more), its base point being a reuse; a run with exact sensitivities is one evaluation (and
+  ``jacobian_cost`` forward-equivalents in that unit, below). Libraries' own counts of
+  "Jacobian evaluations" are never used for the budget.
+* ``trace``: ``[[n_evals, best cost], ...]``, one pair at each charged evaluation that lowered
+  the best usable cost: the best-so-far cost after *every* charged evaluation, exactly (it is
+  the pair's cost up to the next pair's ``n_evals``), so evaluations-to-target need no rounding
+  to an iteration's or a generation's end.
 * :meth:`forward_equivalents` converts the evaluations into plain forward runs by measured wall
   time: a plain or infeasible evaluation is one, a run with sensitivities is its wall time over
   the median wall time of the plain runs of the same evaluator (without plain runs, the median
@@ -28,15 +45,16 @@ Accounting (honest: what a user pays for)
   :meth:`reset` (they belong to how the objective was set up) and are converted to
   forward-equivalents the same way (:meth:`charged_equivalents`).
 * ``log`` holds one dict per evaluation, cache hits included (``cached=True``):
-  ``{"x", "cost", "ok", "feasible", "wall_s", "cached", "n_evals", "kind"}``, ``kind`` being
-  ``"plain"`` or ``"jacobian"``.
+  ``{"x", "cost", "ok", "feasible", "wall_s", "cached", "charged", "n_evals", "kind"}``,
+  ``kind`` being ``"plain"`` or ``"jacobian"``, ``charged`` whether the call was paid.
 * ``set_budget(n)``: an evaluation that would make the spent budget exceed ``n`` raises
   :class:`BudgetExhausted`; for a batch, the points that fit are evaluated and recorded first.
   ``best`` (the lowest-cost successful point so far) lets any solver return a result then. The
   spent budget (:attr:`spent`) is ``n_evals`` when ``budget_unit = "evaluations"`` (the default)
   and :meth:`nominal_equivalents` when ``budget_unit = "forward-equivalents"``: then an exact
   Jacobian costs ``jacobian_cost`` of the budget and a finite-difference Jacobian its n (forward)
-  or 2n (central) runs, so that methods with and without exact Jacobians get the same budget.
+  or 2n (central) runs, so that methods with and without exact Jacobians get the same budget. A
+  charged repeat costs what the evaluation it repeats cost.
 
 Failure policy (never raise into a solver)
 ------------------------------------------
@@ -91,6 +109,15 @@ def sequential_map(fn, items) -> list:
 
 #: the units a budget can be given in (``Evaluator(budget_unit=...)``)
 BUDGET_UNITS = ("evaluations", "forward-equivalents")
+
+#: finite-difference steps relative to |z| by scheme, scipy's recommendation for a function
+#: accurate to machine precision eps: sqrt(eps) (forward, error ~ h + eps/h) and eps^(1/3)
+#: (central, error ~ h^2 + eps/h); a model whose values carry more noise declares its own
+#: ``fd_rel_step = {"forward": ..., "central": ...}`` (the FE model: measured, see forward.py)
+FD_REL_STEP = {
+    "forward": float(np.sqrt(np.finfo(float).eps)),
+    "central": float(np.cbrt(np.finfo(float).eps)),
+}
 
 #: nominal price, in forward-equivalents, of a response + exact Jacobian of a model that provides
 #: Jacobians but declares no ``jacobian_cost``
@@ -160,6 +187,8 @@ class Evaluator:
                   model's declared ``jacobian_cost``, else DEFAULT_JACOBIAN_COST); >= 1
     cost_path : plain evaluations of a model offering ``misfit_of`` take its cost path (see the
                   module docstring)
+    free_repeats : serve repeated points free (FE economy) instead of charging them (COCO's
+                  rule, the default); see the module docstring
 
     ``observers`` (a list) holds callables ``observer(evaluator, evaluation)`` called after each
     recorded evaluation (progress bars, live logs); they must not raise.
@@ -175,6 +204,7 @@ class Evaluator:
         budget_unit: str = "evaluations",
         jacobian_cost: float | None = None,
         cost_path: bool = True,
+        free_repeats: bool = False,
     ):
         if budget_unit not in BUDGET_UNITS:
             raise ValueError(
@@ -196,6 +226,7 @@ class Evaluator:
         self.exact_jacobian = exact_jacobian and provides_jacobian(problem.model)
         self.budget_unit = budget_unit
         self.jacobian_cost = float(jacobian_cost)
+        self.free_repeats = bool(free_repeats)
         self._warned = False
         self.charges: dict[str, dict[str, float]] = {}
         self.observers: list = []
@@ -234,10 +265,12 @@ class Evaluator:
         self.n_failed = 0
         self.n_infeasible = 0
         self.n_cache_hits = 0
+        self.n_repeats = 0  # charged calls served from the cache (in n_evals)
         self.n_jacobian_failures = 0
         self.n_jacobian_runs = 0  # new evaluations run with exact sensitivities
         self._nominal = 0.0
         self.log: list[dict[str, Any]] = []
+        self.trace: list[list[float]] = []
         self.best: Evaluation | None = None
         self._cache: OrderedDict[bytes, Evaluation] = OrderedDict()
         self.budget: float | None = None
@@ -268,6 +301,11 @@ class Evaluator:
             return max(0, self.budget - self.n_evals)
         return max(0, math.floor(self.budget - self._nominal + 1e-9))
 
+    @property
+    def repeats_rule(self) -> str:
+        """``"charged"`` (every call counts, the default) or ``"free"`` (``free_repeats``)."""
+        return "free" if self.free_repeats else "charged"
+
     def charge_of(self, kind: str, feasible: bool = True) -> float:
         """Nominal forward-equivalents of one new evaluation: ``jacobian_cost`` for a feasible
         run with sensitivities (``kind = "jacobian"``), 1 for everything else."""
@@ -279,6 +317,7 @@ class Evaluator:
             "n_failed": self.n_failed,
             "n_infeasible": self.n_infeasible,
             "n_cache_hits": self.n_cache_hits,
+            "n_repeats": self.n_repeats,
             "forward_equivalents": self.forward_equivalents(),
             "nominal_equivalents": self.nominal_equivalents(),
             "n_jacobian_runs": self.n_jacobian_runs,
@@ -310,20 +349,23 @@ class Evaluator:
         """Evaluations in plain-forward-run units (runs with sensitivities weighted by wall
         time). Without a successful plain run to measure against (a method that only ever asks
         for Jacobians) the runs' own plain parts are the unit, and without those a run with
-        sensitivities counts its nominal ``jacobian_cost``."""
-        new = [e for e in self.log if not e["cached"]]
+        sensitivities counts its nominal ``jacobian_cost``. A charged repeat counts what the
+        evaluation it repeats counted."""
+        paid = [e for e in self.log if e["charged"]]
         unit = self._unit_s()
         total = 0.0
-        for e in new:
+        for e in paid:
             if e["kind"] == "jacobian" and e["ok"]:
-                total += e["wall_s"] / unit if unit else self.jacobian_cost
+                wall = e["source_wall_s"] if e["cached"] else e["wall_s"]
+                total += wall / unit if unit else self.jacobian_cost
             else:
                 total += 1.0
         return total
 
     def nominal_equivalents(self) -> float:
         """Evaluations in nominal forward-equivalents: ``jacobian_cost`` per feasible run with
-        exact sensitivities, 1 per other evaluation (cache hits are free). Deterministic."""
+        exact sensitivities, 1 per other evaluation (charged repeats included, free cache hits
+        excluded). Deterministic."""
         return self._nominal
 
     @property
@@ -362,12 +404,17 @@ class Evaluator:
             wall_s,
         )
 
-    def _record(self, ev: Evaluation, key: bytes | None, kind: str) -> None:
+    def _record(
+        self, ev: Evaluation, key: bytes | None, kind: str, charged: bool = True, source_wall_s=0.0
+    ) -> None:
         if ev.cached:
             self.n_cache_hits += 1
-        else:
+        if charged:
             self.n_evals += 1
             self._nominal += self.charge_of(kind, ev.feasible)
+        if ev.cached:
+            self.n_repeats += int(charged)
+        else:
             if kind == "jacobian" and ev.feasible:
                 self.n_jacobian_runs += 1
             if not ev.feasible:
@@ -380,6 +427,7 @@ class Evaluator:
                     self._cache.popitem(last=False)
             if ev.ok and ev.feasible and (self.best is None or ev.cost < self.best.cost):
                 self.best = ev
+                self.trace.append([self.n_evals, ev.cost])
         self.log.append(
             {
                 "x": ev.x,
@@ -388,44 +436,59 @@ class Evaluator:
                 "feasible": ev.feasible,
                 "wall_s": ev.wall_s,
                 "cached": ev.cached,
+                "charged": charged,
                 "n_evals": self.n_evals,
                 "kind": kind,
                 "plain_wall_s": None if ev.cached else ev.plain_wall_s,
+                **({"source_wall_s": source_wall_s} if ev.cached and charged else {}),
             }
         )
         for observe in self.observers:
             observe(self, ev)
 
-    def evaluate_many(self, Z, *, with_jacobian: bool = False) -> list[Evaluation]:
+    def evaluate_many(
+        self, Z, *, with_jacobian: bool = False, reuse: bool = False
+    ) -> list[Evaluation]:
         """Evaluate a batch of scaled points; the uncached feasible ones go through one mapper call.
 
-        Order of the log = order of ``Z``. If the budget does not cover every new point, the first
-        ones that fit are evaluated and recorded, then :class:`BudgetExhausted` is raised.
-        ``with_jacobian`` runs the model with exact sensitivities (only a cached evaluation that
-        already has them is reused).
+        Order of the log = order of ``Z``. A point already evaluated (or earlier in ``Z``) is
+        served from the cache, charged unless ``free_repeats`` or ``reuse`` (the wrapper asking
+        again for a value it holds, not a call of the method). If the budget does not cover
+        every charged point, the first ones that fit are evaluated and recorded, then
+        :class:`BudgetExhausted` is raised. ``with_jacobian`` runs the model with exact
+        sensitivities (only a cached evaluation that already has them is reused).
         """
         fast = self._misfit is not None and not with_jacobian
         prepared = self.problem.classify(Z, check=not fast)
         keys = [x.tobytes() for x, _ in prepared]
         kind = "jacobian" if with_jacobian else "plain"
-        # index -> cached Evaluation, or index of its first copy
-        hits: dict[int, Evaluation | int] = {}
-        new: list[int] = []
+        # per point: None (new), a cached Evaluation, or the index of its first copy in Z
+        source: list[Evaluation | int | None] = []
         first: dict[bytes, int] = {}
         for i, key in enumerate(keys):
             cached = self._cache.get(key) if self.cache else None
             if cached is not None and (
                 not with_jacobian or cached.jacobian is not None or not cached.usable
             ):
-                hits[i] = cached
+                source.append(cached)
                 self._cache.move_to_end(key)
             elif self.cache and key in first:
-                hits[i] = first[key]
+                source.append(first[key])
             else:
-                new.append(i)
+                source.append(None)
                 first[key] = i
-        allowed = self._fitting([self.charge_of(kind, prepared[i][1] is None) for i in new])
-        todo = new[:allowed]
+        free = self.free_repeats or reuse
+
+        def feasible(i: int) -> bool:
+            src = source[i]
+            if isinstance(src, Evaluation):
+                return src.feasible
+            return prepared[i if src is None else src][1] is None
+
+        charged = [i for i in range(len(keys)) if source[i] is None or not free]
+        fits = self._fitting([self.charge_of(kind, feasible(i)) for i in charged])
+        allowed = set(charged[:fits])
+        todo = [i for i in range(len(keys)) if source[i] is None and i in allowed]
         run_idx = [i for i in todo if prepared[i][1] is None]
         done: dict[int, Evaluation] = {}
         if run_idx:
@@ -436,22 +499,24 @@ class Evaluator:
             if i not in done:
                 done[i] = self._failure(prepared[i][0], prepared[i][1], feasible=False)
         out: list[Evaluation] = []
-        for i in range(len(prepared)):
-            if i in done:
+        for i, src in enumerate(source):
+            pay = i in allowed
+            if src is None:
+                if not pay:
+                    continue  # left out by the budget
                 ev = done[i]
                 self._record(ev, keys[i], kind)
-            elif i in hits:
-                src = hits[i]
+            else:
                 if isinstance(src, int):
                     if src not in done:
                         continue  # repeat of a point left out by the budget
                     src = done[src]
+                if not (pay or free):
+                    continue  # a charged repeat left out by the budget
                 ev = replace(src, cached=True, wall_s=0.0)
-                self._record(ev, None, kind)
-            else:
-                continue  # left out by the budget
+                self._record(ev, None, kind, charged=pay, source_wall_s=src.wall_s)
             out.append(ev)
-        if len(new) > allowed:
+        if len(allowed) < len(charged):
             raise BudgetExhausted(self.budget, self.n_evals, self.budget_unit)
         return out
 
@@ -516,10 +581,11 @@ class Evaluator:
             k += 1
         return k
 
-    def evaluate(self, z, *, with_jacobian: bool = False) -> Evaluation:
-        """Evaluate one scaled point (cache first; counts and budget as documented)."""
+    def evaluate(self, z, *, with_jacobian: bool = False, reuse: bool = False) -> Evaluation:
+        """Evaluate one scaled point (cache first; counts and budget as documented; ``reuse``:
+        a cached point is served free, see :meth:`evaluate_many`)."""
         return self.evaluate_many(
-            np.asarray(z, dtype=float).reshape(1, -1), with_jacobian=with_jacobian
+            np.asarray(z, dtype=float).reshape(1, -1), with_jacobian=with_jacobian, reuse=reuse
         )[0]
 
     def cost(self, z) -> float:
@@ -534,20 +600,33 @@ class Evaluator:
 
     def cost_split(self, z) -> dict[str, float]:
         """Cost per named block plus ``"total"``; blocks are ``nan`` for a failed/infeasible
-        point."""
-        ev = self.evaluate(z)
+        point (a reuse: free when ``z`` was evaluated)."""
+        ev = self.evaluate(z, reuse=True)
         if not ev.usable:
             return {**{name: math.nan for name in self.blocks}, "total": ev.cost}
         return {**self.problem.split(ev.residual), "total": ev.cost}
 
     # --- derivatives -----------------------------------------------------------------------------
+    def fd_rel_step(self, scheme: str = "forward", rel_step: float | None = None) -> float:
+        """The relative finite-difference step of ``scheme``: ``rel_step`` when given (> 0), else
+        the model's declared ``fd_rel_step[scheme]``, else :data:`FD_REL_STEP` (scipy's)."""
+        if rel_step is not None:
+            ok = isinstance(rel_step, (int, float)) and math.isfinite(rel_step) and rel_step > 0
+            if not ok:
+                raise ValueError(f"rel_step = {rel_step!r} is out of range: a number > 0 (or None)")
+            return float(rel_step)
+        declared = getattr(self.model, "fd_rel_step", None) or {}
+        return float(declared.get(scheme, FD_REL_STEP[scheme]))
+
     def jacobian(
-        self, z, *, scheme: str = "forward", rel_step: float = 1e-6, r0=None
+        self, z, *, scheme: str = "forward", rel_step: float | None = None, r0=None
     ) -> np.ndarray:
         """Jacobian ``dR/dz`` (m, n) of the whitened residual: exact when the model provides it
         (one run with sensitivities, ``scheme`` ignored), else by finite differences.
 
-        Finite differences: step ``h_i = rel_step * max(|z_i|, 1)``; a step that would leave the
+        Finite differences: step ``h_i = rel_step * |z_i|`` (``rel_step`` where ``z_i = 0``),
+        relative as scipy and MINPACK make it, so that a parameter far from its reference scale
+        loses no digits; ``rel_step`` defaults to :meth:`fd_rel_step`. A step that would leave the
         box is flipped inward (``central`` falls back to a one-sided inward difference there). All
         columns are one batch. A column whose point failed is retried once on the other side; if
         that fails too, the column is set to zero and ``n_jacobian_failures`` is incremented. If
@@ -556,8 +635,8 @@ class Evaluator:
         if scheme not in ("forward", "central"):
             raise ValueError(f"scheme = {scheme!r} is unknown; allowed: forward, central")
         z = np.clip(np.asarray(z, dtype=float).ravel(), self.lower_z, self.upper_z)
-        if self.exact_jacobian:
-            ev = self.evaluate(z, with_jacobian=True)
+        if self.exact_jacobian:  # the Jacobian at z: a reuse when z was run with it
+            ev = self.evaluate(z, with_jacobian=True, reuse=True)
             if ev.usable and ev.jacobian is not None:
                 return ev.jacobian.copy()
             if not ev.usable:
@@ -567,12 +646,13 @@ class Evaluator:
     def _fd_jacobian(self, z, scheme, rel_step, r0) -> np.ndarray:
         n, m = self.n_params, self.n_residuals
         if r0 is None:
-            ev0 = self.evaluate(z)
+            ev0 = self.evaluate(z, reuse=True)
             if not ev0.usable:
                 return np.zeros((m, n))
             r0 = ev0.residual
         r0 = np.asarray(r0, dtype=float)
-        h = rel_step * np.maximum(np.abs(z), 1.0)
+        rel_step = self.fd_rel_step(scheme, rel_step)
+        h = rel_step * np.where(z != 0, np.abs(z), 1.0)
         up_room, down_room = self.upper_z - z, z - self.lower_z
         plus = np.where(
             h <= up_room, h, np.where(down_room >= up_room, -np.minimum(h, down_room), up_room)
@@ -627,10 +707,13 @@ class Evaluator:
                     self.n_jacobian_failures += 1
         return J
 
-    def gradient(self, z, **kw) -> tuple[float, np.ndarray]:
+    def gradient(self, z, *, reuse: bool = False, **kw) -> tuple[float, np.ndarray]:
         """``cost`` and its gradient ``2 J^T R`` in z (through :meth:`jacobian`); of a scalar
-        problem, ``df/dz`` (the one row of the value's Jacobian)."""
-        ev = self.evaluate(z, with_jacobian=self.exact_jacobian)
+        problem, ``df/dz`` (the one row of the value's Jacobian). The point itself is a call of
+        the method (charged, also when repeated) unless ``reuse`` (a library asking for the
+        gradient at the point whose cost it just had); the columns are charged as in
+        :meth:`jacobian`."""
+        ev = self.evaluate(z, with_jacobian=self.exact_jacobian, reuse=reuse)
         if not ev.usable:
             return ev.cost, np.zeros(self.n_params)
         J = ev.jacobian if ev.jacobian is not None else self.jacobian(z, r0=ev.residual, **kw)

@@ -25,6 +25,13 @@ from problems.materials import LinearElastic
 #: tighter than the solver defaults so that finite-difference Jacobians are clean
 FORWARD_SETTINGS = NewtonSettings(rtol_force=1e-10, rtol_displacement=1e-10)
 
+#: relative finite-difference steps of the FE model by scheme (its values carry the Newton
+#: tolerance's noise, ~1e-10, not machine precision). Forward: the truncation error (~h) and the
+#: noise (~1e-10 / h) balance near 1e-5..1e-6; 1e-6 keeps columns within ~1e-5 of the exact ones.
+#: Central: truncation ~h^2, so 1e-4 leaves ~1e-8 (measured on coarse against the DDM Jacobian:
+#: clean from 1e-3 down to 1e-5; see docs/fe_model.md). The evaluator uses them for this model.
+FD_REL_STEP = {"forward": 1e-6, "central": 1e-4}
+
 #: nominal price of ``model(x, jacobian=True)`` (response + exact Jacobian, 6 parameters) in plain
 #: forward runs, per mesh preset: the largest ratio measured by ``bench/perf/jacobian.py`` (wall
 #: or CPU time; coarse: 1.68 over the nine cases, paper: 1.97 on two; docs/fe_model.md "Cost"),
@@ -99,6 +106,7 @@ class FEForwardModel:
     """
 
     provides_jacobian: ClassVar[bool] = True
+    fd_rel_step: ClassVar[dict] = FD_REL_STEP
 
     case: Case
     mesh: str = "coarse"
