@@ -153,11 +153,14 @@ def comma_list(item_type, *, what: str = "value"):
 
 def mesh_spec(text: str) -> str:
     """A mesh spec the FE model accepts (``coarse``, ``paper``, ``fine``, ``NX,NY,NZ``, optionally
-    ``:eighth``/``:quarter``); returned unchanged (checked by problems.fe.mesh.parse_mesh_spec)."""
+    ``:eighth``/``:quarter``); returned unchanged (checked by problems.fe.mesh.parse_mesh_spec,
+    and refused when its operators cannot fit in memory: bench.resources.check_mesh_memory)."""
+    from bench.resources import check_mesh_memory
     from problems.fe.mesh import parse_mesh_spec
 
     try:
         parse_mesh_spec(text)
+        check_mesh_memory(text)
     except ValueError as exc:
         raise ArgumentTypeError(str(exc)) from None
     return text
@@ -176,17 +179,22 @@ def input_file(text: str) -> str:
 
 
 def output_file(text: str) -> str:
-    """A file to be written: not an existing directory, its folder not a file."""
+    """A file to be written, checked before any work: not an existing directory, its folder an
+    existing, writable folder (so that a long computation never ends on an unwritable path)."""
+    import os
+
     p = Path(text)
     if not text:
         raise ArgumentTypeError("empty file name")
     if p.is_dir():
         raise ArgumentTypeError(f"{text} is a directory; give a file name")
     parent = p.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if parent.exists() and not parent.is_dir():
+    if not parent.exists():
+        raise ArgumentTypeError(f"{text}: folder {parent} does not exist; create it first")
+    if not parent.is_dir():
         raise ArgumentTypeError(f"{text}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise ArgumentTypeError(f"{text} is not writable (permission denied)")
     return text
 
 
@@ -352,6 +360,7 @@ BY_NAME = {
     "scheduler": scheduler_address,
     "data": input_file,
     "json": output_file,
+    "csv": output_file,
     "plate_margin_mm": nonneg_float,
 }
 _INT_TYPES = (nonneg_int, positive_int)

@@ -169,6 +169,21 @@ def parse_options(items: list[str], flag: str = "--option") -> dict:
     return out
 
 
+def check_finer(hifi_mesh: str, mesh: str) -> None:
+    """ValueError (one line) unless ``hifi_mesh`` is finer than the inverse ``mesh``: at least as
+    many elements along x, y and z and more along one (a coarser or equal "high-fidelity" model
+    corrects nothing, or the wrong way)."""
+    from problems.fe.mesh import parse_mesh_spec
+
+    hi, lo = parse_mesh_spec(hifi_mesh).shape, parse_mesh_spec(mesh).shape
+    if not (all(h >= n for h, n in zip(hi, lo)) and hi != lo):
+        raise ValueError(
+            f"--hifi-mesh {hifi_mesh!r} ({','.join(map(str, hi))} elements) is not finer than "
+            f"the inverse mesh {mesh!r} ({','.join(map(str, lo))}); allowed: a mesh with at least "
+            "as many elements along x, y and z and more along one"
+        )
+
+
 def format_identification(case, result) -> str:
     """Parameters (reference, start, found, signed error %), then cost, status, evaluations,
     time."""
@@ -269,6 +284,8 @@ def main(args) -> int:
             "--correction default sets the plate margin and the high-fidelity mesh itself (see "
             "`femubench cases`); to change them name the treatment, e.g. --correction bae"
         )
+    if args.hifi_mesh is not None:
+        check_finer(args.hifi_mesh, args.mesh)
     spec = Identification(
         case.name,
         args.solver,

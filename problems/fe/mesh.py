@@ -191,7 +191,8 @@ def check_symmetry(symmetry: str, shape: tuple[int, int, int], what: str = "symm
 
 def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
     """Parse ``MESH[:SYMMETRY]``: MESH a preset (``coarse``, ``paper``, ``fine``), ``NX,NY,NZ`` or a
-    tuple; SYMMETRY ``eighth`` or ``quarter``, by default ``eighth`` where it is exact (NZ even)."""
+    tuple; SYMMETRY ``eighth`` or ``quarter``, by default ``eighth`` where it is exact (NZ even).
+    ValueError for NZ < 2 (every node on a plate: nothing to solve)."""
     if isinstance(spec, MeshSpec):
         return spec
     symmetry = None
@@ -215,6 +216,11 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
                 f"mesh {spec!r} is unknown; allowed: {', '.join(MESH_PRESETS)} or NX,NY,NZ "
                 f"(whole numbers >= 1), optionally followed by :{'|:'.join(SYMMETRIES)}"
             )
+    if shape[2] < 2:
+        raise ValueError(
+            f"mesh {spec!r}: NZ = {shape[2]} leaves no node between the plates (no free dof); "
+            "allowed: NZ >= 2"
+        )
     if symmetry is None:
         return MeshSpec(shape, default_symmetry(shape))
     return MeshSpec(shape, check_symmetry(symmetry, shape, f"mesh {spec!r}: symmetry"))
