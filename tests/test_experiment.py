@@ -60,3 +60,134 @@ def test_machine_levels_equal_steps_bit_for_bit_and_uneven_levels():
     assert np.allclose(r.snapshots_mm, [0.2, 0.9, 1.5], rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="strictly increasing"):
         MachineLoading([0.5, 0.4])
+
+
+# --- the experiment file and its import ---------------------------------------------------------
+from problems.inverse.experiment import (  # noqa: E402
+    ExperimentFileError,
+    face_affine,
+    force_sigma_kN,
+    import_experiment,
+    load_experiment,
+    rigid_basis,
+    rigid_fit,
+    rigid_free_model,
+    sha256,
+)
+from problems.inverse.lab import curve_summary, lab_case  # noqa: E402
+from problems.inverse.virtual_experiment import VirtualTest, write_virtual_experiment  # noqa: E402
+
+TRUTH = (33000.0, 37.0, 0.87, 13.5, 23.0, 1350.0)  # linear-compression, not its reference
+
+
+def test_rigid_fit_recovers_a_known_motion():
+    rng = np.random.default_rng(3)
+    y, z = rng.uniform(-50, 50, 200), rng.uniform(0, 100, 200)
+    sign = np.where(y < 0, -1.0, 1.0)
+    B = rigid_basis(y, z, sign)
+    field = rng.normal(0, 0.01, 400)  # any deformation
+    motion = np.array([0.0123, -0.0456, 3.2e-4])
+    w = 1.0 / rng.uniform(1e-3, 3e-3, 400) ** 2
+    got = rigid_fit(B, field + B @ motion, w) - rigid_fit(B, field, w)
+    assert np.allclose(got, motion, rtol=0, atol=1e-10)
+    # in the folded layout the rotation field is that of the true positions
+    assert np.allclose(sign * B[:200, 2], -(z - z.mean()))
+
+
+def test_face_calibration_from_origin_and_from_corners_agree():
+    A1, c1 = face_affine("px", 100.0, 80.0, mm_per_px=0.05, origin=[300.0, 2400.0])
+    corners = [[300, 2400], [2300, 2400], [2300, 800], [300, 800]]
+    A2, c2 = face_affine("px", 100.0, 80.0, corners=corners)
+    assert np.allclose(A1, A2, atol=1e-12) and c2["corner_residual_mm"] < 1e-9
+    assert c2["mm_per_unit"] == pytest.approx(0.05)
+    assert np.allclose(A1 @ [2300.0, 800.0, 1.0], [100.0, 80.0])
+
+
+@pytest.fixture(scope="module")
+def consistent(tmp_path_factory):
+    """A virtual 100 mm cube made on the inverse mesh itself with negligible DIC noise, a rigid
+    drift and a class 0.5 load cell: the import must give the model's own response."""
+    out = tmp_path_factory.mktemp("ve")
+    t = VirtualTest(
+        "linear-compression",
+        TRUTH,
+        data_mesh="4,4,8",
+        noise_px=(1e-6, 2e-6),
+        drift_mm=(0.05, -0.03),
+        drift_rad=3e-4,
+        load_cell_class=0.5,
+        force_step_kN=0.001,
+    )
+    return write_virtual_experiment(t, out, "consistent")
+
+
+def test_import_removes_the_drift_and_matches_the_model(consistent):
+    exp = load_experiment(consistent)
+    ds = import_experiment(exp)
+    assert ds.settings.specimen_mm == (100.0, 100.0, 100.0)
+    assert ds.points.shape == (400, 2) and np.all(ds.points[:, 0] >= 0)
+    assert ds.meta["dropped_off_face"] == 484 - 400
+    case = get_case("linear-compression")
+    fe = FEForwardModel(case, "4,4,8", ds.settings.loading, ds.points, specimen_mm=(100,) * 3)
+    model = rigid_free_model(fe, ds)
+    r = model(np.array(TRUTH))
+    n = ds.u_h.size
+    assert np.abs(r.values[: 2 * n] - ds.values[: 2 * n]).max() < 2e-6  # mm: CSV rounding
+    rel = np.abs(r.values[2 * n :] / ds.reaction_kN - 1)
+    assert rel.max() < 0.005 + 1e-6  # within the class 0.5 error
+    assert np.allclose(ds.std_force_kN, 0.005 / np.sqrt(3) * ds.reaction_kN, rtol=1e-3)
+    assert ds.meta["files_sha256"]["machine_log.csv"] == sha256(
+        consistent.parent / "machine_log.csv"
+    )
+    assert len(ds.meta["files_sha256"]) == 2 + 8
+    # the projected Jacobian is the Jacobian of the projected model
+    rj = model(np.array(TRUTH), jacobian=True)
+    assert rj.jacobian.shape == (2 * n + 8, 6)
+
+
+def test_lab_case_from_the_test_itself(consistent):
+    ds = import_experiment(load_experiment(consistent))
+    s = curve_summary(ds)
+    assert s["E_MPa"] == pytest.approx(TRUTH[0], rel=0.15)
+    for name in ("linear-compression", "hyperbolic-tension", "exponent-shear"):
+        case, ref = lab_case(name, ds, s), get_case(name)
+        assert np.all(case.lower <= case.start) and np.all(case.start <= case.upper)
+        assert not np.any(np.isclose(case.start, ref.reference, rtol=1e-6))
+    lin = lab_case("linear-compression", ds, s)
+    assert np.all(lin.lower <= TRUTH) and np.all(np.array(TRUTH) <= lin.upper)
+
+
+def test_bad_experiment_file_lists_every_error(tmp_path):
+    f = tmp_path / "bad.toml"
+    f.write_text(
+        '[specimen]\nwidth_mm = -100\ndepth_mm = 100\nheight_mm = "x"\nplatens = "coulomb"\n'
+        '[camera]\nunits = "inch"\norigin = [1, 2]\n'
+        '[loading]\nlog = "nope.csv"\nforce_unit = "lbf"\nload_cell_class = 4\n'
+        '[dic]\nfiles = "dic/*.csv"\n[extra]\n'
+    )
+    with pytest.raises(ExperimentFileError) as exc:
+        load_experiment(f)
+    errs = exc.value.errors
+    text = "\n".join(errs)
+    for needle in (
+        "[specimen] width_mm = -100",
+        "[specimen] height_mm = 'x'",
+        "Coulomb friction is not supported",
+        "[camera] units = 'inch'",
+        "[loading] log = 'nope.csv'",
+        "[loading] force_unit = 'lbf'",
+        "[loading] load_cell_class = 4",
+        "[loading] displacement_column: missing",
+        "[dic] files = 'dic/*.csv': no file matches",
+        "unknown table [extra]",
+    ):
+        assert needle in text, needle
+    assert all("\n" not in e for e in errs) and len(errs) >= 10
+
+
+def test_force_sigma_from_the_class_and_the_resolution():
+    s = force_sigma_kN([100.0, 0.0], 1.0, 0.01)
+    assert s[0] == pytest.approx(np.hypot(1.0 / np.sqrt(3), 0.01 / np.sqrt(12)))
+    assert s[1] == pytest.approx(0.01 / np.sqrt(12))
+    with pytest.raises(ValueError, match="force_resolution"):
+        force_sigma_kN([0.0], 1.0, 0.0)

@@ -59,37 +59,55 @@ PAPER_A_ERROR = (11.0, 46.0)
 # --- the same concrete seen through each hardening test ------------------------------------
 
 
-def _sigma0_linear(hardening: str) -> float:
-    tb, K = math.tan(math.radians(BETA_REF)), K_REF
-    d = (1.0 - tb / 3.0) * SIGMA_C0
+def _sigma0_linear(hardening: str, sigma_c: float, beta: float, K: float) -> float:
+    tb = math.tan(math.radians(beta))
+    d = (1.0 - tb / 3.0) * sigma_c
     return {
-        "compression": SIGMA_C0,
+        "compression": sigma_c,
         "tension": d / (1.0 / K + tb / 3.0),
         "shear": d / (math.sqrt(3.0) / 2.0 * (1.0 + 1.0 / K)),
     }[hardening]
 
 
-def _sigma0_hyperbolic(hardening: str) -> float:
-    tb = math.tan(math.radians(BETA_REF))
-    l0 = hyperbolic_l0("compression", SIGMA_C0, PT0_REF, BETA_REF)
-    d0 = l0 + PT0_REF * tb
+def _sigma0_hyperbolic(hardening: str, sigma_c: float, beta: float, pt0: float) -> float:
+    tb = math.tan(math.radians(beta))
+    l0 = hyperbolic_l0("compression", sigma_c, pt0, beta)
+    d0 = l0 + pt0 * tb
     if hardening == "compression":
-        return SIGMA_C0
+        return sigma_c
     if hardening == "shear":
         return math.sqrt((d0**2 - l0**2) / 3.0)
-    return brentq(lambda st: math.sqrt(l0**2 + st**2) + st * tb / 3.0 - d0, 1e-9, SIGMA_C0)
+    return brentq(lambda st: math.sqrt(l0**2 + st**2) + st * tb / 3.0 - d0, 1e-9, sigma_c)
 
 
-def _sigma0_exponent(hardening: str) -> float:
-    a, b, pt = A_REF, B_REF, PT0_REF
+def _sigma0_exponent(hardening: str, sigma_c: float, pt0: float, b: float) -> float:
+    a = (pt0 + sigma_c / 3.0) / sigma_c**b  # the surface through p = -pt0, q = 0
     if hardening == "compression":
-        return SIGMA_C0
+        return sigma_c
     if hardening == "shear":
-        return (pt / a) ** (1.0 / b) / math.sqrt(3.0)
-    return brentq(lambda st: a * st**b + st / 3.0 - pt, 1e-9, SIGMA_C0)
+        return (pt0 / a) ** (1.0 / b) / math.sqrt(3.0)
+    return brentq(lambda st: a * st**b + st / 3.0 - pt0, 1e-9, sigma_c)
 
 
-_SIGMA0 = {"linear": _sigma0_linear, "hyperbolic": _sigma0_hyperbolic, "exponent": _sigma0_exponent}
+def sigma0_of(
+    form: str,
+    hardening: str,
+    sigma_c: float = SIGMA_C0,
+    *,
+    beta: float = BETA_REF,
+    K: float = K_REF,
+    pt0: float = PT0_REF,
+    b: float = B_REF,
+) -> float:
+    """The ``sigma0`` (MPa) of variant ``form``-``hardening`` for a concrete whose initial yield
+    surface (of ``form``, shaped by beta in degrees, K, pt0 in MPa, b) yields at ``sigma_c`` MPa in
+    uniaxial compression: that surface's yield stress in the variant's hardening test. The
+    defaults are the study's reference concrete."""
+    if form == "linear":
+        return _sigma0_linear(hardening, sigma_c, beta, K)
+    if form == "hyperbolic":
+        return _sigma0_hyperbolic(hardening, sigma_c, beta, pt0)
+    return _sigma0_exponent(hardening, sigma_c, pt0, b)
 
 
 @dataclass(frozen=True)
@@ -139,7 +157,7 @@ def make_case(form: str, hardening: str) -> Case:
         raise ValueError(f"form {form!r} is unknown; allowed: {', '.join(FORMS)}")
     if hardening not in HARDENINGS:
         raise ValueError(f"hardening {hardening!r} is unknown; allowed: {', '.join(HARDENINGS)}")
-    sigma0 = _SIGMA0[form](hardening)
+    sigma0 = sigma0_of(form, hardening)
     refs = {
         "E": E_REF,
         "beta": BETA_REF,

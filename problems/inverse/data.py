@@ -176,7 +176,11 @@ _DEFAULTS = {"specimen_mm": SPECIMEN_MM, "levels_mm": ()}
 @dataclass(frozen=True, eq=False)
 class Dataset:
     """Measured front-face displacements (mm) and plate force (kN) with their standard
-    deviations."""
+    deviations.
+
+    std_force_kN : (N,) standard deviation of each force, kN, when the data say it (an
+                   experiment's load-cell accuracy); None: the objective's ``sigma_force_kN``
+    """
 
     case: str
     settings: DataSettings
@@ -188,6 +192,7 @@ class Dataset:
     reaction_kN: np.ndarray  # (N,)
     std_u_mm: np.ndarray  # (2, N, m) standard deviation of u_h and u_v, mm
     meta: dict = field(default_factory=dict)
+    std_force_kN: np.ndarray | None = None
 
     @property
     def values(self) -> np.ndarray:
@@ -195,7 +200,10 @@ class Dataset:
         return np.concatenate([self.u_h.ravel(), self.u_v.ravel(), self.reaction_kN])
 
     def sigma(self, force_kN: float = 1.0) -> np.ndarray:
-        """Standard deviations of the measurement vector (diagonal covariance), mm and kN."""
+        """Standard deviations of the measurement vector (diagonal covariance), mm and kN: the
+        force's from :attr:`std_force_kN` when the data have it, else ``force_kN``."""
+        if self.std_force_kN is not None:
+            return np.concatenate([self.std_u_mm.ravel(), self.std_force_kN])
         if not force_kN > 0:
             raise ValueError(f"sigma_force_kN = {force_kN!r} is out of range: must be > 0 kN")
         return np.concatenate([self.std_u_mm.ravel(), np.full(len(self.reaction_kN), force_kN)])
@@ -210,7 +218,7 @@ class Dataset:
         return _digest(self._doc())
 
     def _doc(self) -> dict:
-        return {
+        doc = {
             "format": FORMAT,
             "case": self.case,
             "settings": self.settings.to_dict(),
@@ -223,6 +231,9 @@ class Dataset:
             "std_u_mm": self.std_u_mm.tolist(),
             "meta": self.meta,
         }
+        if self.std_force_kN is not None:
+            doc["std_force_kN"] = np.asarray(self.std_force_kN, float).tolist()
+        return doc
 
 
 def _digest(doc: dict) -> str:
@@ -433,6 +444,11 @@ def _dataset_from_doc(doc: dict) -> Dataset:
     meta = doc.get("meta", {})
     if not isinstance(meta, dict):
         raise ValueError("field meta must be a JSON object")
+    std_force = None
+    if "std_force_kN" in doc:
+        std_force = _array(doc, "std_force_kN")
+        if std_force.shape != (n,) or not np.all(np.isfinite(std_force) & (std_force > 0)):
+            raise ValueError(f"field std_force_kN must hold {n} standard deviations > 0 kN")
     return Dataset(
         doc["case"],
         settings,
@@ -444,6 +460,7 @@ def _dataset_from_doc(doc: dict) -> Dataset:
         arrays["reaction_kN"],
         arrays["std_u_mm"],
         meta,
+        std_force,
     )
 
 

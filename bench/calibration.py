@@ -1,0 +1,413 @@
+"""Calibrate a real test: identify each Drucker-Prager variant on an experiment, then report.
+
+:func:`calibrate` imports an experiment (problems/inverse/experiment.py), and for each chosen
+variant builds its lab case (bounds and start from the test, problems/inverse/lab.py) and the
+objective (the FE model of the specimen on the inverse mesh, with the data's rigid-motion
+removal), runs the default local method (``lm`` with exact Jacobians) from the start, and at the
+optimum takes the exact Jacobian for the Laplace covariance and the Fisher information
+(problems/analysis/identifiability.py). Each variant's result is written atomically to
+``<out>/variants/<variant>.json`` keyed by what makes it (data hash, mesh, budget, bounds and
+start): a calibration interrupted resumes with the variants not done. The report
+(``report.json``, ``report.md``, ``force_displacement.png``, ``residuals.png``) ranks the
+variants by AIC and BIC (``chi2 + 2 k`` and ``chi2 + k ln n``; the noise model is known, so
+``-2 ln L = chi2`` up to a constant common to all variants) with Akaike weights.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bench.store import atomic_write_text
+from problems.inverse import layout
+from problems.inverse.data import Dataset
+
+FORMAT = "femubench-calibration/1"
+#: condition number of the Fisher information (in z = x / start) above which a warning is given
+CONDITION_WARNING = 1e8
+#: Laplace standard deviation (% of the value) above which a parameter is called poorly identified
+STD_WARNING_PERCENT = 25.0
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """mesh: inverse mesh spec; budget: evaluations of ``lm`` per variant; seed of the method."""
+
+    mesh: str = "coarse"
+    budget: int = 80
+    seed: int = 0
+
+
+def objective_for(data: Dataset, case, mesh: str):
+    """The evaluator of ``case`` (a lab case) on the imported ``data``: the FE model of the
+    specimen on ``mesh`` at the data's points and machine loading, the data's rigid-motion
+    removal applied to it, the data's per-point and per-force standard deviations."""
+    from problems.inverse.evaluator import Evaluator
+    from problems.inverse.experiment import rigid_free_model
+    from problems.inverse.forward import FEForwardModel
+    from problems.inverse.problem import LeastSquaresProblem
+
+    fe = FEForwardModel(
+        case, mesh, data.settings.loading, data.points, specimen_mm=data.settings.specimen_mm
+    )
+    model = rigid_free_model(fe, data)
+    problem = LeastSquaresProblem(
+        model,
+        data.values,
+        case.lower,
+        case.upper,
+        case.reference,
+        sigma=data.sigma(),
+        blocks=layout.blocks(len(data.snapshots_mm), len(data.points)),
+        provenance={
+            "case": case.name,
+            "data_tier": data.settings.tier,
+            "data_hash": data.hash,
+            "inverse_mesh": mesh,
+        },
+    )
+    return Evaluator(problem, exact_jacobian=True)
+
+
+def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
+    """Hash of what makes one variant's result: data, case box and start, mesh, budget, seed."""
+    body = {
+        "data": data.hash,
+        "variant": case.name,
+        "lower": case.lower.tolist(),
+        "upper": case.upper.tolist(),
+        "start": case.start.tolist(),
+        "mesh": settings.mesh,
+        "budget": settings.budget,
+        "seed": settings.seed,
+    }
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dict:
+    """Identify ``case`` on ``data`` (``lm`` from ``case.start``), then the Laplace covariance,
+    the Fisher information and the fit at the optimum, as a JSON-ready dict."""
+    from problems.analysis.identifiability import analyse_jacobian
+    from solvers import solve
+
+    ev = objective_for(data, case, settings.mesh)
+    result = solve(ev, "lm", budget=settings.budget, seed=settings.seed, x0=case.start)
+    x = np.asarray(result.x, float)
+    z = ev.to_scaled(x)
+    J = ev.jacobian(z)
+    best = ev.evaluate(z)
+    n_evals = ev.n_evals
+    out = {
+        "variant": case.name,
+        "names": list(case.names),
+        "units": [p.unit for p in case.parameters],
+        "start": case.start.tolist(),
+        "lower": case.lower.tolist(),
+        "upper": case.upper.tolist(),
+        "status": result.status,
+        "message": result.message,
+        "n_evals": int(n_evals),
+        "wall_s": float(result.wall_s),
+        "ok": bool(best.usable),
+    }
+    if not best.usable:
+        return out | {"x": x.tolist(), "chi2": math.inf}
+    ident = analyse_jacobian(J, ev.reference, x=x, names=case.names)
+    N, m = len(data.snapshots_mm), len(data.points)
+    r = best.residual
+    split = {k: float(np.sum(r[s] ** 2)) for k, s in layout.blocks(N, m).items()}
+    counts = {k: len(range(len(r))[s]) for k, s in layout.blocks(N, m).items()}
+    model_values = ev.problem.data - r * data.sigma()
+    _, _, model_force = layout.unstack(model_values, N, m)
+    warnings = list(ident.warnings)
+    if ident.condition > CONDITION_WARNING:
+        warnings.append(
+            f"Fisher information condition number {ident.condition:.3g} > "
+            f"{CONDITION_WARNING:g}: weakest direction "
+            + ", ".join(f"{k} {v:+.2f}" for k, v in ident.weakest.items() if abs(v) > 0.2)
+        )
+    std_pct = 100.0 * ident.std_x / np.abs(x)
+    poor = [f"{n} ({s:.3g} %)" for n, s in zip(case.names, std_pct) if s > STD_WARNING_PERCENT]
+    if poor:
+        warnings.append(
+            f"poorly identified (Laplace sd > {STD_WARNING_PERCENT:g} %): " + ", ".join(poor)
+        )
+    at_bound = [
+        n
+        for n, v, lo, hi in zip(case.names, x, case.lower, case.upper)
+        if min(v - lo, hi - v) <= 1e-6 * (hi - lo)
+    ]
+    if at_bound:
+        warnings.append(f"at a bound of its box: {', '.join(at_bound)}")
+    chi2 = float(best.cost)
+    n_data, k = len(r), len(x)
+    return out | {
+        "x": x.tolist(),
+        "std": ident.std_x.tolist(),
+        "std_percent": std_pct.tolist(),
+        "ci95_lower": (x - 1.96 * ident.std_x).tolist(),
+        "ci95_upper": (x + 1.96 * ident.std_x).tolist(),
+        "correlation": np.nan_to_num(ident.correlation).tolist(),
+        "condition": float(ident.condition),
+        "warnings": warnings,
+        "chi2": chi2,
+        "n_data": n_data,
+        "rms_sigma": math.sqrt(chi2 / n_data),
+        "rms_sigma_blocks": {b: math.sqrt(split[b] / counts[b]) for b in ("u_h", "u_v", "force")},
+        "aic": chi2 + 2 * k,
+        "bic": chi2 + k * math.log(n_data),
+        "model_force_kN": model_force.tolist(),
+        "residual_last_sigma": {
+            "u_h": layout.unstack(r, N, m)[0][-1].tolist(),
+            "u_v": layout.unstack(r, N, m)[1][-1].tolist(),
+        },
+    }
+
+
+def calibrate(
+    experiment_path,
+    out_dir,
+    *,
+    models=None,
+    settings: CalibrationSettings | None = None,
+    progress=print,
+) -> dict:
+    """Calibrate every chosen variant of the experiment at ``experiment_path`` into ``out_dir``
+    (module docstring); returns the report dict. ``models``: variant names (default: the
+    experiment file's ``[calibration] models``); ``settings`` default from the file too. Variants
+    whose result is already in ``out_dir`` with the same key are read, not rerun."""
+    from problems.inverse.experiment import import_experiment, load_experiment
+    from problems.inverse.lab import curve_summary, lab_case
+
+    exp = load_experiment(experiment_path)
+    out = Path(out_dir)
+    if out.resolve() in (exp.path.parent, exp.log.parent, *(f.parent for f in exp.dic_files)):
+        raise ValueError(
+            f"--out {out_dir}: the folder of the experiment's files; outputs never go among the "
+            "inputs (name a new folder)"
+        )
+    settings = settings or CalibrationSettings(exp.mesh, exp.budget)
+    models = list(models or exp.models)
+    data = import_experiment(exp)
+    summary = curve_summary(data)
+    results = {}
+    for name in models:
+        case = lab_case(name, data, summary)
+        key = variant_key(data, case, settings)
+        path = out / "variants" / f"{name}.json"
+        if path.exists():
+            try:
+                old = json.loads(path.read_text())
+            except (OSError, json.JSONDecodeError):
+                old = {}
+            if old.get("key") == key:
+                progress(f"{name}: done before ({path})")
+                results[name] = old
+                continue
+        progress(f"{name}: identifying from the test's start on mesh {settings.mesh} ...")
+        res = calibrate_variant(data, case, settings) | {"key": key}
+        atomic_write_text(path, json.dumps(res, indent=1, allow_nan=True) + "\n")
+        results[name] = res
+        progress(
+            f"{name}: chi2 {res['chi2']:.6g}, rms {res.get('rms_sigma', math.nan):.3g} sigma, "
+            f"{res['n_evals']} evaluations"
+        )
+    report = assemble(exp, data, summary, results, settings)
+    write_report(report, data, out)
+    return report
+
+
+def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict:
+    """The report dict: experiment, import, heuristics, each variant, model selection."""
+    ok = {k: v for k, v in results.items() if v.get("ok") and math.isfinite(v["chi2"])}
+    ranking = []
+    if ok:
+        aic_min = min(v["aic"] for v in ok.values())
+        w = {k: math.exp(-0.5 * (v["aic"] - aic_min)) for k, v in ok.items()}
+        total = sum(w.values())
+        for name in sorted(ok, key=lambda k: ok[k]["aic"]):
+            v = ok[name]
+            ranking.append(
+                {
+                    "variant": name,
+                    "aic": v["aic"],
+                    "bic": v["bic"],
+                    "delta_aic": v["aic"] - aic_min,
+                    "akaike_weight": w[name] / total,
+                    "chi2": v["chi2"],
+                    "rms_sigma": v["rms_sigma"],
+                }
+            )
+    meta = data.meta
+    return {
+        "format": FORMAT,
+        "experiment": exp.name,
+        "description": exp.description,
+        "specimen_mm": {"width": exp.width_mm, "depth": exp.depth_mm, "height": exp.height_mm},
+        "platens": exp.platens,
+        "inverse_mesh": settings.mesh,
+        "budget": settings.budget,
+        "data_hash": data.hash,
+        "import": {
+            k: meta[k]
+            for k in (
+                "files_sha256",
+                "calibration",
+                "points_read",
+                "dropped_not_in_every_image",
+                "dropped_off_face",
+                "dropped_non_finite_rows",
+                "images_used",
+                "rigid_motion_removed",
+                "force_accuracy_percent",
+            )
+        }
+        | {"points_used": len(data.points), "images": len(data.snapshots_mm)},
+        "test": summary,
+        "displacement_mm": data.snapshots_mm.tolist(),
+        "force_kN": data.reaction_kN.tolist(),
+        "force_sigma_kN": np.asarray(data.std_force_kN).tolist(),
+        "variants": results,
+        "ranking": ranking,
+    }
+
+
+def _atomic_figure(fig, path: Path) -> None:
+    """Save a figure atomically (temporary file in the same folder, then rename)."""
+    from bench.plotting import save
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        save(fig, tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def write_report(report: dict, data: Dataset, out: Path) -> None:
+    """``report.json``, ``report.md`` and the figures into ``out`` (atomic writes)."""
+    from bench.plotting import line_style, pyplot
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "report.json", json.dumps(report, indent=1, allow_nan=True) + "\n")
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    d = np.array(report["displacement_mm"])
+    ax.errorbar(
+        d,
+        report["force_kN"],
+        yerr=2 * np.array(report["force_sigma_kN"]),
+        fmt="ko",
+        label="measured (2 sd)",
+        zorder=3,
+    )
+    for i, row in enumerate(report["ranking"][:4]):
+        v = report["variants"][row["variant"]]
+        style = line_style(i) | {"marker": None}
+        ax.plot(
+            d, v["model_force_kN"], label=f"{row['variant']} (dAIC {row['delta_aic']:.3g})", **style
+        )
+    ax.set_xlabel("plate displacement (mm)")
+    ax.set_ylabel("force (kN)")
+    ax.legend(fontsize=7)
+    _atomic_figure(fig, out / "force_displacement.png")
+    if report["ranking"]:
+        best = report["variants"][report["ranking"][0]["variant"]]
+        s = np.array(data.meta["face_s_mm"])
+        fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.6))
+        for ax, comp in zip(axes, ("u_h", "u_v")):
+            r = np.array(best["residual_last_sigma"][comp])
+            sc = ax.scatter(s, data.points[:, 1], c=r, cmap="RdBu_r", vmin=-3, vmax=3, s=12)
+            ax.set_title(f"{comp} residual / sigma, last image")
+            ax.set_xlabel("s (mm)")
+            ax.set_aspect("equal")
+        axes[0].set_ylabel("z (mm)")
+        fig.colorbar(sc, ax=axes)
+        _atomic_figure(fig, out / "residuals.png")
+    atomic_write_text(out / "report.md", render_markdown(report))
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def render_markdown(report: dict) -> str:
+    """The calibration report as Markdown."""
+    imp, t = report["import"], report["test"]
+    sp = report["specimen_mm"]
+    lines = [
+        f"# Calibration of {report['experiment']}",
+        "",
+        report["description"],
+        "",
+        f"Specimen {sp['width']:g} x {sp['depth']:g} x {sp['height']:g} mm (width x depth x "
+        f"height), {report['platens']} platens; inverse mesh `{report['inverse_mesh']}`, `lm` "
+        f"with exact Jacobians, {report['budget']} evaluations per variant.",
+        "",
+        "## Import",
+        f"- {imp['images']} images, {imp['points_used']} face points used of "
+        f"{imp['points_read']} read: {imp['dropped_off_face']} off the face, "
+        f"{imp['dropped_not_in_every_image']} not in every image, "
+        f"{imp['dropped_non_finite_rows']} rows with non-finite values dropped",
+        f"- calibration: {json.dumps(imp['calibration'])}",
+        f"- force sd from a load-cell accuracy of {imp['force_accuracy_percent']:g} % of reading",
+        "- files (SHA-256): "
+        + ", ".join(f"`{k}` {v[:12]}" for k, v in imp["files_sha256"].items() if "/" not in k)
+        + f" and {sum('/' in k for k in imp['files_sha256'])} DIC exports",
+        "",
+        "## What the test says (start and bounds, never a reference)",
+        f"- E {_fmt(t['E_MPa'])} MPa (DIC strain; from the force curve {_fmt(t['E_force_MPa'])}), "
+        f"yield in compression {_fmt(t['sigma_c_MPa'])} MPa, hardening {_fmt(t['H_c_MPa'])} MPa, "
+        f"peak stress {_fmt(t['f_c_MPa'])} MPa, f_ctm {_fmt(t['f_ctm_MPa'])} MPa",
+        "",
+        "## Model selection",
+        "| rank | variant | chi2 | rms (sigma) | AIC | BIC | dAIC | Akaike weight |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for i, r in enumerate(report["ranking"], 1):
+        lines.append(
+            f"| {i} | {r['variant']} | {_fmt(r['chi2'])} | {r['rms_sigma']:.3f} | "
+            f"{_fmt(r['aic'])} | {_fmt(r['bic'])} | {r['delta_aic']:.3g} | "
+            f"{r['akaike_weight']:.3g} |"
+        )
+    lines += ["", "## Parameters (Laplace 95 % intervals from the exact Jacobian)"]
+    for name, v in report["variants"].items():
+        lines += ["", f"### {name}: {v['status']} after {v['n_evals']} evaluations"]
+        if not v.get("ok"):
+            lines.append(f"- failed: {v['message']}")
+            continue
+        blocks = v["rms_sigma_blocks"]
+        lines.append(
+            f"- fit: rms {v['rms_sigma']:.3f} sigma (u_h {blocks['u_h']:.3f}, u_v "
+            f"{blocks['u_v']:.3f}, force {blocks['force']:.3f}); Fisher condition "
+            f"{v['condition']:.3g}"
+        )
+        lines += [
+            "",
+            "| parameter | start | value | sd | sd % | 95 % interval |",
+            "|---|---|---|---|---|---|",
+        ]
+        for j, n in enumerate(v["names"]):
+            lines.append(
+                f"| {n} ({v['units'][j]}) | {_fmt(v['start'][j])} | {_fmt(v['x'][j])} | "
+                f"{_fmt(v['std'][j])} | {v['std_percent'][j]:.3g} | "
+                f"[{_fmt(v['ci95_lower'][j])}, {_fmt(v['ci95_upper'][j])}] |"
+            )
+        for w in v["warnings"]:
+            lines.append(f"- warning: {w}")
+    lines += [
+        "",
+        "Figures: `force_displacement.png` (measured against the best variants), `residuals.png`"
+        " (residuals of the best variant on the face, last image, in sigma units).",
+    ]
+    return "\n".join(lines) + "\n"
