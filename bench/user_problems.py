@@ -4,16 +4,14 @@ A run of a user problem is the problem's factory called with the suite's argumen
 :class:`~problems.inverse.evaluator.Evaluator` over it and :func:`solvers.solve`; the result's
 ``extra["problem"]`` holds what the report needs to judge it without importing the problem:
 
-* ``name``, ``kind`` (``"scalar"`` or ``"least-squares"``), ``f_min``, ``x_ref``, the success
-  rule (``success_rule``, ``success_text``) and the verdict (``success``, ``f_gap``, ``digits``);
-* ``trace``: ``[[n_evals, best f], ...]`` at every call that improved the best cost (exact per
-  call, from the evaluator's log: what the fixed-target views and the COCO/IOH export read).
+``name``, ``kind`` (``"scalar"`` or ``"least-squares"``), ``f_min``, ``x_ref``, the success rule
+(``success_rule``, ``success_text``) and the verdict (``success``, ``f_gap``, ``digits``). The
+fixed-target views and the COCO/IOH export read the result's exact per-call ``trace``.
 """
 
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 
@@ -54,19 +52,6 @@ def start_of(up, config) -> np.ndarray:
     return np.clip(x, p.lower, p.upper)
 
 
-def improvement_trace(log: list[dict]) -> list[list[float]]:
-    """``[[n_evals, best cost], ...]`` at every new evaluation that improved the best usable cost
-    (cache hits and failed points never improve)."""
-    best, out = math.inf, []
-    for e in log:
-        if e["cached"] or not (e["ok"] and e["feasible"]):
-            continue
-        if e["cost"] < best:
-            best = float(e["cost"])
-            out.append([int(e["n_evals"]), best])
-    return out
-
-
 def run_user(config, *, mapper=None, observers=()):
     """Run one configuration of a user problem; return its RunResult (``extra["problem"]`` as in
     the module docstring). Exceptions propagate (the runner turns them into failed records)."""
@@ -85,10 +70,6 @@ def run_user(config, *, mapper=None, observers=()):
         **dict(config.options),
     )
     verdict = up.judge(np.asarray(result.x), float(result.cost), bool(result.success))
-    result.extra["problem"] = {
-        **up.describe(),
-        **verdict,
-        "trace": improvement_trace(ev.log),
-    }
+    result.extra["problem"] = {**up.describe(), **verdict}
     result.provenance = {**result.provenance, "problem": config.problem}
     return result

@@ -168,7 +168,7 @@ def test_suite_of_user_problems_runs_and_judges(tmp_path):
     assert "needs a least-squares problem" in recs[("sphere", "lm")]["result"]["message"]
     sph = recs[("sphere", "cma")]["result"]["extra"]["problem"]
     assert sph["success"] and sph["kind"] == "scalar" and sph["success_text"] == "f − f_min ≤ 1e-06"
-    trace = sph["trace"]
+    trace = recs[("sphere", "cma")]["result"]["trace"]
     assert trace[-1][1] == pytest.approx(recs[("sphere", "cma")]["result"]["cost"])
     assert all(a[0] < b[0] and a[1] > b[1] for a, b in zip(trace, trace[1:]))
     expo = recs[("expo", "lm")]["result"]["extra"]["problem"]

@@ -11,14 +11,15 @@
   reads (``cocopp.main("coco/<method>")``); only the runs of BBOB problems, as cocopp knows
   COCO's own suites only.
 
-What a run contributes is its improvement trace ``[[evaluations, best f], ...]``: exact per call
-for user problems (``result.extra.problem.trace``), from the history rows (one per iteration or
-generation) for the FE cases, whose problems are the case with its data tier and treatment and
-whose algorithms the solver with its track and Jacobian when not the defaults. ``f_opt`` is the
-problem's known ``f_min``; without one, the best cost any run of the problem reached (FE cases: 0,
-a least-squares cost being >= 0). A BBOB problem (factory arguments ``function`` and
-``instance``) keeps its function and instance numbers; any other problem gets the function number
-of its position among the problems in alphabetical order, and instance 1 for every run.
+What a run contributes is its improvement trace ``[[evaluations, best f], ...]``: the result's
+exact per-call ``trace`` when the record has one, else the history rows (one per iteration or
+generation; the shipped FE records). The FE cases' problems are the case with its data tier and
+treatment, their algorithms the solver with its track and Jacobian when not the defaults.
+``f_opt`` is the problem's known ``f_min``; without one, the best cost any run of the problem
+reached (FE cases: 0, a least-squares cost being >= 0). A BBOB problem (factory arguments
+``function`` and ``instance``) keeps its function and instance numbers; any other problem gets the
+function number of its position among the problems in alphabetical order, and instance 1 for
+every run.
 
 The report reads records only: nothing here imports problems/ or solvers/.
 """
@@ -56,9 +57,8 @@ class ExportRun:
 
 def _trace_of(rec) -> list[tuple[int, float]]:
     res = rec["result"]
-    prob = (res.get("extra") or {}).get("problem") or {}
-    if prob.get("trace") is not None:
-        return [(int(n), float(f)) for n, f in prob["trace"]]
+    if res.get("trace"):  # exact per call (records since the every-call accounting)
+        return [(int(n), float(f)) for n, f in res["trace"]]
     best, out = math.inf, []
     for h in res.get("history") or []:
         f = h.get("best_cost", h.get("cost"))

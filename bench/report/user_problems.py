@@ -56,7 +56,7 @@ def user_frame(records) -> pd.DataFrame:
                 "f_min": prob.get("f_min"),
                 "cost": float(res.get("cost") if res.get("cost") is not None else math.nan),
                 "digits": prob.get("digits", math.nan),
-                "raw_trace": [(int(n), float(f)) for n, f in prob.get("trace") or []],
+                "raw_trace": [(int(n), float(f)) for n, f in res.get("trace") or []],
             }
         )
     df = pd.DataFrame(rows)
