@@ -116,9 +116,7 @@ class RunConfig:
         """The configuration as a dict; the keys added after schema 2 appear only when they differ
         from their defaults, so that the records of earlier suites keep their hashes."""
         extra = {
-            k: getattr(self, k)
-            for k, default in _LATER_KEYS.items()
-            if getattr(self, k) != default
+            k: getattr(self, k) for k, default in _LATER_KEYS.items() if getattr(self, k) != default
         }
         return extra | {
             "case": self.case,
@@ -412,7 +410,7 @@ def _check_data_settings(data: dict) -> str | None:
 
 
 def method_options(method: str) -> dict | None:
-    """The option table ``{name: (default, description)}`` of a method, None if unknown."""
+    """The declared options ``{name: solvers.options.Option}`` of a method, None if unknown."""
     from solvers import find_method
 
     info = find_method(method)
@@ -492,8 +490,6 @@ def parse_suite(
         err(f"[suite] description must be a string, got {description!r}")
         description = ""
 
-    from solvers.base import option_value_error
-
     problems = _parse_problems(raw.get("problems", {}), err)
 
     parts_raw = raw.get("part", [])
@@ -508,9 +504,7 @@ def parse_suite(
             for key in part:
                 if key not in SUITE_KEYS or key in ("name", "description"):
                     hint = _did_you_mean(key, SUITE_KEYS)
-                    err(
-                        f"[[part]] {i}: unknown key {key!r}{hint}; allowed: {', '.join(PART_KEYS)}"
-                    )
+                    err(f"[[part]] {i}: unknown key {key!r}{hint}; allowed: {', '.join(PART_KEYS)}")
             merged = {k: v for k, v in s.items() if k not in ("name", "description")} | part
 
             def part_err(msg, i=i):
@@ -575,7 +569,7 @@ def parse_suite(
                 )
                 continue
             if table is not None:
-                default = table[key][0] if isinstance(table[key], tuple) else table[key]
+                default = table[key].default
                 ok, value2 = _coerce(value, _types_like(default))
                 if not ok:
                     err(
@@ -584,11 +578,9 @@ def parse_suite(
                     )
                     continue
                 value = value2
-                why = option_value_error(
-                    key, value, default, table[key][1] if isinstance(table[key], tuple) else ""
-                )
+                why = table[key].error(value)
                 if why:
-                    err(f"[options.{_q(m)}] {key} = {why}")
+                    err(f"[options.{_q(m)}] {key} = {why}; allowed: {table[key].range_text()}")
                     continue
             if isinstance(value, float) and not math.isfinite(value):
                 err(

@@ -36,26 +36,26 @@ import numpy as np
 
 from problems.inverse.evaluator import BudgetExhausted, Evaluator
 from problems.io import jsonio
+from solvers.options import Option
 from solvers.result import RunResult
 
 FAMILIES = ("local", "global", "sampling")
 
 #: Methods that need residuals (least squares) or a likelihood; they refuse a scalar objective
 #: (problems.user.ScalarProblem), whose cost is f itself
-LEAST_SQUARES_ONLY = (
-    "lm", "lm-minpack", "trf", "gauss-newton", "multistart-lm", "pso+lm", "mcmc"
-)
+LEAST_SQUARES_ONLY = ("lm", "lm-minpack", "trf", "gauss-newton", "multistart-lm", "pso+lm", "mcmc")
 STATUSES = ("converged", "budget", "max_iterations", "failed", "stalled")
 
 
 @dataclass(frozen=True)
 class MethodInfo:
-    """A registered method: its library, family, options ``name -> (default, description)``."""
+    """A registered method: its library, family and declared options ``name ->``
+    :class:`~solvers.options.Option`."""
 
     name: str
     library: str
     family: str
-    options: dict[str, tuple[Any, str]]
+    options: dict[str, Option]
     run: Callable[["Run"], "Outcome"]
     stochastic: bool = False
     description: str = ""
@@ -67,10 +67,7 @@ class MethodInfo:
             "family": self.family,
             "stochastic": self.stochastic,
             "description": self.description,
-            "options": {
-                k: {"default": jsonio.plain(d), "description": s}
-                for k, (d, s) in self.options.items()
-            },
+            "options": {k: opt.to_dict() for k, opt in self.options.items()},
         }
 
 
@@ -94,13 +91,17 @@ def register(
     *,
     library: str,
     family: str,
-    options: dict[str, tuple[Any, str]] | None = None,
+    options: dict[str, Option] | None = None,
     stochastic: bool = False,
     description: str = "",
 ):
-    """Decorator adding ``run`` to :data:`METHODS` under ``name``."""
+    """Decorator adding ``run`` to :data:`METHODS` under ``name``; ``options`` declared with
+    :mod:`solvers.options`."""
     if family not in FAMILIES:
         raise ValueError(f"family {family!r} is unknown; allowed: {', '.join(FAMILIES)}")
+    bad = [k for k, v in (options or {}).items() if not isinstance(v, Option)]
+    if bad:
+        raise TypeError(f"{name}: options {bad} are not declared as solvers.options.Option")
 
     def deco(run):
         METHODS[name] = MethodInfo(
@@ -254,126 +255,12 @@ class Run:
         return out
 
 
-#: options that count something (population, walkers, iterations, evaluations): whole numbers >= 1
-COUNT_OPTIONS = frozenset(
-    {
-        "pop_size",
-        "popsize",
-        "n_particles",
-        "n_starts",
-        "n_walkers",
-        "n_steps",
-        "n_initial",
-        "n_points",
-        "n_restarts",
-        "num_workers",
-        "max_generations",
-        "max_iterations",
-        "maxiter",
-        "maxeval",
-        "max_nfev",
-        "max_backtracks",
-        "max_evals",
-        "ftol_iter",
-        "incpopsize",
-    }
-)
-#: options that are probabilities or fractions: numbers in [0, 1] (burn_fraction below 1)
-FRACTION_OPTIONS = frozenset(
-    {"crossover_prob", "mutation_prob", "CR", "burn_fraction", "global_fraction"}
-)
-#: step sizes and scales: numbers > 0
-POSITIVE_OPTIONS = frozenset(
-    {"initial_step", "ball_size", "sigma0", "rel_step", "velocity_clamp", "min_tau_multiple"}
-)
-#: tolerances and distribution indices: numbers >= 0
-NONNEGATIVE_OPTIONS = frozenset(
-    {
-        "xtol",
-        "gtol",
-        "xtol_rel",
-        "ftol_rel",
-        "ftol_abs",
-        "tolfun",
-        "tolx",
-        "local_xtol_rel",
-        "local_ftol_rel",
-        "crossover_eta",
-        "mutation_eta",
-        "c1",
-        "max_asks_factor",
-    }
-)
-
-
-def option_choices(description: str) -> tuple[str, ...]:
-    """The names an option's description offers as ``name (...) | name | ...``
-    (after its last colon)."""
-    text = description.rsplit(":", 1)[-1]
-    alternatives = [a.strip() for a in text.split(" | ")]
-    if len(alternatives) < 2:
-        return ()
-    return tuple(
-        a.replace("=", " ").replace("(", " ").split()[0] for a in alternatives if a.split()
-    )
-
-
-def option_value_error(name: str, value: Any, default: Any, description: str = "") -> str | None:
-    """Why ``value`` is not a valid value of the option ``name`` (default ``default``), or None.
-
-    The default's type is the option's type: a bool takes a bool; a number takes a number (an
-    integer default a whole number), finite unless the default is not, or a string quoted in the
-    description (``x_scale``: ``'jac'``); counts (:data:`COUNT_OPTIONS`) are >= 1, fractions
-    (:data:`FRACTION_OPTIONS`) in [0, 1], step sizes (:data:`POSITIVE_OPTIONS`) > 0, tolerances
-    (:data:`NONNEGATIVE_OPTIONS`) >= 0; a string default takes the names its description offers as
-    ``a | b | c`` (:func:`option_choices`). A None default takes anything (the method checks).
-    """
-    if value is None:
-        return None if default is None else f"{value!r} is not allowed (default {default!r})"
-    if isinstance(default, bool):
-        return None if isinstance(value, bool) else f"{value!r} is not true/false"
-    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-        value, (bool, np.bool_)
-    )
-    if isinstance(default, (int, float)) or (default is None and number):
-        if isinstance(value, str):
-            if f"'{value}'" in description:
-                return None
-            return f"{value!r} is not a number"
-        if not number:
-            return f"{value!r} is not a number"
-        if not math.isfinite(float(value)) and (default is None or math.isfinite(float(default))):
-            return f"{value!r} is not a finite number"
-        if isinstance(default, int) and float(value) != int(value):
-            return f"{value!r} is not a whole number"
-        if name in COUNT_OPTIONS and (float(value) != int(value) or value < 1):
-            return f"{value!r} is out of range: a whole number >= 1"
-        if name in FRACTION_OPTIONS and not (
-            0 <= value < 1 if name == "burn_fraction" else 0 <= value <= 1
-        ):
-            return (
-                f"{value!r} is out of range: must be in [0, "
-                f"1{')' if name == 'burn_fraction' else ']'}"
-            )
-        if name in POSITIVE_OPTIONS and not value > 0:
-            return f"{value!r} is out of range: must be > 0"
-        if name in NONNEGATIVE_OPTIONS and not value >= 0:
-            return f"{value!r} is out of range: must be >= 0"
-        return None
-    if isinstance(default, str) and isinstance(value, str):
-        choices = option_choices(description)
-        if default in choices and value not in choices:
-            # (only a description that offers its default)
-            return f"{value!r} is unknown; allowed: {', '.join(choices)}"
-    return None  # otherwise the method checks (bo's noise takes a name or a number)
-
-
 def resolve_options(
     info: MethodInfo, options: dict[str, Any], strict: bool = True
 ) -> dict[str, Any]:
-    """Defaults overridden by ``options``; unknown names and impossible values (see
-    :func:`option_value_error`) raise ``ValueError`` (unknown names are dropped when not
-    ``strict``)."""
+    """Defaults overridden by ``options``; unknown names and values the method's declaration does
+    not allow (:meth:`solvers.options.Option.error`) raise ``ValueError`` (unknown names are
+    dropped when not ``strict``)."""
     unknown = set(options) - set(info.options)
     if unknown and strict:
         raise ValueError(
@@ -381,11 +268,14 @@ def resolve_options(
         )
     if strict:
         for k, v in options.items():
-            default, text = info.options[k]
-            why = option_value_error(k, v, default, text)
+            opt = info.options[k]
+            why = opt.error(v)
             if why:
-                raise ValueError(f"{info.name}: option {k} = {why} (default {default!r}: {text})")
-    out = {k: d for k, (d, _) in info.options.items()}
+                raise ValueError(
+                    f"{info.name}: option {k} = {why}; allowed: {opt.range_text()} "
+                    f"(default {opt.default!r}: {opt.help})"
+                )
+    out = {k: opt.default for k, opt in info.options.items()}
     out.update({k: v for k, v in options.items() if k in info.options})
     return out
 

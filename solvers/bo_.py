@@ -46,42 +46,61 @@ import warnings
 import numpy as np
 
 from solvers.base import Outcome, Run, isolated_global_rng, lhs, register
+from solvers.options import Option, choice, count, flag, nonnegative, number
 
 BO_OPTIONS = {
-    "n_initial": (
-        None,
-        "Latin-hypercube points of the initial design (None: 4 n, n = number of parameters)",
+    "n_initial": count(
+        None, "Latin-hypercube points of the initial design (None: 4 n, n = number of parameters)"
     ),
-    "include_x0": (False, "put the start point into the initial design"),
-    "acq_func": ("EI", "acquisition: EI (expected improvement) | PI | LCB | gp_hedge"),
-    "xi": (0.01, "EI/PI exploration margin, in units of the transformed cost"),
-    "kappa": (1.96, "LCB exploration weight"),
-    "transform": (
+    "include_x0": flag(False, "put the start point into the initial design"),
+    "acq_func": choice(
+        "EI",
+        "acquisition: EI (expected improvement) | PI | LCB | gp_hedge",
+        ("EI", "PI", "LCB", "gp_hedge"),
+    ),
+    "xi": nonnegative(0.01, "EI/PI exploration margin, in units of the transformed cost"),
+    "kappa": nonnegative(1.96, "LCB exploration weight"),
+    "transform": choice(
         "none",
         "surrogate target: none = cost | log1p = ln(1 + cost/cost_scale) | log = ln(cost)",
+        ("none", "log1p", "log"),
     ),
-    "cost_scale": (
+    "cost_scale": Option(
+        "float",
         None,
         "cost_scale of log1p: a cost | median (running median cost) | None (number of residuals)",
+        low=0.0,
+        low_open=True,
+        strings=("median",),
     ),
-    "failure_penalty": (1.0, "failed points: worst transformed cost so far + failure_penalty"),
-    "acq_optimizer": (
+    "failure_penalty": number(
+        1.0, "failed points: worst transformed cost so far + failure_penalty"
+    ),
+    "acq_optimizer": choice(
         "lbfgs",
         "acquisition search: lbfgs (random points + L-BFGS-B polish) | sampling",
+        ("lbfgs", "sampling"),
     ),
-    "n_points": (2000, "random points scored per acquisition search"),
-    "n_restarts": (2, "L-BFGS-B starts of the acquisition search (lbfgs; at least 1)"),
-    "gp_restarts": (1, "random restarts of the GP hyperparameter (marginal likelihood) fit"),
-    "refit_every": (
+    "n_points": count(2000, "random points scored per acquisition search"),
+    "n_restarts": count(2, "L-BFGS-B starts of the acquisition search (lbfgs; at least 1)"),
+    "gp_restarts": nonnegative(
+        1, "random restarts of the GP hyperparameter (marginal likelihood) fit", "int"
+    ),
+    "refit_every": count(
         5,
         "fit the GP hyperparameters at every refit_every-th iteration; in between keep them",
     ),
-    "noise": (
+    "noise": Option(
+        "float",
         "gaussian",
         "GP noise: gaussian (a learned white-noise level) | a fixed variance (of the normalised "
         "target)",
+        low=0.0,
+        strings=("gaussian",),
     ),
-    "max_evals": (200, "stop after this many evaluations (the GP costs O(k^3)); None: the budget"),
+    "max_evals": count(
+        200, "stop after this many evaluations (the GP costs O(k^3)); None: the budget"
+    ),
 }
 
 

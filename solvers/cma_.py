@@ -27,17 +27,21 @@ import numpy as np
 from problems.inverse.evaluator import BudgetExhausted
 from problems.io import jsonio
 from solvers.base import Outcome, Run, isolated_global_rng, register
+from solvers.options import count, nonnegative, positive
 
 CMA_OPTIONS = {
-    "sigma0": (0.3, "initial step size as a fraction of each box width (unit box)"),
-    "popsize": (None, "population size lambda of the first run (None: cma's 4 + floor(3 ln n))"),
-    "restarts": (9, "IPOP restarts after cma's own termination (0: stop at the first termination)"),
-    "incpopsize": (2, "population factor at each restart (IPOP; 1: plain restarts)"),
-    "tolfun": (1e-11, "cma termination: range of the recent best costs below tolfun"),
-    "tolx": (1e-11, "cma termination: step sizes below tolx (unit box)"),
-    "max_generations": (
-        None,
-        "maximum number of generations over all restarts (None: until the budget)",
+    "sigma0": positive(0.3, "initial step size as a fraction of each box width (unit box)"),
+    "popsize": count(
+        None, "population size lambda of the first run (None: cma's 4 + floor(3 ln n))"
+    ),
+    "restarts": nonnegative(
+        9, "IPOP restarts after cma's own termination (0: stop at the first termination)", "int"
+    ),
+    "incpopsize": count(2, "population factor at each restart (IPOP; 1: plain restarts)"),
+    "tolfun": nonnegative(1e-11, "cma termination: range of the recent best costs below tolfun"),
+    "tolx": nonnegative(1e-11, "cma termination: step sizes below tolx (unit box)"),
+    "max_generations": count(
+        None, "maximum number of generations over all restarts (None: until the budget)"
     ),
 }
 

@@ -46,32 +46,37 @@ from typing import Callable, Iterator
 import numpy as np
 
 from solvers.base import Outcome, Run, lhs, register
+from solvers.options import Option, choice, count, flag, fraction, nonnegative, positive
 
 MCMC_OPTIONS = {
-    "n_walkers": (None, "number of walkers (None: max(16, 4 n), made even)"),
-    "n_steps": (None, "number of steps (None: as many as the budget allows)"),
-    "init": ("ball", "walker start: ball (around x0) | lhs (Latin hypercube over the box)"),
-    "ball_size": (1e-2, "standard deviation of the start ball, in z = x / reference"),
-    "burn_fraction": (0.3, "fraction of the steps discarded as burn-in"),
-    "moves": (
+    "n_walkers": count(None, "number of walkers (None: max(16, 4 n), made even)"),
+    "n_steps": count(None, "number of steps (None: as many as the budget allows)"),
+    "init": choice(
+        "ball",
+        "walker start: ball (around x0) | lhs (Latin hypercube over the box)",
+        ("ball", "lhs"),
+    ),
+    "ball_size": positive(1e-2, "standard deviation of the start ball, in z = x / reference"),
+    "burn_fraction": fraction(0.3, "fraction of the steps discarded as burn-in", high_open=True),
+    "moves": choice(
         "de-mix",
         "emcee moves: de-mix (80 % DE + 20 % DE-snooker) | stretch | de | de-snooker | walk",
+        ("de-mix", "stretch", "de", "de-snooker", "walk"),
     ),
-    "keep_chain": (True, "store the chain in extra (ignored when chain_path is given)"),
-    "chain_path": (
+    "keep_chain": flag(True, "store the chain in extra (ignored when chain_path is given)"),
+    "chain_path": Option(
+        "str",
         None,
         "keep the chain in this .npz file (solvers.npz_backend.NpzBackend) instead of extra",
     ),
-    "min_tau_multiple": (
-        50.0,
-        "warn when the kept chain is shorter than this many autocorrelation times",
+    "min_tau_multiple": positive(
+        50.0, "warn when the kept chain is shorter than this many autocorrelation times"
     ),
-    "stop_converged": (
-        True,
-        "stop as soon as the chain is converged (see converged_at); the budget is then a cap",
+    "stop_converged": flag(
+        True, "stop as soon as the chain is converged (see converged_at); the budget is then a cap"
     ),
-    "check_every": (250, "steps between two convergence checks (stop_converged)"),
-    "tau_rtol": (
+    "check_every": count(250, "steps between two convergence checks (stop_converged)"),
+    "tau_rtol": nonnegative(
         0.05,
         "convergence also needs tau_max to have changed by less than this since the last check",
     ),
@@ -256,8 +261,6 @@ def run_mcmc(r: Run) -> Outcome:
     sampler.random_state = np.random.RandomState(r.seed % 2**32).get_state()
     planned = int(o["n_steps"]) if o["n_steps"] else math.inf
     check_every = int(o["check_every"])
-    if check_every < 1:
-        raise ValueError(f"mcmc: check_every = {check_every} is out of range: at least 1 step")
     stopped, tau_seen = False, math.inf
     # a chain never comes back to a point it evaluated: caching its 10^5 evaluations (each with its
     # residual, m floats) would only fill the memory (10 GB for 150 000 points of m = 8 130)

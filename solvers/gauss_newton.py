@@ -24,16 +24,17 @@ from __future__ import annotations
 import numpy as np
 
 from solvers.base import Outcome, Run, register
+from solvers.options import count, nonnegative, number
 from solvers.scipy_ import JAC_OPTIONS
 
 GN_OPTIONS = {
     **JAC_OPTIONS,
-    "max_iterations": (100, "maximum number of Gauss-Newton iterations"),
-    "ftol": (1e-10, "stop when the relative cost decrease of an accepted step is below ftol"),
-    "xtol": (1e-10, "stop when |dz| <= xtol (xtol + |z|)"),
-    "gtol": (1e-12, "stop when the projected gradient's infinity norm is below gtol"),
-    "c1": (1e-4, "Armijo sufficient-decrease constant"),
-    "max_backtracks": (30, "maximum number of step halvings in the line search"),
+    "max_iterations": count(100, "maximum number of Gauss-Newton iterations"),
+    "ftol": number(1e-10, "stop when the relative cost decrease of an accepted step is below ftol"),
+    "xtol": nonnegative(1e-10, "stop when |dz| <= xtol (xtol + |z|)"),
+    "gtol": nonnegative(1e-12, "stop when the projected gradient's infinity norm is below gtol"),
+    "c1": nonnegative(1e-4, "Armijo sufficient-decrease constant"),
+    "max_backtracks": count(30, "maximum number of step halvings in the line search"),
 }
 
 

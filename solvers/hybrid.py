@@ -16,14 +16,15 @@ from __future__ import annotations
 import numpy as np
 
 from solvers.base import Outcome, Run, lhs, register
+from solvers.options import count, flag, fraction
 from solvers.pyswarms_ import PSO_OPTIONS
 from solvers.scipy_ import LM_OPTIONS
 
 _LM_KEYS = ("scheme", "rel_step", "ftol", "xtol", "gtol", "x_scale")
 
 MULTISTART_OPTIONS = {
-    "n_starts": (5, "number of LM starts"),
-    "include_x0": (True, "use the start point as the first start"),
+    "n_starts": count(5, "number of LM starts"),
+    "include_x0": flag(True, "use the start point as the first start"),
     **{k: LM_OPTIONS[k] for k in _LM_KEYS},
 }
 
@@ -82,8 +83,8 @@ def run_multistart(r: Run) -> Outcome:
 
 
 PSO_LM_OPTIONS = {
-    "global_fraction": (0.5, "share of the budget for the PSO phase"),
-    "n_particles": (20, "swarm size of the PSO phase"),
+    "global_fraction": fraction(0.5, "share of the budget for the PSO phase"),
+    "n_particles": count(20, "swarm size of the PSO phase"),
     **{k: PSO_OPTIONS[k] for k in ("w", "c1", "c2", "bh_strategy", "velocity_clamp")},
     **{k: LM_OPTIONS[k] for k in _LM_KEYS},
 }

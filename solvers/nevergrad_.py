@@ -39,23 +39,21 @@ import numpy as np
 
 from problems.inverse.evaluator import BudgetExhausted
 from solvers.base import Outcome, Run, isolated_global_rng, register
+from solvers.options import choice, count, flag, nonnegative
 
 NGOPT_OPTIONS = {
-    "num_workers": (
+    "num_workers": count(
         1,
         "candidates asked per batch (one objective.costs call each; NGOpt adapts its choice to it)",
     ),
-    "optimizer": (
-        "NGOpt",
-        "nevergrad optimizer name from ng.optimizers.registry (NGOpt: the portfolio)",
+    "optimizer": choice(
+        "NGOpt", "nevergrad optimizer name from ng.optimizers.registry (NGOpt: the portfolio)"
     ),
-    "include_x0": (
-        False,
-        "start nevergrad at the start point (False: at a seeded uniform point of the box)",
+    "include_x0": flag(
+        False, "start nevergrad at the start point (False: at a seeded uniform point of the box)"
     ),
-    "max_asks_factor": (
-        3,
-        "stop (stalled) after max_asks_factor * budget asks (repeated points are free)",
+    "max_asks_factor": nonnegative(
+        3, "stop (stalled) after max_asks_factor * budget asks (repeated points are free)", "int"
     ),
 }
 

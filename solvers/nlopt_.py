@@ -20,6 +20,7 @@ import nlopt
 import numpy as np
 
 from solvers.base import METHODS, MethodInfo, Outcome, Run, register_resolver
+from solvers.options import choice, count, nonnegative, positive
 from solvers.scipy_ import JAC_OPTIONS
 
 LOCAL = ("BOBYQA", "SBPLX", "NELDERMEAD", "COBYLA", "LBFGS")
@@ -28,27 +29,30 @@ REGISTERED = tuple(f"nlopt:{a}" for a in LOCAL + GLOBAL)
 _STOCHASTIC = ("CRS2", "ESCH", "ISRES", "RAND")  # and MLSL with pseudo-random starts (not *_LDS)
 
 LOCAL_OPTIONS = {
-    "xtol_rel": (1e-8, "relative tolerance on z"),
-    "ftol_rel": (1e-12, "relative tolerance on the cost"),
-    "ftol_abs": (0.0, "absolute tolerance on the cost (0: off)"),
-    "initial_step": (None, "initial step in z (None: nlopt's default from the bounds)"),
-    "maxeval": (None, "nlopt maxeval (its own count, cache hits included); None = 10 x budget"),
+    "xtol_rel": nonnegative(1e-8, "relative tolerance on z"),
+    "ftol_rel": nonnegative(1e-12, "relative tolerance on the cost"),
+    "ftol_abs": nonnegative(0.0, "absolute tolerance on the cost (0: off)"),
+    "initial_step": positive(None, "initial step in z (None: nlopt's default from the bounds)"),
+    "maxeval": count(
+        None, "nlopt maxeval (its own count, cache hits included); None = 10 x budget"
+    ),
 }
 GLOBAL_OPTIONS = {
-    "xtol_rel": (0.0, "relative tolerance on z (0: off; global methods run to maxeval)"),
-    "ftol_rel": (0.0, "relative tolerance on the cost (0: off)"),
-    "ftol_abs": (0.0, "absolute tolerance on the cost (0: off)"),
-    "population": (0, "population / points per iteration (0: nlopt's default)"),
-    "maxeval": (None, "nlopt maxeval (its own count, cache hits included); None = 10 x budget"),
+    "xtol_rel": nonnegative(0.0, "relative tolerance on z (0: off; global methods run to maxeval)"),
+    "ftol_rel": nonnegative(0.0, "relative tolerance on the cost (0: off)"),
+    "ftol_abs": nonnegative(0.0, "absolute tolerance on the cost (0: off)"),
+    "population": nonnegative(0, "population / points per iteration (0: nlopt's default)", "int"),
+    "maxeval": count(
+        None, "nlopt maxeval (its own count, cache hits included); None = 10 x budget"
+    ),
 }
 MLSL_OPTIONS = {
     **GLOBAL_OPTIONS,
-    "local": (
-        "BOBYQA",
-        "local optimizer of MLSL (an LN_ algorithm; LD_ ones get the Jacobian gradient)",
+    "local": choice(
+        "BOBYQA", "local optimizer of MLSL (an LN_ algorithm; LD_ ones get the Jacobian gradient)"
     ),
-    "local_xtol_rel": (1e-6, "relative z tolerance of each local search"),
-    "local_ftol_rel": (1e-10, "relative cost tolerance of each local search"),
+    "local_xtol_rel": nonnegative(1e-6, "relative z tolerance of each local search"),
+    "local_ftol_rel": nonnegative(1e-10, "relative cost tolerance of each local search"),
 }
 
 _RESULT = {

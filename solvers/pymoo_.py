@@ -11,26 +11,27 @@ from __future__ import annotations
 import numpy as np
 
 from solvers.base import Outcome, Run, isolated_global_rng, lhs, register
+from solvers.options import choice, count, flag, fraction, nonnegative, number
 
 POP_OPTIONS = {
-    "pop_size": (40, "population size"),
-    "max_generations": (None, "maximum number of generations (None: until the budget)"),
-    "include_x0": (False, "put the start point into the initial population"),
+    "pop_size": count(40, "population size"),
+    "max_generations": count(None, "maximum number of generations (None: until the budget)"),
+    "include_x0": flag(False, "put the start point into the initial population"),
 }
 
 GA_OPTIONS = {
     **POP_OPTIONS,
-    "crossover_prob": (0.9, "SBX crossover probability"),
-    "crossover_eta": (15.0, "SBX distribution index"),
-    "mutation_eta": (20.0, "polynomial mutation distribution index"),
-    "mutation_prob": (None, "polynomial mutation probability per variable (None: 1/n)"),
+    "crossover_prob": fraction(0.9, "SBX crossover probability"),
+    "crossover_eta": nonnegative(15.0, "SBX distribution index"),
+    "mutation_eta": nonnegative(20.0, "polynomial mutation distribution index"),
+    "mutation_prob": fraction(None, "polynomial mutation probability per variable (None: 1/n)"),
 }
 
 DE_OPTIONS = {
     **POP_OPTIONS,
-    "variant": ("DE/rand/1/bin", "DE/<selection>/<n_diffs>/<crossover>"),
-    "CR": (0.9, "crossover rate"),
-    "F": (0.8, "differential weight"),
+    "variant": choice("DE/rand/1/bin", "DE/<selection>/<n_diffs>/<crossover>"),
+    "CR": fraction(0.9, "crossover rate"),
+    "F": number(0.8, "differential weight"),
 }
 
 

@@ -18,28 +18,29 @@ from unittest import mock
 import numpy as np
 
 from solvers.base import Outcome, Run, isolated_global_rng, lhs, register
+from solvers.options import choice, count, flag, nonnegative, number, positive
 
 PSO_OPTIONS = {
-    "n_particles": (30, "swarm size"),
-    "w": (0.729, "inertia weight"),
-    "c1": (1.49445, "cognitive coefficient"),
-    "c2": (1.49445, "social coefficient"),
-    "max_iterations": (None, "maximum number of iterations (None: until the budget)"),
-    "bh_strategy": (
+    "n_particles": count(30, "swarm size"),
+    "w": number(0.729, "inertia weight"),
+    "c1": nonnegative(1.49445, "cognitive coefficient"),
+    "c2": number(1.49445, "social coefficient"),
+    "max_iterations": count(None, "maximum number of iterations (None: until the budget)"),
+    "bh_strategy": choice(
         "reflective",
         "pyswarms boundary handling: nearest | reflective | shrink | random | intermediate | "
         "periodic",
+        ("nearest", "reflective", "shrink", "random", "intermediate", "periodic"),
     ),
-    "velocity_clamp": (
-        0.5,
-        "maximum |velocity| per iteration as a fraction of each box width (None: no clamp)",
+    "velocity_clamp": positive(
+        0.5, "maximum |velocity| per iteration as a fraction of each box width (None: no clamp)"
     ),
-    "ftol": (
+    "ftol": number(
         -math.inf,
         "stop when the best cost improves by less than ftol (relative) for ftol_iter iterations",
     ),
-    "ftol_iter": (1, "iterations over which ftol is checked"),
-    "include_x0": (False, "put the start point into the initial swarm"),
+    "ftol_iter": count(1, "iterations over which ftol is checked"),
+    "include_x0": flag(False, "put the start point into the initial swarm"),
 }
 
 

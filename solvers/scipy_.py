@@ -6,10 +6,15 @@ import numpy as np
 from scipy.optimize import dual_annealing, least_squares
 
 from solvers.base import Outcome, Run, register
+from solvers.options import choice, count, flag, nonnegative, number, positive
 
 JAC_OPTIONS = {
-    "scheme": ("forward", "finite-difference scheme of the parallel Jacobian: forward | central"),
-    "rel_step": (
+    "scheme": choice(
+        "forward",
+        "finite-difference scheme of the parallel Jacobian: forward | central",
+        ("forward", "central"),
+    ),
+    "rel_step": positive(
         None,
         "finite-difference step relative to |z| (z = x / reference; where z = 0, the reference "
         "scale); None: the model's declared step, else scipy's sqrt(eps) = 1.5e-8 (forward) or "
@@ -19,16 +24,21 @@ JAC_OPTIONS = {
 
 LM_OPTIONS = {
     **JAC_OPTIONS,
-    "ftol": (1e-10, "stop when the relative cost decrease of a step is below ftol"),
-    "xtol": (1e-10, "stop when the relative step size is below xtol"),
-    "gtol": (1e-10, "stop when the scaled gradient is below gtol"),
-    "x_scale": (1.0, "least_squares x_scale in z (1.0 or 'jac')"),
-    "ls_method": (
+    "ftol": number(1e-10, "stop when the relative cost decrease of a step is below ftol"),
+    "xtol": nonnegative(1e-10, "stop when the relative step size is below xtol"),
+    "gtol": nonnegative(1e-10, "stop when the scaled gradient is below gtol"),
+    "x_scale": number(
+        1.0, "least_squares x_scale in z (1.0 or 'jac')", low=0.0, low_open=True, strings=("jac",)
+    ),
+    "ls_method": choice(
         "dogbox",
         "least_squares method with bounds: dogbox (rectangular trust region, variables at a "
         "bound leave the step) or trf (reflective trust region)",
+        ("dogbox", "trf"),
     ),
-    "max_nfev": (None, "least_squares max_nfev (its own count, Jacobians excluded); None = budget"),
+    "max_nfev": count(
+        None, "least_squares max_nfev (its own count, Jacobians excluded); None = budget"
+    ),
 }
 
 _LS_STATUS = {
@@ -55,8 +65,6 @@ def run_lm(r: Run) -> Outcome:
     nominal): an accepted point then needs no second run for its Jacobian, and most points are
     accepted. Iterations = Jacobian evaluations."""
     obj, o = r.objective, r.options
-    if o["ls_method"] not in ("dogbox", "trf"):
-        raise ValueError(f"ls_method = {o['ls_method']!r} is unknown; allowed: dogbox, trf")
     lo, hi = r.lower, r.upper
     # least_squares starts strictly inside the box; do the same here so its first call is a
     # cache hit
@@ -103,15 +111,19 @@ def run_lm(r: Run) -> Outcome:
 
 
 SA_OPTIONS = {
-    "maxiter": (1000, "maximum number of annealing iterations"),
-    "initial_temp": (5230.0, "initial temperature"),
-    "restart_temp_ratio": (
+    "maxiter": count(1000, "maximum number of annealing iterations"),
+    "initial_temp": number(5230.0, "initial temperature", low=0.01, low_open=True, high=5e4),
+    "restart_temp_ratio": number(
         2e-5,
         "reannealing starts when the temperature falls to initial_temp * ratio",
+        low=0.0,
+        low_open=True,
+        high=1.0,
+        high_open=True,
     ),
-    "visit": (2.62, "visiting distribution parameter"),
-    "accept": (-5.0, "acceptance distribution parameter"),
-    "no_local_search": (False, "pure generalised simulated annealing (no L-BFGS-B polishing)"),
+    "visit": number(2.62, "visiting distribution parameter", low=1.0, low_open=True, high=3.0),
+    "accept": number(-5.0, "acceptance distribution parameter", low=-1e4, low_open=True, high=-5.0),
+    "no_local_search": flag(False, "pure generalised simulated annealing (no L-BFGS-B polishing)"),
     **JAC_OPTIONS,
 }
 

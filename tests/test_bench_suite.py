@@ -70,7 +70,8 @@ def test_all_cases_means_the_nine_fe_cases():
 def test_options_are_attached_to_their_method_only():
     from solvers import METHODS
 
-    name, (default, _) = next(iter(METHODS["lm"].options.items()))
+    name, opt = next(iter(METHODS["lm"].options.items()))
+    default = opt.default
     value = (
         default
         if not isinstance(default, (int, float)) or isinstance(default, bool)
@@ -189,11 +190,7 @@ def test_all_errors_are_reported_at_once():
 def test_option_values_are_type_checked():
     from solvers import METHODS
 
-    name, (default, _) = next(
-        (k, v)
-        for k, v in METHODS["lm"].options.items()
-        if isinstance(v[0], (int, float)) and not isinstance(v[0], bool)
-    )
+    name = next(k for k, v in METHODS["lm"].options.items() if v.type in ("int", "float"))
     with pytest.raises(ValueError, match=rf"\[options.lm\] {name} must be like its default"):
         parse_suite(with_(f"options.lm.{name}", "fast"))
 

@@ -12,6 +12,7 @@ from problems.inverse.analytic import ANALYTIC_CASES, analytic_objective
 from problems.inverse.protocol import ForwardResult
 from solvers import METHODS, RunResult, solve
 from solvers.base import FAMILIES, get_method
+from solvers.options import Option
 from tests.support import evaluator
 
 ALL = sorted(METHODS)
@@ -59,10 +60,7 @@ def test_registry_lists_the_required_methods():
     assert required <= set(METHODS)
     for name, info in METHODS.items():
         assert info.name == name and info.family in FAMILIES and info.library
-        assert all(
-            isinstance(v, tuple) and len(v) == 2 and isinstance(v[1], str)
-            for v in info.options.values()
-        )
+        assert all(isinstance(v, Option) and v.help for v in info.options.values())
         json.dumps(info.to_dict())
     assert METHODS["mcmc"].family == "sampling" and METHODS["lm"].family == "local"
 

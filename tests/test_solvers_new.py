@@ -39,8 +39,8 @@ def test_registered_as_global_stochastic_methods_with_declared_options():
     for name in NEW:
         info = METHODS[name]
         assert info.family == "global" and info.stochastic and info.library == libraries[name]
-        assert info.options and all(isinstance(d, str) for _, d in info.options.values())
-    assert METHODS["bo"].options["max_evals"][0] == 200
+        assert info.options and all(isinstance(o.help, str) for o in info.options.values())
+    assert METHODS["bo"].options["max_evals"].default == 200
 
 
 @pytest.mark.parametrize("method", NEW)

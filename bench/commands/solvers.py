@@ -11,20 +11,28 @@ def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON list, one object per method")
     p.add_argument("--family", choices=["local", "global", "sampling"], help="only this family")
     p.add_argument("--options", action="store_true", help="also describe every option")
+    p.add_argument(
+        "--markdown",
+        action="store_true",
+        help="print docs/solver_options.md (every method's declared options)",
+    )
 
 
 def format_table(infos, describe: bool = False) -> str:
     """The plain-text table of :class:`~solvers.base.MethodInfo` objects."""
     lines = [f"{'method':18} {'library':15} {'family':9} {'random':6}  options (default)"]
     for info in infos:
-        opts = ", ".join(f"{k}={d!r}" for k, (d, _) in info.options.items())
+        opts = ", ".join(f"{k}={o.default!r}" for k, o in info.options.items())
         lines.append(
             f"{info.name:18} {info.library:15} {info.family:9} "
             f"{'yes' if info.stochastic else 'no':6}  {opts}"
         )
         if describe:
             lines.append(f"    {info.description}")
-            lines += [f"    {k:20} {d!r:>14}  {text}" for k, (d, text) in info.options.items()]
+            lines += [
+                f"    {k:20} {o.default!r:>14}  {o.help} (allowed: {o.range_text()})"
+                for k, o in info.options.items()
+            ]
     lines.append("Any other nlopt algorithm also works as nlopt:<NAME> (e.g. nlopt:LN_PRAXIS).")
     return "\n".join(lines)
 
@@ -35,7 +43,11 @@ def main(args) -> int:
     from solvers import METHODS
 
     infos = [i for i in METHODS.values() if args.family in (None, i.family)]
-    if args.json:
+    if args.markdown:
+        from solvers.options import markdown
+
+        print(markdown({i.name: i for i in infos}), end="")
+    elif args.json:
         print(json.dumps([i.to_dict() for i in infos], indent=1))
     else:
         print(format_table(infos, args.options))
