@@ -173,7 +173,15 @@ def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, ma
 
     path = bae_path(spec, hifi_mesh, data)
     if path.exists():
-        return Correction.load(path)
+        try:
+            return Correction.load(path)
+        except ValueError as exc:  # a torn cache: set it aside and compute it again
+            import warnings
+
+            from problems.io.atomic import set_aside_torn
+
+            moved = set_aside_torn(path)
+            warnings.warn(f"{exc}; moved to {moved} and computed again", stacklevel=2)
     case = get_case(spec.case)
     corr = bae_statistics(
         hifi,
@@ -185,7 +193,6 @@ def bae_correction(spec: Identification, hifi, inverse, hifi_mesh: str, data, ma
         mapper=mapper,
         provenance={"case": spec.case, "inverse_mesh": spec.mesh, "hifi_mesh": hifi_mesh},
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
     corr.save(path)
     return corr
 

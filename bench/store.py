@@ -35,12 +35,12 @@ import json
 import logging
 import math
 import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any, Iterator
 
 from problems.io import jsonio
+from problems.io.atomic import atomic_write_text  # noqa: F401  (the one atomic writer)
 
 RECORD_SCHEMA = 1
 RUNS = "runs"
@@ -65,33 +65,6 @@ def record_path(out_dir: str | Path, config_hash: str) -> Path:
 
 def corrupt_dir(out_dir: str | Path) -> Path:
     return runs_dir(out_dir) / CORRUPT
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically: temporary file, fsync, rename, fsync directory."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    try:  # make the rename durable
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:  # pragma: no cover - platforms without directory fsync
-        pass
 
 
 def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:

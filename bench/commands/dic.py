@@ -134,6 +134,8 @@ def write_csv(path, result) -> None:
     converged (0/1); u, v and the standard deviations are NaN where not converged."""
     import numpy as np
 
+    from problems.io.atomic import atomic_write_text
+
     data = np.column_stack(
         [
             result.x,
@@ -146,23 +148,26 @@ def write_csv(path, result) -> None:
             result.converged.astype(float),
         ]
     )
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write(",".join(COLUMNS) + "\n")
-        for row in data:
-            fh.write(
-                f"{row[0]:.0f},{row[1]:.0f},{row[2]:.6f},{row[3]:.6f},{row[4]:.6g},{row[5]:.6g},"
-                f"{row[6]:.6f},{int(row[7])}\n"
-            )
+    lines = [",".join(COLUMNS)] + [
+        f"{row[0]:.0f},{row[1]:.0f},{row[2]:.6f},{row[3]:.6f},{row[4]:.6g},{row[5]:.6g},"
+        f"{row[6]:.6f},{int(row[7])}"
+        for row in data
+    ]
+    atomic_write_text(path, "\n".join(lines) + "\n")
 
 
 def main(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
 
+    from bench.outputs import refuse_inputs
     from bench.progress import enabled
     from problems.dic.correlate import Correlator, DICConfig, as_grey, check_not_blank, grid_points
     from problems.dic.imageio import read_image
 
+    outs = _csv_paths(args.csv, len(args.deformed)) if args.csv else [None] * len(args.deformed)
+    for option, path in [*(("--csv", o) for o in outs), ("--figure", args.figure)]:
+        refuse_inputs(option, path, [args.ref, *args.deformed])
     cfg = DICConfig(
         subset=args.subset,
         step=args.step,
@@ -185,7 +190,6 @@ def main(args: argparse.Namespace) -> int:
         images.append(img)
     pts = grid_points(ref.shape, cfg.subset, cfg.step, args.roi)
     corr = Correlator(ref, pts, cfg)
-    outs = _csv_paths(args.csv, len(images)) if args.csv else [None] * len(images)
     prev = None
     res = None
     for path, img, out in tqdm(

@@ -267,8 +267,10 @@ def main(args) -> int:
     from pathlib import Path
 
     from bench.identification import Identification, identify
+    from bench.outputs import refuse_inputs
     from problems.inverse.cases import get_case
 
+    refuse_inputs("--json", args.json, [args.data])
     spec = problem_spec(args)
     if spec is not None:
         if args.case:

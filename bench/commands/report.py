@@ -38,7 +38,9 @@ def add_arguments(parser) -> None:
         "--out",
         default=None,
         metavar="DEST",
-        help="write the report into DEST instead of DIR/report (replaced as a whole)",
+        help="write the report into DEST instead of DIR/report (replaced as a whole, so refused "
+        "when it is DIR, DIR/runs, a folder holding DIR or an input, or a non-empty folder that "
+        "no report wrote)",
     )
     parser.add_argument(
         "--posterior",

@@ -105,7 +105,12 @@ def write_report(
         from bench.report.model_error_note import default_model_error_dirs
 
         model_error_dirs = default_model_error_dirs(out_dir)
-    tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=".report-"))
+    from bench.report import dest as report_dest
+
+    report_dest.check_dest(out_dir, final, [*posterior_dirs, *model_error_dirs])
+    lock = report_dest.lock(final.parent)  # held until the report is in place
+    tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=report_dest.TMP_PREFIX))
+    report_dest.mark(tmp)
     try:
         if len(runs):
             build_report(
@@ -135,6 +140,7 @@ def write_report(
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
+        lock.close()
     return final / "report.md"
 
 

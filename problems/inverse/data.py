@@ -349,12 +349,9 @@ def dic_image_dir(path: str | Path) -> Path:
 
 def save(ds: Dataset, path: str | Path) -> Path:
     """Write ``ds`` atomically as JSON."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(ds.to_json())
-    tmp.replace(path)
-    return path
+    from problems.io.atomic import atomic_write_text
+
+    return atomic_write_text(path, ds.to_json())
 
 
 def load(path: str | Path) -> Dataset:
@@ -497,7 +494,17 @@ def get_data(case: str, settings: DataSettings | None = None, *, progress: bool 
         default_path(case, settings.tier) if is_default(settings) else cached_path(case, settings)
     )
     if path.exists():
-        return load(path)
+        try:
+            return load(path)
+        except ValueError as exc:
+            if is_default(settings):  # a data set, not a cache: say which file to fix
+                raise
+            import warnings
+
+            from problems.io.atomic import set_aside_torn
+
+            moved = set_aside_torn(path)  # a torn cache: set aside, computed again
+            warnings.warn(f"{exc}; moved to {moved} and computed again", stacklevel=2)
     if progress:
         print(
             f"computing data for {case} on mesh {settings.mesh} (cached in {path}) ...", flush=True

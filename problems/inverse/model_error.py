@@ -102,7 +102,9 @@ class Correction:
         """Write the statistics to ``path`` (npz, with the hash and provenance)."""
         import json
 
-        np.savez_compressed(
+        from problems.io.atomic import atomic_savez
+
+        atomic_savez(
             path,
             treatment=self.treatment,
             shift=_or_empty(self.shift),
@@ -117,25 +119,36 @@ class Correction:
 
     @classmethod
     def load(cls, path) -> "Correction":
-        """Read statistics written by :meth:`save`; the content hash is verified."""
+        """Read statistics written by :meth:`save`; the content hash is verified. A torn file
+        (truncated zip, missing array, hash mismatch) raises ValueError naming ``path``; a missing
+        one FileNotFoundError."""
         import json
+        import zipfile
 
-        with np.load(path, allow_pickle=False) as f:
-            counts = f["counts"]
-            c = cls(
-                str(f["treatment"]),
-                _or_none(f["shift"]),
-                _or_none(f["factor"]),
-                int(counts[0]),
-                float(counts[1]),
-                int(counts[2]),
-                float(counts[3]),
-                int(counts[4]),
-                _or_none(f["points"]),
-                json.loads(str(f["provenance"])),
-            )
-            if str(f["hash"]) != c.hash:
-                raise ValueError(f"{path}: content hash mismatch (file modified or torn)")
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                counts = f["counts"]
+                c = cls(
+                    str(f["treatment"]),
+                    _or_none(f["shift"]),
+                    _or_none(f["factor"]),
+                    int(counts[0]),
+                    float(counts[1]),
+                    int(counts[2]),
+                    float(counts[3]),
+                    int(counts[4]),
+                    _or_none(f["points"]),
+                    json.loads(str(f["provenance"])),
+                )
+                stored = str(f["hash"])
+        except FileNotFoundError:
+            raise
+        except (zipfile.BadZipFile, EOFError, KeyError, OSError, ValueError, IndexError) as exc:
+            raise ValueError(
+                f"BAE statistics {path} are torn ({type(exc).__name__}: {exc})"
+            ) from None
+        if stored != c.hash:
+            raise ValueError(f"BAE statistics {path} are torn (content hash mismatch)")
         return c
 
 
