@@ -58,7 +58,19 @@ def test_coco_export_is_read_by_cocopp(bbob_dir, tmp_path):
     n_ok = sum(math.isfinite(h) for h in hits)
     assert n_ok > 0
     assert d3.detERT([target])[0] == pytest.approx(spent / n_ok)
-    cocopp.main(f"-o {tmp_path / 'pp'} {tmp_path / 'coco' / 'cma'}")  # the full post-processing
+
+
+@pytest.mark.slow
+def test_cocopp_main_postprocesses_the_export(bbob_dir, tmp_path):
+    """cocopp's whole post-processing (figures, tables, HTML) on the exported folder."""
+    pytest.importorskip("cocopp")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import cocopp
+
+    write_coco(store.load_records(bbob_dir), tmp_path / "coco")
+    cocopp.main(f"-o {tmp_path / 'pp'} {tmp_path / 'coco' / 'cma'}")
     assert (tmp_path / "pp" / "index.html").is_file()
 
 
@@ -180,3 +192,35 @@ def test_pairwise_tests_find_a_clear_difference_and_not_a_null_one():
     assert over.loc[("bad", "bad2"), "verdict"] == "no difference"
     per = t[(t["scope"] != "all problems") & (t["a"] == "bad") & (t["b"] == "good")]
     assert len(per) == 8 and (per["verdict"] == "b better").all()
+
+
+def test_stats_format_adds_the_fe_statistics(tmp_path):
+    """--format stats on FE records: rank tests and fixed views of the relative cost; without it
+    nothing is added (the shipped report test covers that)."""
+    from bench.report.user_problems import fe_frame
+
+    raw = {
+        "suite": {
+            "name": "s",
+            "cases": ["analytic-smooth", "analytic-linear"],
+            "methods": ["lm", "de"],
+            "seeds": [0, 1, 2],
+            "starts": ["random"],
+            "budgets": [60],
+        }
+    }
+    out = tmp_path / "res"
+    run_suite(parse_suite(raw), out, workers=1, progress=False)
+    recs = store.load_records(out)
+    df = fe_frame(recs)
+    assert len(df) == 12 and set(df["problem"]) == {
+        "analytic-smooth-model-error",
+        "analytic-linear-model-error",
+    }
+    assert all(t[0][1] >= t[-1][1] >= 0 for t in df["trace"]) and df["gap"].min() == 0.0
+    from bench.report import write_report
+
+    md = write_report(out, ["md", "csv", "stats"], dest=tmp_path / "rep", figures=False)
+    text = md.read_text()
+    assert "## Statistics of the FE runs" in text and "Fixed budget" in text
+    assert (tmp_path / "rep" / "tables" / "fe_rank_tests.csv").is_file()

@@ -5,7 +5,7 @@ from __future__ import annotations
 NAME = "report"
 HELP = "write the tables (Table 1, comparison) and figures of a results directory into DIR/report/"
 
-FORMATS = ("md", "csv", "tex", "pdf", "parquet", "ioh", "coco")
+FORMATS = ("md", "csv", "tex", "pdf", "parquet", "ioh", "coco", "stats")
 
 
 def add_arguments(parser) -> None:
@@ -18,7 +18,8 @@ def add_arguments(parser) -> None:
         metavar="LIST",
         help="comma-separated: md, csv, tex (tables), pdf (figures also as PDF), "
         "parquet (the tidy DataFrames), ioh (IOHprofiler folders for IOHanalyzer), coco (COCO "
-        "data folders for cocopp); default md,csv,tex",
+        "data folders for cocopp), stats (rank tests, fixed-target and fixed-budget tables of "
+        "the FE runs); default md,csv,tex",
     )
     parser.add_argument(
         "--tol",

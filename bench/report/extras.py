@@ -1,9 +1,10 @@
 """What the report adds to report.md beyond the FE sections: the user-problem report
-(:mod:`bench.report.user_problems`) and the IOHprofiler / COCO exports
-(:mod:`bench.report.export`), in one call from :func:`bench.report.write_report`.
+(:mod:`bench.report.user_problems`), the statistics of the FE runs (format ``stats``) and the
+IOHprofiler / COCO exports (:mod:`bench.report.export`), in one call from
+:func:`bench.report.write_report`.
 
-Without user problems and without ``ioh``/``coco`` formats it writes nothing (so the FE reports
-render exactly as before)."""
+Without user problems and without the ``stats``, ``ioh`` and ``coco`` formats it writes nothing
+(so the FE reports render exactly as before)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,13 @@ from pathlib import Path
 
 from bench.report.user_problems import is_user_record
 
-__all__ = ["EXPORT_FORMATS", "is_user_record", "write_extras"]
+__all__ = ["EXPORT_FORMATS", "STATS_FORMAT", "is_user_record", "write_extras"]
 
 #: the report formats that are exports (folders next to report.md)
 EXPORT_FORMATS = ("ioh", "coco")
+#: the report format that adds the statistics section of the FE runs (rank tests, fixed-target
+#: and fixed-budget views); off by default, so that the FE reports render as before
+STATS_FORMAT = "stats"
 
 
 def write_extras(records, user, dest: Path, formats, *, source: Path) -> list[str]:
@@ -23,12 +27,14 @@ def write_extras(records, user, dest: Path, formats, *, source: Path) -> list[st
     ``dest/ioh`` and ``dest/coco``; return the markdown added."""
     from bench.report import export
     from bench.report.sections import TABLE_FORMATS
-    from bench.report.user_problems import section
+    from bench.report.user_problems import fe_statistics, section
 
     dest = Path(dest)
     report = dest / "report.md"
     tfmt = [f for f in formats if f in TABLE_FORMATS]
     md = section(user, dest, tfmt, source) if user else []
+    if "stats" in formats:
+        md += fe_statistics(records, dest, tfmt)
     done = []
     if "ioh" in formats:
         n = len(export.write_ioh(records, dest / "ioh"))

@@ -109,30 +109,36 @@ def _fmt(v) -> str:
     return f"{v:.3g}"
 
 
+class _Tables:
+    """Writes tables into ``dest/tables`` and collects their markdown in ``md``."""
+
+    def __init__(self, dest: Path, tfmt):
+        self.dest, self.tfmt, self.md = Path(dest), list(tfmt), []
+
+    def __call__(self, stem, display, raw, caption, index_label="method"):
+        paths = T.write_table(
+            self.dest / "tables" / stem,
+            self.tfmt,
+            display=display,
+            raw=raw,
+            caption=caption,
+            label=f"tab:{stem}",
+            index_label=index_label,
+        )
+        links = ", ".join(f"[{p.suffix[1:]}]({p.relative_to(self.dest)})" for p in paths)
+        self.md.extend([caption + "\n", T.to_markdown(display, index_label=index_label)])
+        if links:
+            self.md.append(f"Files: {links}\n")
+
+
 def section(records, dest: Path, tfmt, source: Path | None = None) -> list[str]:
     """The markdown blocks of the user-problem report (tables written into ``dest/tables``);
     ``[]`` when there are no user-problem records."""
     df = user_frame(records)
     if not len(df):
         return []
-    tdir = dest / "tables"
-    md: list[str] = []
-
-    def table(stem, display, raw, caption, index_label="method", raw_index=True):
-        paths = T.write_table(
-            tdir / stem,
-            tfmt,
-            display=display,
-            raw=raw,
-            caption=caption,
-            label=f"tab:{stem}",
-            index_label=index_label,
-            raw_index=raw_index,
-        )
-        links = ", ".join(f"[{p.suffix[1:]}]({p.relative_to(dest)})" for p in paths)
-        md.extend([caption + "\n", T.to_markdown(display, index_label=index_label)])
-        if links:
-            md.append(f"Files: {links}\n")
+    table = _Tables(dest, tfmt)
+    md = table.md
 
     problems = sorted(df["problem"].unique())
     methods = sorted(df["method"].unique())
@@ -183,6 +189,24 @@ def section(records, dest: Path, tfmt, source: Path | None = None) -> list[str]:
         "success for a successful run, over its successes; ∞ = none); last column over all "
         "problems, with successes/runs.",
     )
+    statistics_blocks(df, table, "user")
+    return md
+
+
+#: more method pairs than this: the rank-test table shows only those that differ
+MAX_PAIRS_SHOWN = 30
+
+#: what the gap of the user problems is, in the captions
+USER_GAP = "f − f_ref (f_ref = f_min, or the best any run reached)"
+
+
+def statistics_blocks(df: pd.DataFrame, table, prefix: str, gap: str = USER_GAP, unit="") -> None:
+    """Pairwise rank tests, fixed-target and fixed-budget tables of the frame ``df`` (columns
+    problem, method, budget, n_evals, gap, trace), written by ``table`` (a :class:`_Tables`) as
+    ``<prefix>_rank_tests``, ``<prefix>_fixed_target``, ``<prefix>_fixed_budget``; ``gap`` says
+    in words what the gap is, ``unit`` what the budgets count (default evaluations)."""
+    unit = unit or "evaluations"
+    short = gap.split(" (")[0]
     tests = S.pairwise_tests(df)
     if len(tests):
         overall = tests[tests["scope"] == "all problems"]
@@ -201,15 +225,23 @@ def section(records, dest: Path, tfmt, source: Path | None = None) -> list[str]:
             if c in disp:
                 disp[c] = disp[c].map(_fmt)
         disp = disp.drop(columns=["no difference"], errors="ignore").fillna(T.DASH)
+        n_pairs, note = len(disp), ""
+        if n_pairs > MAX_PAIRS_SHOWN:  # many methods: the pairs that differ
+            differ = disp["verdict"].ne("no difference")
+            for c in ("problems a better", "problems b better"):
+                if c in disp:
+                    differ |= disp[c].ne(T.DASH) & disp[c].astype(str).ne("0")
+            disp = disp[differ]
+            note = f" Of the {n_pairs} pairs, the {len(disp)} with a difference are shown."
         table(
-            "user_rank_tests",
+            f"{prefix}_rank_tests",
             disp.set_index("a"),
             tests.set_index("scope"),
-            "Pairwise rank tests of the final f − f_ref (log scale; f_ref = f_min, or the best "
-            "any run reached): Wilcoxon signed-rank over the problems (median of each method's "
+            f"Pairwise rank tests of the final {gap} on a log scale: Wilcoxon signed-rank over "
+            "the problems (median of each method's "
             f"runs per problem; n problems), Holm-corrected, α = {S.ALPHA:g}; 'problems a/b "
             "better': problems where a Mann–Whitney U test of the runs (>= 3 per method) finds "
-            "a difference after Holm's correction (every test in the CSV).",
+            "a difference after Holm's correction (every test in the CSV)." + note,
             index_label="a",
         )
 
@@ -219,12 +251,12 @@ def section(records, dest: Path, tfmt, source: Path | None = None) -> list[str]:
     runs = ft.pivot(index="method", columns="target", values="runs")
     ft_disp = ft_disp.astype(str) + " (" + reached.astype(str) + "/" + runs.astype(str) + ")"
     ft_disp = ft_disp[sorted(ft_disp.columns, reverse=True)]  # easy to hard
-    ft_disp.columns = [f"f−f_ref ≤ {t:g}" for t in ft_disp.columns]
+    ft_disp.columns = [f"≤ {t:g}" for t in ft_disp.columns]
     table(
-        "user_fixed_target",
+        f"{prefix}_fixed_target",
         ft_disp,
         ft.set_index("method"),
-        "Fixed target: ERT in evaluations to reach f − f_ref ≤ target over all runs of a method "
+        f"Fixed target: ERT in {unit} to reach {gap} ≤ target over all runs of a method "
         "(runs that reached it / runs).",
     )
     fb = S.fixed_budget(df)
@@ -232,10 +264,72 @@ def section(records, dest: Path, tfmt, source: Path | None = None) -> list[str]:
     fb_disp = fb.groupby("method")[cols].median().map(_fmt)
     fb_disp.columns = [f"{float(c[4:]):g} × budget" for c in cols]
     table(
-        "user_fixed_budget",
+        f"{prefix}_fixed_budget",
         fb_disp,
         fb.set_index("method"),
-        "Fixed budget: f − f_ref reached after a fraction of the budget, median over the "
+        f"Fixed budget: {short} reached after a fraction of the budget, median over the "
         "problems of the median over a method's runs (per problem in the CSV).",
     )
-    return md
+
+
+def fe_frame(records) -> pd.DataFrame:
+    """The FE (and analytic) runs as :func:`statistics_blocks` reads them: a problem is a case
+    with its data tier and treatment, a method the solver with its track and Jacobian; the gap is
+    the relative cost ``(J − J_best) / (J_init − J_best)`` (J_best the best final cost any run of
+    the problem reached, J_init the median first cost of its runs; the FE report's cost-target
+    scale), the trace from the record's exact trace or its history rows."""
+    from bench.report.export import _method_key, _problem_key, _trace_of
+
+    rows = []
+    for rec in records:
+        if is_user_record(rec):
+            continue
+        cfg, res = rec["config"], rec["result"]
+        trace = _trace_of(rec)
+        if not trace:
+            continue
+        rows.append(
+            {
+                "problem": _problem_key(cfg),
+                "method": _method_key(cfg),
+                "budget": int(cfg["budget"]),
+                "n_evals": max(int(res.get("n_evals") or 0), trace[-1][0]),
+                "raw_trace": trace,
+            }
+        )
+    df = pd.DataFrame(rows)
+    if not len(df):
+        return df
+    best = df.groupby("problem")["raw_trace"].agg(lambda ts: min(t[-1][1] for t in ts))
+    init = df.groupby("problem")["raw_trace"].agg(
+        lambda ts: float(np.median([t[0][1] for t in ts]))
+    )
+    scale = {p: max(init[p] - best[p], 1e-300) for p in best.index}
+    df["trace"] = [
+        [(n, (f - best[p]) / scale[p]) for n, f in t]
+        for t, p in zip(df["raw_trace"], df["problem"])
+    ]
+    df["gap"] = [t[-1][1] for t in df["trace"]]
+    return df
+
+
+def fe_statistics(records, dest: Path, tfmt) -> list[str]:
+    """The statistics section of the FE runs (``femubench report --format stats``)."""
+    df = fe_frame(records)
+    if not len(df):
+        return []
+    table = _Tables(dest, tfmt)
+    table.md.append("## Statistics of the FE runs\n")
+    table.md.append(
+        "Rank tests, fixed-target and fixed-budget views of the runs above (a problem: a case with "
+        "its data tier and treatment; budgets in the solvers' evaluations, charges not "
+        "included).\n"
+    )
+    statistics_blocks(
+        df,
+        table,
+        "fe",
+        gap="(J − J_best)/(J_init − J_best) (J_best the best final cost of the case, J_init its "
+        "median first cost)",
+    )
+    return table.md
