@@ -346,6 +346,9 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         "jacobian": spec.jacobian,
         "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
     }
+    from problems.inverse.plausibility import warn_implausible
+
+    warn_implausible(case, data, region, result)  # wrong units, cost, bounds: with the numbers
     return replace(result, provenance=provenance)
 
 

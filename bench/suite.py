@@ -381,8 +381,11 @@ def _mesh_error(mesh) -> str | None:
 
     if not isinstance(mesh, str):
         return f"mesh must be a string, got {mesh!r}"
+    from bench.resources import check_mesh_memory
+
     try:
         parse_mesh_spec(mesh)
+        check_mesh_memory(mesh)
     except ValueError as exc:
         return str(exc)
     return None
@@ -398,15 +401,32 @@ def _data_settings() -> dict[str, tuple]:
     }  # the tier is a suite dimension: [suite] tiers
 
 
-def _check_data_settings(data: dict) -> str | None:
-    """The reason ``data`` does not make valid DataSettings, or None."""
+#: [data] keys checked together when levels_mm is given (it must end at displacement_mm and have
+#: snapshots values)
+_JOINT_DATA_KEYS = ("levels_mm", "snapshots", "displacement_mm")
+
+
+def _data_settings_errors(data: dict) -> list[str]:
+    """Every reason ``data`` does not make valid DataSettings (each key alone, the machine log's
+    keys together), or []."""
     from problems.inverse.data import DataSettings
 
-    try:
-        DataSettings(**data)
-    except (ValueError, TypeError) as exc:
-        return str(exc)
-    return None
+    def why(values: dict) -> str | None:
+        try:
+            DataSettings(**values)
+        except (ValueError, TypeError) as exc:
+            return str(exc)
+        return None
+
+    joint = _JOINT_DATA_KEYS if "levels_mm" in data else ()
+    alone = [why({k: v}) for k, v in data.items() if k not in joint]
+    errors = [e for e in alone if e]
+    together = {k: v for k, v in data.items() if k in joint}
+    if together and why(together):
+        errors.append(why(together))
+    if not errors and why(data):  # the combination of individually valid values
+        errors.append(why(data))
+    return errors
 
 
 def method_options(method: str) -> dict | None:
@@ -441,12 +461,48 @@ def load_suite(path: str | Path) -> Suite:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"suite file {str(path)!r} does not exist")
-    text = path.read_text()
+    blob = path.read_bytes()
+    if b"\0" in blob:
+        raise ValueError(f"{path}: a binary file (NUL bytes), not a TOML suite")
+    try:
+        text = blob.decode("utf-8-sig")  # a leading byte-order mark is accepted
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"{path}: not UTF-8 text (byte {blob[exc.start]:#04x} at offset {exc.start}); "
+            "save the suite as UTF-8"
+        ) from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    return parse_suite(raw, name=path.stem, source=text, where=str(path))
+    suite = parse_suite(raw, name=path.stem, source=text, where=str(path))
+    missing = missing_surrogates(suite)
+    if missing:
+        raise ValueError(
+            f"{path}: invalid suite:\n  - "
+            + "\n  - ".join(
+                f"tracks: no default surrogate of {case} on mesh {mesh} ({folder}); build it "
+                f"with `femubench surrogate {case} --mesh {mesh}`"
+                for case, mesh, folder in missing
+            )
+        )
+    return suite
+
+
+def missing_surrogates(suite: Suite) -> list[tuple[str, str, Path]]:
+    """``(case, mesh, folder)`` of every default surrogate the suite's surrogate-track runs need
+    and the surrogate root (bench.commands.surrogate.surrogate_root) does not hold."""
+    from bench.commands.surrogate import surrogate_root
+    from problems.surrogate.store import JSON_NAME, NPZ_NAME, default_name
+
+    needed = dict.fromkeys((r.case, r.mesh) for r in suite.runs() if r.track == "surrogate")
+    root = surrogate_root() if needed else None
+    missing = []
+    for case, mesh in needed:
+        folder = root / default_name(case, mesh)
+        if not all((folder / name).is_file() for name in (JSON_NAME, NPZ_NAME)):
+            missing.append((case, mesh, folder))
+    return missing
 
 
 def parse_suite(
@@ -538,8 +594,7 @@ def parse_suite(
             err(f"[data] {key} must be finite, got {value!r}")
         data[key] = value
     if data and not any(e.startswith("[data]") for e in errors):
-        reason = _check_data_settings(data)
-        if reason:
+        for reason in _data_settings_errors(data):
             err(f"[data] {reason}")
 
     # [options.<method>]
@@ -743,6 +798,16 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
         plate_margin = 0.0
 
     tracks = _choice_list(s, "tracks", ["fe"], TRACKS, err)
+    if "surrogate" in tracks:
+        from problems.inverse.cases import ANALYTIC_CASES
+
+        no_surrogate = [c for c in cases if c in ANALYTIC_CASES or c in problems]
+        if no_surrogate:
+            err(
+                f"[suite] tracks: the surrogate track is for the FE cases; "
+                f"{', '.join(map(str, no_surrogate))} cannot have one (run them in a [[part]] "
+                'with tracks = ["fe"])'
+            )
     jacobians = _choice_list(s, "jacobians", ["exact"], JACOBIANS, err)
     budget_unit = s.get("budget_unit", "evaluations")
     if budget_unit not in BUDGET_UNITS:

@@ -60,8 +60,18 @@ def test_sensitivity_delta_outside_a_sane_relative_range_is_refused(capsys, delt
 def test_a_hifi_mesh_not_finer_than_the_inverse_mesh_is_refused(capsys, hifi, tmp_path):
     one_line_error(
         capsys,
-        ["identify", "linear-compression", "--solver", "lm", "--correction", "one-point",
-         "--hifi-mesh", hifi, "--json", str(tmp_path / "r.json")],  # fmt: skip
+        [
+            "identify",
+            "linear-compression",
+            "--solver",
+            "lm",
+            "--correction",
+            "one-point",
+            "--hifi-mesh",
+            hifi,
+            "--json",
+            str(tmp_path / "r.json"),
+        ],  # fmt: skip
         "--hifi-mesh",
         "not finer",
     )
@@ -84,3 +94,209 @@ def test_the_smoke_suite_has_the_number_of_runs_the_readme_says(capsys, tmp_path
     assert "12 runs," in out
     readme = (ROOT / "README.md").read_text()
     assert "# 12 runs on analytic problems" in readme and "16 runs" not in readme
+
+
+# --- suite files: validated before any work -------------------------------------------------------
+
+SUITE = '[suite]\ncases = ["{case}"]\nmethods = ["lm"]\nbudgets = [10]\n'
+
+
+def write_suite(tmp_path, text: str | bytes, name: str = "s.toml") -> Path:
+    path = tmp_path / name
+    (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    "extra, case, needle",
+    [
+        ('mesh = "1,1,1"\n', "linear-compression", "NZ = 1"),
+        ('tracks = ["fe", "surrogate"]\n', "analytic-linear", "surrogate track is for the FE"),
+        ('tracks = ["surrogate"]\n', "linear-compression", "no default surrogate of"),
+    ],
+)
+@pytest.mark.parametrize("dry", [True, False])
+def test_a_suite_that_cannot_run_is_refused_before_any_work(
+    capsys, tmp_path, monkeypatch, extra, case, needle, dry
+):
+    monkeypatch.setenv("FEMUBENCH_SURROGATE_DIR", str(tmp_path / "no-surrogates"))
+    suite = write_suite(tmp_path, SUITE.format(case=case) + extra)
+    out = tmp_path / "out"
+    code = main(["run", str(suite), "--out", str(out), "--workers", "1", *(["--dry-run"] * dry)])
+    err = capsys.readouterr().err
+    assert code == 2 and needle in err and str(suite) in err, err
+    assert not out.exists()
+
+
+def test_every_bad_data_value_of_a_suite_is_reported_at_once(tmp_path):
+    from bench.suite import load_suite
+
+    text = SUITE.format(case="linear-compression") + (
+        "[data]\nresolution_um = -1.0\nnoise_um = -2.0\nsnapshots = 0\nmargin_mm = 40.0\n"
+        "displacement_mm = 1000.0\n"
+    )
+    with pytest.raises(ValueError) as exc:
+        load_suite(write_suite(tmp_path, text))
+    lines = [ln for ln in str(exc.value).splitlines() if ln.startswith("  - [data]")]
+    assert len(lines) == 5, str(exc.value)
+    for needle in ("resolution_um", "noise_um", "snapshots = 0", "margin_mm", "1000 mm"):
+        assert needle in str(exc.value)
+
+
+def test_a_suite_with_a_byte_order_mark_is_read(tmp_path):
+    from bench.suite import load_suite
+
+    path = write_suite(tmp_path, b"\xef\xbb\xbf" + SUITE.format(case="analytic-linear").encode())
+    assert len(load_suite(path)) == 1
+
+
+@pytest.mark.parametrize(
+    "blob, needle",
+    [
+        (b"\x00\x01\x02PK binary", "binary file"),
+        (b'[suite]\nname = "caf\xe9"\n', "not UTF-8 text (byte 0xe9 at offset 19)"),
+        (b"[suite\ncases = 1\n", "not valid TOML"),
+    ],
+)
+def test_a_binary_or_undecodable_suite_names_the_file(capsys, tmp_path, blob, needle):
+    path = write_suite(tmp_path, blob)
+    err = one_line_error(capsys, ["run", str(path), "--dry-run", "--out", str(tmp_path / "o")])
+    assert str(path) in err and needle in err
+
+
+# --- data files -----------------------------------------------------------------------------------
+
+
+def shipped(case: str = "linear-compression"):
+    from problems.inverse.data import load
+
+    return load(ROOT / "problems/inverse/datasets/consistent" / f"{case}.json")
+
+
+def edited(tmp_path, edit) -> Path:
+    """The shipped data file with ``edit(doc)`` applied, re-hashed (a well-formed file)."""
+    import json
+
+    from problems.inverse.data import _digest
+
+    doc = json.loads(
+        (ROOT / "problems/inverse/datasets/consistent/linear-compression.json").read_text()
+    )
+    edit(doc)
+    doc["hash"] = _digest(doc)
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_data_points_off_the_face_are_refused_with_a_count(tmp_path):
+    from problems.inverse.data import load
+
+    def edit(doc):
+        doc["points"][0] = [80.0, 5.0]
+        doc["points"][7] = [5.0, 160.0]
+
+    with pytest.raises(ValueError, match=r"field points: 2 of 406 points lie off the front face"):
+        load(edited(tmp_path, edit))
+
+
+def test_all_infinite_sigma_is_refused_naming_the_field(tmp_path):
+    from problems.inverse.data import load
+
+    def edit(doc):
+        doc["std_u_mm"] = [[[float("inf")] * len(r) for r in b] for b in doc["std_u_mm"]]
+
+    with pytest.raises(ValueError, match=r"field std_u_mm: all 8120 standard deviations are infin"):
+        load(edited(tmp_path, edit))
+
+
+def test_a_displacement_beyond_the_specimen_is_refused(capsys):
+    from problems.inverse.data import DataSettings
+
+    one_line_error(capsys, ["forward", "--displacement", "1000"], "--displacement", "<= 10% ")
+    with pytest.raises(ValueError, match=r"displacement_mm = 16 mm is beyond the specimen"):
+        DataSettings(displacement_mm=16.0)
+    assert DataSettings(displacement_mm=15.0).displacement_mm == 15.0
+
+
+# --- plausibility warnings ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "field, factor, needle",
+    [
+        ("reaction_kN", 1e3, "N instead of kN"),
+        ("u_v", 1e3, "micrometres instead of mm"),
+        ("points", 0.1, "cm instead of mm"),
+    ],
+)
+def test_data_in_wrong_units_are_flagged(field, factor, needle):
+    from dataclasses import replace
+
+    from problems.inverse.plausibility import data_warnings
+
+    ds = shipped()
+    assert data_warnings(ds) == []
+    bad = data_warnings(replace(ds, **{field: getattr(ds, field) * factor}))
+    assert len(bad) == 1 and needle in bad[0]
+    zero = replace(ds, u_h=ds.u_h * 0, u_v=ds.u_v * 0, reaction_kN=ds.reaction_kN * 0)
+    assert "all zero" in data_warnings(zero)[0]
+
+
+def test_a_cost_far_above_the_data_size_and_bounds_are_flagged():
+    from types import SimpleNamespace
+
+    from problems.inverse.plausibility import result_warnings
+
+    def result(cost, x):
+        return SimpleNamespace(cost=cost, x=x, parameter_names=["a", "b"])
+
+    lo, hi = [0.0, 0.0], [1.0, 10.0]
+    assert result_warnings(result(900.0, [0.5, 5.0]), 10, lo, hi) == []
+    (msg,) = result_warnings(result(1000.0, [0.5, 5.0]), 10, lo, hi)
+    assert "final cost 1000 is 100 x the 10 data" in msg
+    (msg,) = result_warnings(result(1.0, [0.0, 10.0]), 10, lo, hi)
+    assert "2 of 2 parameters on a bound: a = 0 (lower bound), b = 10 (upper bound)" in msg
+
+
+@pytest.fixture(scope="module")
+def force_in_newton(tmp_path_factory):
+    """Consistent data of linear-compression on the 2,2,4 mesh with the force in N (x 1000)."""
+    from dataclasses import replace
+
+    from problems.inverse.data import make_data, save
+
+    ds = make_data("linear-compression", tier="consistent", mesh="2,2,4")
+    bad = replace(ds, reaction_kN=ds.reaction_kN * 1e3)
+    return bad, save(bad, tmp_path_factory.mktemp("data") / "newton.json")
+
+
+def test_identify_prints_and_writes_the_plausibility_warnings(capsys, tmp_path, force_in_newton):
+    import json
+
+    _, path = force_in_newton
+    out = tmp_path / "r.json"
+    argv = ["identify", "linear-compression", "--solver", "lm", "--mesh", "2,2,4", "--data",
+            str(path), "--budget", "4", "--quiet", "--json", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    found = json.loads(out.read_text())["warnings"]
+    assert any("N instead of kN" in w for w in found)
+    cost = [w for w in found if w.startswith("final cost")]
+    assert cost and float(cost[0].split(" x the")[0].split(" is ")[1]) >= 100
+    assert all(f"  warning: {w}" in text for w in found)
+
+
+def test_a_suite_run_keeps_the_warnings_in_its_record_and_the_report_lists_them(force_in_newton):
+    from bench.report.warnings import warnings_section
+    from bench.runner import run_one
+    from bench.suite import RunConfig
+
+    ds, _ = force_in_newton
+    config = RunConfig("linear-compression", "lm", 0, "default", 0, 4, "2,2,4", tier="consistent")
+    record = run_one(config, dataset=ds)
+    plaus = [w for w in record["warnings"] if w.startswith("PlausibilityWarning: ")]
+    assert any("N instead of kN" in w for w in plaus) and any("final cost" in w for w in plaus)
+    md = "\n".join(warnings_section([record, {**record, "warnings": []}]))
+    assert md.startswith("## Plausibility warnings") and "1 run(s) gave numbers" in md
+    assert "N instead of kN" in md and "linear-compression/lm/s0/default0/b4" in md

@@ -75,10 +75,12 @@ def main(args) -> int:
 
     from bench.progress import enabled, warn_if_long
     from problems.fe.front_face import measurement_grid
-    from problems.fe.mesh import SYMMETRIES, check_symmetry, parse_mesh_spec
+    from problems.fe.mesh import SPECIMEN_MM, SYMMETRIES, check_symmetry, parse_mesh_spec
     from problems.fe.newton import Loading, discretise, run
     from problems.inverse.forward import material_from
+    from problems.inverse.plausibility import check_displacement
 
+    check_displacement(args.displacement, SPECIMEN_MM[2], "--displacement")
     spec = parse_mesh_spec(args.mesh)
     if args.symmetry is not None:
         if args.symmetry not in SYMMETRIES:

@@ -251,7 +251,8 @@ def format_identification(case, result) -> str:
 def result_document(result) -> dict:
     """The JSON written by ``--json``: the RunResult (with its ``provenance``: case, data tier and
     hash, data and inverse meshes, treatment and its high-fidelity mesh, start), ``iterations``,
-    ``errors_percent`` and the package version."""
+    ``errors_percent`` and the package version (``main`` adds ``warnings``: the plausibility
+    warnings, problems.inverse.plausibility)."""
     from bench.cli import package_version
 
     return {
@@ -264,11 +265,13 @@ def result_document(result) -> dict:
 
 def main(args) -> int:
     import json
+    import warnings
     from pathlib import Path
 
     from bench.identification import Identification, identify
     from bench.outputs import refuse_inputs
     from problems.inverse.cases import get_case
+    from problems.inverse.plausibility import PlausibilityWarning
 
     refuse_inputs("--json", args.json, [args.data])
     spec = problem_spec(args)
@@ -311,13 +314,26 @@ def main(args) -> int:
 
     if not case.is_analytic:
         warn_if_long(NAME, args.budget, args.mesh, what=f"budget {args.budget}")
-    with EvaluationProgress(
-        total=args.budget, desc=f"{case.name} {args.solver}", disable=not enabled(args.quiet)
-    ) as progress:
+    with (
+        EvaluationProgress(
+            total=args.budget, desc=f"{case.name} {args.solver}", disable=not enabled(args.quiet)
+        ) as progress,
+        warnings.catch_warnings(record=True) as caught,
+    ):
+        warnings.simplefilter("always", PlausibilityWarning)
         result = identify(spec, observers=[progress])
+    found = []
+    for w in caught:
+        if issubclass(w.category, PlausibilityWarning):
+            found.append(str(w.message))
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     print(format_identification(case, result))
+    for message in found:
+        print(f"  warning: {message}")
     if args.json:
-        Path(args.json).write_text(json.dumps(result_document(result), indent=1))
+        doc = {**result_document(result), "warnings": found}
+        Path(args.json).write_text(json.dumps(doc, indent=1))
         print(f"  written {args.json}")
     return 0
 

@@ -170,6 +170,7 @@ def build_report(
     ``<case>/summary.json``; ``model_error_dirs``: folders holding the model-error study's
     ``<case>/*.json`` (none found: the notes under the model-error Tables 1 say so)."""
     from bench.report.sections import SECTIONS, prepare
+    from bench.report.warnings import warnings_section
 
     dest.mkdir(parents=True, exist_ok=True)
     rep = prepare(
@@ -191,5 +192,6 @@ def build_report(
     md: list[str] = []
     for section in SECTIONS:
         md += section(rep)
+    md += warnings_section(records)  # the records' plausibility warnings, if any
     (dest / "report.md").write_text("\n".join(md), encoding="utf-8")
     return dest / "report.md"

@@ -146,6 +146,14 @@ class DataSettings:
 
             parse_mesh_spec(self.mesh)  # validates the mesh spec
         _ = self.loading  # validates displacement, snapshots, plates
+        from problems.inverse.plausibility import check_displacement
+
+        check_displacement(self.displacement_mm, self.specimen_mm[2])
+        if not len(self.points):  # validates spacing_mm and margin_mm
+            raise ValueError(
+                f"margin_mm = {self.margin_mm!r} leaves no front-face point; allowed: < half the "
+                f"{quarter_size(self.specimen_mm)[1]:g} mm face width"
+            )
 
     @property
     def loading(self) -> Loading:
@@ -438,6 +446,14 @@ def _dataset_from_doc(doc: dict) -> Dataset:
         raise ValueError(
             "field std_u_mm must hold standard deviations > 0 mm (infinite: a point not measured)"
         )
+    if not np.isfinite(std).any():
+        raise ValueError(
+            f"field std_u_mm: all {std.size} standard deviations are infinite (no displacement "
+            "measured); allowed: finite values > 0 mm where a point was measured"
+        )
+    from problems.inverse.plausibility import check_points
+
+    check_points(arrays["points"], settings.specimen_mm, "field points")
     meta = doc.get("meta", {})
     if not isinstance(meta, dict):
         raise ValueError("field meta must be a JSON object")
