@@ -342,10 +342,10 @@ def identify_problem(args, spec: dict) -> int:
     """``femubench identify --problem ENTRY``: one run of a user problem, printed with its own
     success rule (evaluations, f − f_min, correct digits)."""
     import json
-    from pathlib import Path
 
     from bench.suite import RunConfig
     from bench.user_problems import run_user
+    from problems.io.atomic import atomic_write_text
 
     entry = spec["entry"]
     config = RunConfig(
@@ -363,7 +363,7 @@ def identify_problem(args, spec: dict) -> int:
     result = run_user(config)
     print(format_problem_run(config, result))
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=1))
+        atomic_write_text(args.json, json.dumps(result.to_dict(), indent=1))
         print(f"  written {args.json}")
     return 0
 

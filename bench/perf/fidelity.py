@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import time
 from pathlib import Path
 
@@ -286,9 +285,9 @@ def _key(method, side, f, i, s) -> str:
 
 
 def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    from problems.io.atomic import atomic_write_text
+
+    atomic_write_text(path, text)
 
 
 def run_all(out: Path, methods, functions, instances, seeds, budget: int) -> None:

@@ -159,10 +159,10 @@ def _safe(name: str) -> str:
 
 
 def _atomic(path: Path, text: str) -> None:
+    from bench.store import atomic_write_text  # the one atomic writer
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    atomic_write_text(path, text)
 
 
 def _groups(runs, key):
