@@ -663,7 +663,7 @@ def parse_suite(
 
 def _parse_problems(raw, err) -> dict[str, dict]:
     """Validate the ``[problems.<name>]`` tables; return ``name -> {"entry", "args"}`` with every
-    grid combination expanded (``<name>-<key><value>...``)."""
+    grid combination expanded (``<name>-<key><value>...``; a string value without its key)."""
     from problems.user import entry_point_error, load_factory
 
     if not isinstance(raw, dict):
@@ -700,7 +700,9 @@ def _parse_problems(raw, err) -> dict[str, dict]:
             continue
         keys = list(grid)
         for combo in itertools.product(*(grid[k] for k in keys)):
-            full = name + "".join(f"-{k}{v}" for k, v in zip(keys, combo))
+            full = name + "".join(
+                f"-{v}" if isinstance(v, str) else f"-{k}{v}" for k, v in zip(keys, combo)
+            )
             out[full] = {
                 "entry": entry,
                 "args": dict(sorted((args | dict(zip(keys, combo))).items())),

@@ -40,6 +40,11 @@ class _Sphere:
         return float(np.sum((np.asarray(x) - self.shift) ** 2) + 1.0)
 
 
+def tagged(n: int = 3, shift: float = 0.5, tag: str = ""):
+    """The sphere with a string argument (grid names)."""
+    return sphere(n, shift)
+
+
 def _exp_model(x):
     t = np.linspace(0.0, 4.0, 20)
     return x[0] * np.exp(-x[1] * t)
@@ -113,6 +118,9 @@ def test_grid_expands_and_hash_carries_the_problem():
     }
     assert runs[0].hash != runs[1].hash
     assert runs[0].label == "sph-shift0.0/de/s0/default0/b10"
+    raw["problems"]["sph"]["grid"] = {"shift": [0.5], "tag": ["a"]}
+    raw["problems"]["sph"]["entry"] = "tests.test_user_problems:tagged"
+    assert [r.case for r in parse_suite(raw).runs()] == ["sph-shift0.5-a"]
 
 
 # --- scalar objectives ----------------------------------------------------------------------------
