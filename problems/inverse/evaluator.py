@@ -129,7 +129,7 @@ class BudgetExhausted(Exception):
 
     def __init__(self, budget: float, n_evals: int, unit: str = "evaluations"):
         if unit == "evaluations":
-            text = f"evaluation budget of {budget} forward evaluations exhausted ({n_evals} used)"
+            text = f"evaluation budget of {budget} exhausted ({n_evals} evaluations used)"
         else:
             text = (
                 f"budget of {budget:g} forward-equivalents exhausted ({n_evals} evaluations used)"
