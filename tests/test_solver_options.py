@@ -62,9 +62,7 @@ def test_options_must_be_declared():
 def test_the_range_in_words():
     assert count(None, "n").range_text() == "a whole number >= 1 or None"
     assert fraction(0.5, "f").range_text() == "a number in [0, 1]"
-    assert number(1.0, "x", low=0.0, low_open=True, high=2.0).range_text() == (
-        "a number in (0, 2]"
-    )
+    assert number(1.0, "x", low=0.0, low_open=True, high=2.0).range_text() == ("a number in (0, 2]")
     assert METHODS["lm"].options["x_scale"].to_dict()["allowed"] == "a number > 0 or jac"
 
 

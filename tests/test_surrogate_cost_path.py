@@ -14,12 +14,12 @@ import pytest
 
 from problems.inverse.cases import CASES
 from problems.inverse.evaluator import BudgetExhausted, Evaluator
-from problems.inverse.feasibility import Screen
 from problems.inverse.problem import LeastSquaresProblem
 from problems.inverse.reduced import AffineMisfit
 from problems.materials.drucker_prager import validate_parameters
 from problems.surrogate._kernels import EXP_REACH, PackedGP, exp_neg_array
 from problems.surrogate.regression import GPComponent, GPFit
+from problems.surrogate.screen import Screen
 
 FE_CASES = [n for n, c in CASES.items() if not c.is_analytic]
 EPS = np.finfo(float).eps

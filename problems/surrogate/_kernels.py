@@ -158,7 +158,7 @@ def surrogate_costs(
     clear,
 ):
     """For the physical points ``X`` (q, d): ``clear`` (q,) = inside the box ``limits[0:2]``
-    (inclusive) and passing the material screen (:mod:`problems.inverse.feasibility`, open
+    (inclusive) and passing the material screen (:mod:`problems.surrogate.screen`, open
     ranges ``limits[2:4]``, ``code``, ``idx``, ``consts``); the GP means ``A`` (q, r) at the
     scaled points and the misfits ``costs`` (q,) ``c_perp + ||g - T a||^2`` (``TT = T^T``, T upper
     triangular). Every point is evaluated; the caller uses the costs of the valid ones.
@@ -193,7 +193,7 @@ def surrogate_costs(
 
 
 # --------------------------------------------------------------------------------------------
-# The material screen (problems.inverse.feasibility.Screen)
+# The material screen (problems.surrogate.screen.Screen)
 # --------------------------------------------------------------------------------------------
 
 #: relative margin of the screen's inequalities

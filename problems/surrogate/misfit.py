@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from problems.inverse.feasibility import NONE, Screen
 from problems.inverse.reduced import AffineMisfit
 from problems.surrogate._kernels import surrogate_costs
+from problems.surrogate.screen import NONE, Screen
 
 
 class SurrogateMisfit:

@@ -10,9 +10,9 @@ other point (outside a range, or within the margin of a boundary) is left to the
 decides and says why. So screen + rule classify every point exactly as the rule alone (tested on
 all nine cases, inside, on and far outside the boxes).
 
-The compiled screen (:func:`problems.surrogate._kernels.screen_points`) lives beside the
-surrogate's cost path kernel that calls it: numba's cache would not see a change to a kernel of
-another file.
+Its one user is the surrogate's cost path (:mod:`problems.surrogate.misfit`); the compiled
+screen (:func:`problems.surrogate._kernels.screen_points`) lives beside the cost path's kernel that
+calls it: numba's cache would not see a change to a kernel of another file.
 """
 
 from __future__ import annotations
