@@ -38,11 +38,15 @@ STD_WARNING_PERCENT = 25.0
 
 @dataclass(frozen=True)
 class CalibrationSettings:
-    """mesh: inverse mesh spec; budget: evaluations of ``lm`` per variant; seed of the method."""
+    """mesh: inverse mesh spec; budget: evaluations of ``lm`` per variant; seed of the method;
+    check_mesh: a finer mesh on which the best variant is run once at its optimum to state the
+    inverse mesh's discretisation error next to the fit (``auto``: the next finer preset of a
+    preset inverse mesh, problems/inverse/build.py; ``""``: none)."""
 
     mesh: str = "coarse"
     budget: int = 80
     seed: int = 0
+    check_mesh: str = "auto"
 
 
 def objective_for(data: Dataset, case, mesh: str):
@@ -120,6 +124,11 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
     if not best.usable:
         return out | {"x": x.tolist(), "chi2": math.inf}
     ident = analyse_jacobian(J, ev.reference, x=x, names=case.names)
+    chi2 = float(best.cost)
+    n_data, k = len(best.residual), len(x)
+    # a fit worse than the noise model (model error) widens the intervals by the Birge ratio
+    birge = max(1.0, math.sqrt(chi2 / max(n_data - k, 1)))
+    std = ident.std_x * birge
     N, m = len(data.snapshots_mm), len(data.points)
     r = best.residual
     split = {k: float(np.sum(r[s] ** 2)) for k, s in layout.blocks(N, m).items()}
@@ -133,7 +142,7 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
             f"{CONDITION_WARNING:g}: weakest direction "
             + ", ".join(f"{k} {v:+.2f}" for k, v in ident.weakest.items() if abs(v) > 0.2)
         )
-    std_pct = 100.0 * ident.std_x / np.abs(x)
+    std_pct = 100.0 * std / np.abs(x)
     poor = [f"{n} ({s:.3g} %)" for n, s in zip(case.names, std_pct) if s > STD_WARNING_PERCENT]
     if poor:
         warnings.append(
@@ -146,14 +155,14 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
     ]
     if at_bound:
         warnings.append(f"at a bound of its box: {', '.join(at_bound)}")
-    chi2 = float(best.cost)
-    n_data, k = len(r), len(x)
     return out | {
         "x": x.tolist(),
-        "std": ident.std_x.tolist(),
+        "std": std.tolist(),
+        "std_noise_only": ident.std_x.tolist(),
+        "birge_ratio": birge,
         "std_percent": std_pct.tolist(),
-        "ci95_lower": (x - 1.96 * ident.std_x).tolist(),
-        "ci95_upper": (x + 1.96 * ident.std_x).tolist(),
+        "ci95_lower": (x - 1.96 * std).tolist(),
+        "ci95_upper": (x + 1.96 * std).tolist(),
         "correlation": np.nan_to_num(ident.correlation).tolist(),
         "condition": float(ident.condition),
         "warnings": warnings,
@@ -178,11 +187,13 @@ def calibrate(
     models=None,
     settings: CalibrationSettings | None = None,
     progress=print,
+    figures: bool = True,
 ) -> dict:
     """Calibrate every chosen variant of the experiment at ``experiment_path`` into ``out_dir``
     (module docstring); returns the report dict. ``models``: variant names (default: the
     experiment file's ``[calibration] models``); ``settings`` default from the file too. Variants
-    whose result is already in ``out_dir`` with the same key are read, not rerun."""
+    whose result is already in ``out_dir`` with the same key are read, not rerun. ``figures``:
+    draw the figures (else report.md and report.json only)."""
     from problems.inverse.experiment import import_experiment, load_experiment
     from problems.inverse.lab import curve_summary, lab_case
 
@@ -220,8 +231,62 @@ def calibrate(
             f"{res['n_evals']} evaluations"
         )
     report = assemble(exp, data, summary, results, settings)
-    write_report(report, data, out)
+    if report["ranking"] and settings.check_mesh:
+        best = report["ranking"][0]["variant"]
+        report["discretisation"] = discretisation_check(
+            data, lab_case(best, data, summary), results[best], settings, out, progress
+        )
+    write_report(report, data, out, figures=figures)
     return report
+
+
+def discretisation_check(data, case, result, settings, out: Path, progress) -> dict:
+    """The inverse mesh's discretisation error at the best fit: the best variant's response on a
+    finer mesh minus the inverse mesh's, in sigma units (rms over each block); stored in
+    ``<out>/variants/discretisation.json`` keyed like a variant. ``{}`` when no finer mesh."""
+    from problems.inverse.build import DEFAULT_HIFI
+    from problems.inverse.experiment import rigid_free_model
+    from problems.inverse.forward import FEForwardModel
+
+    fine = settings.check_mesh
+    if fine == "auto":
+        fine = DEFAULT_HIFI.get(str(settings.mesh).partition(":")[0], "")
+    if not fine or not result.get("ok"):
+        return {}
+    key = variant_key(data, case, settings) + f"|{fine}"
+    path = out / "variants" / "discretisation.json"
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            old = {}
+        if old.get("key") == key:
+            return old
+    progress(f"discretisation error: {case.name} at its optimum on mesh {fine} ...")
+    x = np.asarray(result["x"], float)
+    values = {}
+    for mesh in (settings.mesh, fine):
+        fe = FEForwardModel(
+            case, mesh, data.settings.loading, data.points, specimen_mm=data.settings.specimen_mm
+        )
+        res = rigid_free_model(fe, data)(x)
+        if not res.ok:
+            return {"mesh": fine, "message": res.message}
+        values[mesh] = res.values
+    d = (values[fine] - values[settings.mesh]) / data.sigma()
+    N, m = len(data.snapshots_mm), len(data.points)
+    blocks = layout.blocks(N, m)
+    out_d = {
+        "key": key,
+        "variant": case.name,
+        "mesh": fine,
+        "rms_sigma": float(np.sqrt(np.mean(d**2))),
+        "rms_sigma_blocks": {
+            b: float(np.sqrt(np.mean(d[blocks[b]] ** 2))) for b in ("u_h", "u_v", "force")
+        },
+    }
+    atomic_write_text(path, json.dumps(out_d, indent=1) + "\n")
+    return out_d
 
 
 def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict:
@@ -294,12 +359,16 @@ def _atomic_figure(fig, path: Path) -> None:
             os.unlink(tmp)
 
 
-def write_report(report: dict, data: Dataset, out: Path) -> None:
-    """``report.json``, ``report.md`` and the figures into ``out`` (atomic writes)."""
+def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True) -> None:
+    """``report.json``, ``report.md`` and (with ``figures``) the figures into ``out`` (atomic
+    writes)."""
     from bench.plotting import line_style, pyplot
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "report.json", json.dumps(report, indent=1, allow_nan=True) + "\n")
+    atomic_write_text(out / "report.md", render_markdown(report))
+    if not figures:
+        return
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.0, 4.0))
     d = np.array(report["displacement_mm"])
@@ -334,7 +403,6 @@ def write_report(report: dict, data: Dataset, out: Path) -> None:
         axes[0].set_ylabel("z (mm)")
         fig.colorbar(sc, ax=axes)
         _atomic_figure(fig, out / "residuals.png")
-    atomic_write_text(out / "report.md", render_markdown(report))
 
 
 def _fmt(v: float) -> str:
@@ -361,9 +429,13 @@ def render_markdown(report: dict) -> str:
         f"{imp['dropped_non_finite_rows']} rows with non-finite values dropped",
         f"- calibration: {json.dumps(imp['calibration'])}",
         f"- force sd from a load-cell accuracy of {imp['force_accuracy_percent']:g} % of reading",
-        "- files (SHA-256): "
-        + ", ".join(f"`{k}` {v[:12]}" for k, v in imp["files_sha256"].items() if "/" not in k)
-        + f" and {sum('/' in k for k in imp['files_sha256'])} DIC exports",
+        "- files (SHA-256, first 12 digits): "
+        + ", ".join(
+            f"`{k}` {v[:12]}"
+            for group in ("experiment", "machine_log")
+            for k, v in imp["files_sha256"][group].items()
+        )
+        + f" and {len(imp['files_sha256']['dic'])} DIC exports (all in report.json)",
         "",
         "## What the test says (start and bounds, never a reference)",
         f"- E {_fmt(t['E_MPa'])} MPa (DIC strain; from the force curve {_fmt(t['E_force_MPa'])}), "
@@ -380,7 +452,30 @@ def render_markdown(report: dict) -> str:
             f"{_fmt(r['aic'])} | {_fmt(r['bic'])} | {r['delta_aic']:.3g} | "
             f"{r['akaike_weight']:.3g} |"
         )
-    lines += ["", "## Parameters (Laplace 95 % intervals from the exact Jacobian)"]
+    near = [r["variant"] for r in report["ranking"][1:] if r["delta_aic"] < 2.0]
+    if near:
+        lines += [
+            "",
+            f"dAIC < 2: {', '.join(near)} fit(s) this test as well as the first (not told apart; "
+            "the linear surface's three hardening tests are one material reparametrised).",
+        ]
+    disc = report.get("discretisation") or {}
+    if "rms_sigma" in disc:
+        b = disc["rms_sigma_blocks"]
+        lines += [
+            "",
+            f"Discretisation error of the inverse mesh at the best fit ({disc['variant']}, "
+            f"against mesh `{disc['mesh']}`): rms {disc['rms_sigma']:.3g} sigma (u_h "
+            f"{b['u_h']:.3g}, u_v {b['u_v']:.3g}, force {b['force']:.3g}); an rms fit above 1 "
+            "sigma of that size is the model's, not the test's.",
+        ]
+    lines += [
+        "",
+        "## Parameters (Laplace 95 % intervals from the exact Jacobian)",
+        "",
+        "Standard deviations are widened by the Birge ratio sqrt(chi2 / (n - k)) when it "
+        "exceeds 1.",
+    ]
     for name, v in report["variants"].items():
         lines += ["", f"### {name}: {v['status']} after {v['n_evals']} evaluations"]
         if not v.get("ok"):
@@ -390,7 +485,7 @@ def render_markdown(report: dict) -> str:
         lines.append(
             f"- fit: rms {v['rms_sigma']:.3f} sigma (u_h {blocks['u_h']:.3f}, u_v "
             f"{blocks['u_v']:.3f}, force {blocks['force']:.3f}); Fisher condition "
-            f"{v['condition']:.3g}"
+            f"{v['condition']:.3g}; Birge ratio {v['birge_ratio']:.3g}"
         )
         lines += [
             "",

@@ -38,6 +38,7 @@ import csv
 import glob
 import hashlib
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -113,7 +114,9 @@ class ExperimentFileError(ValueError):
 
     def __init__(self, path, errors: list[str]):
         self.errors = list(errors)
-        super().__init__("\n".join(f"{path}: {e}" for e in self.errors))
+        n = len(self.errors)
+        head = f"experiment file {path}: {n} error{'s' if n > 1 else ''}:"
+        super().__init__("\n".join([head] + [f"  - {e}" for e in self.errors]))
 
 
 @dataclass(frozen=True)
@@ -783,8 +786,15 @@ def import_experiment(exp: Experiment) -> Dataset:
         specimen_mm=exp.specimen_mm,
         levels_mm=loading.levels_mm,
     )
-    files = {str(p.relative_to(exp.path.parent)): sha256(p) for p in (exp.path, exp.log)}
-    files |= {str(p.relative_to(exp.path.parent)): sha256(p) for p in exp.dic_files}
+
+    def rel(p: Path) -> str:
+        return os.path.relpath(p, exp.path.parent)
+
+    files = {
+        "experiment": {rel(exp.path): sha256(exp.path)},
+        "machine_log": {rel(exp.log): sha256(exp.log)},
+        "dic": {rel(p): sha256(p) for p in exp.dic_files},
+    }
     meta = {
         "experiment": exp.name,
         "description": exp.description,

@@ -1,0 +1,84 @@
+"""``femubench calibrate EXPERIMENT``: identify the Drucker-Prager variants on a real test.
+
+Reads an experiment file (docs/calibrating.md), imports its machine log and DIC exports, and for
+each chosen variant runs the default local method (``lm`` with exact Jacobians) from a start
+derived from the test; writes the calibration report (``report.md``, ``report.json``, figures)
+and one result per variant into ``--out`` (default ``calibration/<experiment name>``). Rerun the
+same command to resume an interrupted calibration: variants already done are read back.
+"""
+
+from __future__ import annotations
+
+NAME = "calibrate"
+HELP = (
+    "Calibrate a real test: identify each Drucker-Prager variant on an experiment file (machine "
+    "log + DIC export), with Laplace uncertainty, identifiability warnings, fit quality and model "
+    "selection (AIC/BIC)."
+)
+
+
+def add_arguments(p) -> None:
+    from bench.commands._args import input_file, output_dir
+
+    p.add_argument("experiment", type=input_file, help="the experiment file (TOML)")
+    p.add_argument(
+        "--models",
+        default=None,
+        help="'all' or comma-separated variants form-hardening (default: the file's "
+        "[calibration] models)",
+    )
+    p.add_argument(
+        "--out",
+        type=output_dir,
+        default=None,
+        help="output folder (default calibration/<experiment name>; never the experiment's own)",
+    )
+    p.add_argument("--mesh", default=None, help="inverse mesh (default: the file's, else coarse)")
+    p.add_argument(
+        "--budget", type=int, default=None, help="evaluations of lm per variant (default: file's)"
+    )
+    p.add_argument(
+        "--check-mesh",
+        default="auto",
+        help="finer mesh on which the best variant is rerun once to state the inverse mesh's "
+        "discretisation error ('auto': the next finer preset; 'none': skip)",
+    )
+
+
+def main(args) -> int:
+    from pathlib import Path
+
+    from bench.calibration import CalibrationSettings, calibrate
+    from problems.inverse.experiment import load_experiment, parse_models
+
+    exp = load_experiment(args.experiment)  # every error of the file at once (exit 2)
+    models = None
+    if args.models is not None:
+        try:
+            models = parse_models(args.models)
+        except ValueError as exc:
+            raise ValueError(f"--models {args.models!r}: {exc}") from None
+    check = "" if args.check_mesh == "none" else args.check_mesh
+    if check not in ("", "auto"):
+        from problems.fe.mesh import parse_mesh_spec
+
+        try:
+            parse_mesh_spec(check)
+        except ValueError as exc:
+            raise ValueError(f"--check-mesh {check!r}: {exc}; or auto, none") from None
+    settings = CalibrationSettings(
+        args.mesh or exp.mesh, args.budget or exp.budget, check_mesh=check
+    )
+    out = Path(args.out) if args.out else Path("calibration") / exp.name
+    report = calibrate(exp.path, out, models=models, settings=settings)
+    print(f"calibration report: {out / 'report.md'}")
+    for i, row in enumerate(report["ranking"], 1):
+        v = report["variants"][row["variant"]]
+        values = ", ".join(
+            f"{n} {x:.4g} +- {1.96 * s:.2g}" for n, x, s in zip(v["names"], v["x"], v["std"])
+        )
+        print(
+            f"{i}. {row['variant']}: dAIC {row['delta_aic']:.3g}, rms {row['rms_sigma']:.3f} "
+            f"sigma; {values}"
+        )
+    return 0

@@ -1,0 +1,119 @@
+"""``femubench calibrate``: the shipped example imported and calibrated briefly, resumption,
+consistent data recovered, bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bench.calibration as cal
+from bench.calibration import CalibrationSettings, calibrate
+from bench.cli import main
+from problems.inverse.experiment import import_experiment, load_experiment
+from problems.inverse.virtual_experiment import VirtualTest, write_virtual_experiment
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "suites" / "experiments" / "cube100"
+#: the parameters that made the example (linear-compression on the fine mesh)
+EXAMPLE_TRUTH = np.array([34000.0, 38.0, 0.9, 12.0, 24.0, 1500.0])
+
+
+def _short_copy(tmp_path: Path) -> Path:
+    """The example's experiment file with absolute paths, four images and a tiny inverse mesh."""
+    text = (EXAMPLE / "experiment.toml").read_text()
+    text = text.replace('log = "machine_log.csv"', f'log = "{EXAMPLE / "machine_log.csv"}"')
+    text = text.replace('files = "dic/image_*.csv"', f'files = "{EXAMPLE}/dic/image_*.csv"')
+    text = text.replace('mesh = "coarse"', 'mesh = "3,3,6"\nimages = [1, 4, 8]\nbudget = 8')
+    f = tmp_path / "short.toml"
+    f.write_text(text)
+    return f
+
+
+def test_shipped_example_is_small_and_imports():
+    size = sum(p.stat().st_size for p in EXAMPLE.rglob("*") if p.is_file())
+    assert size < 1_000_000
+    ds = import_experiment(load_experiment(EXAMPLE / "experiment.toml"))
+    assert ds.points.shape == (400, 2) and ds.meta["dropped_off_face"] == 84
+    assert len(ds.snapshots_mm) == 8 and ds.snapshots_mm[-1] == pytest.approx(0.7)
+    assert ds.settings.specimen_mm == (100.0, 100.0, 100.0)
+    # the DIC noise declared (0.01-0.03 px at 0.05 mm/px) is what the sigma column says
+    assert 0.5e-3 < ds.std_u_mm.mean() < 1.5e-3
+
+
+def test_short_calibration_of_the_example_and_resume(tmp_path, monkeypatch):
+    exp = _short_copy(tmp_path)
+    out = tmp_path / "out"
+    settings = CalibrationSettings("3,3,6", 8, check_mesh="")
+    models = ["linear-compression", "hyperbolic-compression"]
+    rep = calibrate(
+        exp, out, models=models, settings=settings, progress=lambda s: None, figures=False
+    )
+    lin = rep["variants"]["linear-compression"]
+    assert lin["ok"] and len(lin["std"]) == 6 and lin["birge_ratio"] >= 1.0
+    assert abs(lin["x"][0] / EXAMPLE_TRUTH[0] - 1) < 0.15  # E on a 27-element eighth
+    assert {r["variant"] for r in rep["ranking"]} == set(models)
+    assert rep["import"]["images"] == 3 and rep["import"]["points_used"] == 400
+    f = np.array(rep["force_kN"])
+    assert np.abs(np.array(lin["model_force_kN"]) / f - 1).max() < 0.15  # coarse model
+    doc = json.loads((out / "report.json").read_text())
+    assert doc["format"] == cal.FORMAT and "AIC" in (out / "report.md").read_text()
+
+    # resumable: nothing is rerun when the results are there
+    def boom(*a, **k):
+        raise AssertionError("rerun")
+
+    monkeypatch.setattr(cal, "calibrate_variant", boom)
+    said = []
+    again = calibrate(exp, out, models=models, settings=settings, progress=said.append)
+    assert sum("done before" in s for s in said) == 2
+    assert again["variants"]["linear-compression"]["x"] == lin["x"]
+    for name in ("report.md", "report.json", "force_displacement.png", "residuals.png"):
+        assert (out / name).stat().st_size > 0
+
+
+def test_consistent_virtual_experiment_is_recovered(tmp_path):
+    """Data made on the inverse mesh itself (no discretisation error), small DIC noise and a
+    class 0.5 load cell: every parameter within 1 %, and within its 95 % interval."""
+    truth = np.array([31000.0, 33.0, 0.88, 11.0, 21.5, 1300.0])
+    t = VirtualTest(
+        "linear-compression",
+        tuple(truth),
+        data_mesh="3,3,6",
+        levels_mm=(0.05, 0.15, 0.3, 0.5),
+        noise_px=(0.002, 0.004),
+        load_cell_class=0.5,
+        force_step_kN=0.001,
+        seed=5,
+    )
+    exp = write_virtual_experiment(t, tmp_path / "ve", "consistent")
+    rep = calibrate(
+        exp,
+        tmp_path / "out",
+        models=["linear-compression"],
+        settings=CalibrationSettings("3,3,6", 30, check_mesh=""),
+        progress=lambda s: None,
+        figures=False,
+    )
+    v = rep["variants"]["linear-compression"]
+    x = np.array(v["x"])
+    assert np.abs(x / truth - 1).max() < 0.01, x / truth - 1
+    lo, hi = np.array(v["ci95_lower"]), np.array(v["ci95_upper"])
+    assert np.sum((lo <= truth) & (truth <= hi)) >= 5
+
+
+def test_cli_bad_file_and_bad_out(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[specimen]\nwidth_mm = 0\n[camera]\nunits = "px"\norigin = [0, 0]\n')
+    assert main(["calibrate", str(bad)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("femubench calibrate: error: experiment file")
+    assert any("[specimen] width_mm = 0: must be > 0" in e for e in err)
+    assert any("[camera] mm_per_px: missing" in e for e in err)
+    assert len(err) >= 8
+    assert main(["calibrate", str(EXAMPLE / "experiment.toml"), "--out", str(EXAMPLE)]) == 2
+    assert "outputs never go among the inputs" in capsys.readouterr().err
+    assert main(["calibrate", str(EXAMPLE / "experiment.toml"), "--models", "linear-nope"]) == 2
+    assert "--models 'linear-nope'" in capsys.readouterr().err
