@@ -638,7 +638,8 @@ def _finish(summary: SuiteSummary, out_dir: Path, cfg: RunConfig, record: dict, 
     store.write_record(out_dir, record)
     res = record["result"]
     summary.ran += 1
-    if not res.get("success"):
+    verdict = ((res.get("extra") or {}).get("problem") or {}).get("success")  # a user problem's
+    if not (res.get("success") if verdict is None else verdict):
         summary.failed += 1
     if record.get("error"):
         summary.crashed += 1

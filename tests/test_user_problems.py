@@ -164,7 +164,7 @@ def test_correct_digits():
 # --- a suite of user problems, run and judged ---
 def test_suite_of_user_problems_runs_and_judges(tmp_path):
     raw = {
-        "suite": {"name": "user", "methods": ["cma", "lm"], "budgets": [400]},
+        "suite": {"name": "user", "methods": ["cma", "lm", "de"], "budgets": [400]},
         "problems": {
             "sphere": {"entry": "tests.test_user_problems:sphere", "args": {"n": 2}},
             "expo": {"entry": "tests.test_user_problems:exponential"},
@@ -172,7 +172,11 @@ def test_suite_of_user_problems_runs_and_judges(tmp_path):
     }
     summary = run_suite(parse_suite(raw), tmp_path, workers=1, progress=False)
     recs = {(r["config"]["case"], r["config"]["method"]): r for r in store.load_records(tmp_path)}
-    assert summary.total == 4 and summary.crashed == 1  # lm on the scalar sphere refuses
+    assert summary.total == 6 and summary.crashed == 1  # lm on the scalar sphere refuses
+    # de ends at its budget (the solver's "success") short of both problems' own rules
+    assert not recs[("sphere", "de")]["result"]["extra"]["problem"]["success"]
+    assert recs[("sphere", "de")]["result"]["success"]
+    assert summary.failed == 3  # the refused run and de on both: judged by the problems' rules
     assert "needs a least-squares problem" in recs[("sphere", "lm")]["result"]["message"]
     sph = recs[("sphere", "cma")]["result"]["extra"]["problem"]
     assert sph["success"] and sph["kind"] == "scalar" and sph["success_text"] == "f − f_min ≤ 1e-06"
