@@ -110,7 +110,8 @@ def solved_dofs(mesh: str) -> int:
     from problems.fe.mesh import parse_mesh_spec
 
     spec = parse_mesh_spec(mesh)
-    nx, ny, nz = spec.shape
+    p = 2 if spec.element == "hex27" else 1  # node intervals per element edge
+    nx, ny, nz = (p * n for n in spec.shape)
     layers = nz // 2 if spec.symmetry == "eighth" else nz
     return 3 * (nx + 1) * (ny + 1) * (layers + 1)
 

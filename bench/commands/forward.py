@@ -72,6 +72,7 @@ def parse_params(items: list[str]) -> dict[str, float]:
 
 def main(args) -> int:
     import json
+    from dataclasses import replace
 
     from bench.progress import enabled, warn_if_long
     from problems.fe.front_face import measurement_grid
@@ -92,12 +93,10 @@ def main(args) -> int:
                 f"--symmetry {args.symmetry!r} contradicts --mesh {args.mesh!r}; give the model "
                 "once"
             )
-        spec = type(spec)(spec.shape, check_symmetry(args.symmetry, spec.shape, "--symmetry"))
+        spec = replace(spec, symmetry=check_symmetry(args.symmetry, spec.shape, "--symmetry"))
     material = material_from(args.case, parse_params(args.param))
     loading = Loading(args.displacement, args.snapshots, args.plates)
-    warn_if_long(
-        NAME, 1, f"{','.join(map(str, spec.shape))}:{spec.symmetry}", what="this forward run"
-    )
+    warn_if_long(NAME, 1, str(spec), what="this forward run")
     mesh = spec.mesh
     disc = discretise(mesh, symmetry=spec.symmetry)
     print(

@@ -52,6 +52,10 @@ MESH_PRESETS: dict[str, tuple[int, int, int]] = {
 #: ``quarter`` all of it
 SYMMETRIES = ("eighth", "quarter")
 
+#: elements of a mesh spec: the 8-node B-bar hexahedron (default) and the 27-node Q2-P1
+#: hexahedron (problems/fe/mesh_quadratic.py)
+ELEMENTS = ("hex8", "hex27")
+
 # Corner order of the 8-node hexahedron (VTK / Abaqus C3D8 order) in the (i, j, k) offsets.
 HEX_CORNERS = np.array(
     [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
@@ -126,14 +130,50 @@ class Mesh:
         }
 
 
-def box_mesh(nx: int, ny: int, nz: int, size_mm: tuple[float, float, float] = SIZE_MM) -> Mesh:
-    """Uniform structured mesh of the box [0, lx] x [0, ly] x [0, lz] mm with nx x ny x nz
-    hexahedra."""
+def graded_coordinates(n: int, length_mm: float, ratio: float, toward: str) -> np.ndarray:
+    """Node coordinates (n + 1,) in mm on [0, length_mm] of ``n`` elements whose lengths grow
+    geometrically, the largest ``ratio`` times the smallest (ratio >= 1; 1 gives
+    ``np.linspace``).
+
+    toward : ``end`` (smallest element at ``length_mm``: a free face, largest at 0: a symmetry
+             plane) or ``both`` (smallest at both ends: the plates, largest at mid-length; the
+             coordinates are exactly symmetric, z_k + z_(n-k) = length_mm, so the lower half of an
+             even ``n`` is the eighth model of the whole)
+    """
+    if not (np.isfinite(ratio) and ratio >= 1.0):
+        raise ValueError(f"grading ratio = {ratio!r} is out of range: a number >= 1")
+    if toward not in ("end", "both"):
+        raise ValueError(f"toward = {toward!r} is unknown; allowed: end, both")
+    if ratio == 1.0:
+        return np.linspace(0.0, length_mm, n + 1)
+    k = np.arange(n)
+    level = (n - 1 - k) if toward == "end" else np.minimum(k, n - 1 - k)  # 0 = smallest
+    top = level.max()
+    sizes = ratio ** (level / top) if top > 0 else np.ones(n)
+    x = np.concatenate([[0.0], np.cumsum(sizes)]) * (length_mm / sizes.sum())
+    if toward == "both":
+        x = 0.5 * (x + length_mm - x[::-1])  # exact mirror symmetry about the middle
+    x[0], x[-1] = 0.0, length_mm
+    return x
+
+
+def graded_box_mesh(
+    nx: int, ny: int, nz: int, ratio: float = 1.0, size_mm: tuple[float, float, float] = SIZE_MM
+) -> Mesh:
+    """Structured mesh of the box [0, lx] x [0, ly] x [0, lz] mm (the quarter model) with
+    nx x ny x nz hexahedra, node spacing graded geometrically (:func:`graded_coordinates`) toward
+    the free faces x = lx, y = ly (largest elements at the symmetry planes x = 0, y = 0) and
+    toward both plates z = 0, lz (largest at mid-height, symmetric about it): the largest element
+    is ``ratio`` (>= 1) times the smallest along each direction; ``ratio = 1`` is uniform
+    (:func:`box_mesh`). Node and element numbering do not depend on the ratio."""
     for name, n in zip("xyz", (nx, ny, nz)):
         if int(n) != n or n < 1:
             raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
     nx, ny, nz = int(nx), int(ny), int(nz)
-    x, y, z = (np.linspace(0.0, L, n + 1) for L, n in zip(size_mm, (nx, ny, nz)))
+    x, y, z = (
+        graded_coordinates(n, L, ratio, toward)
+        for n, L, toward in zip((nx, ny, nz), size_mm, ("end", "end", "both"))
+    )
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     nodes = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
     i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
@@ -144,17 +184,28 @@ def box_mesh(nx: int, ny: int, nz: int, size_mm: tuple[float, float, float] = SI
     return Mesh(nodes, elements[order], (nx, ny, nz))
 
 
+def box_mesh(nx: int, ny: int, nz: int, size_mm: tuple[float, float, float] = SIZE_MM) -> Mesh:
+    """Uniform structured mesh of the box [0, lx] x [0, ly] x [0, lz] mm with nx x ny x nz
+    hexahedra."""
+    return graded_box_mesh(nx, ny, nz, 1.0, size_mm)
+
+
 @dataclass(frozen=True)
 class MeshSpec:
-    """A parsed mesh spec: the quarter mesh (nx, ny, nz over the full height) and the model that
-    solves it.
+    """A parsed mesh spec: the quarter mesh (nx, ny, nz elements over the full height), its node
+    spacing and element, and the model that solves it.
 
     symmetry : ``eighth`` (solve the lower half z <= 75 mm, unfold the answer; needs nz even) or
                ``quarter`` (solve the whole height)
+    grading  : largest / smallest element length along each direction (>= 1; 1 = uniform), see
+               :func:`graded_box_mesh`
+    element  : ``hex8`` or ``hex27`` (:data:`ELEMENTS`)
     """
 
     shape: tuple[int, int, int]
     symmetry: str
+    grading: float = 1.0
+    element: str = "hex8"
 
     @property
     def mesh(self) -> Mesh:
@@ -165,10 +216,26 @@ class MeshSpec:
     def build(self, size_mm: tuple[float, float, float] = SIZE_MM) -> Mesh:
         """The quarter mesh of the whole height of a quarter model of extents ``size_mm`` (mm;
         :func:`quarter_size` of the specimen)."""
-        return box_mesh(*self.shape, size_mm=size_mm)
+        mesh = graded_box_mesh(*self.shape, ratio=self.grading, size_mm=size_mm)
+        if self.element == "hex27":
+            from problems.fe.mesh_quadratic import quadratic_mesh
+
+            mesh = quadratic_mesh(mesh)
+        return mesh
+
+    @property
+    def key(self) -> str:
+        """The discretisation: ``"NX,NY,NZ"`` then ``:gR`` when graded and ``:hex27`` for the
+        27-node element (a uniform 8-node mesh keeps the bare ``"NX,NY,NZ"``)."""
+        tokens = [",".join(map(str, self.shape))]
+        if self.grading != 1.0:
+            tokens.append(f"g{self.grading:g}")
+        if self.element != "hex8":
+            tokens.append(self.element)
+        return ":".join(tokens)
 
     def __str__(self) -> str:
-        return f"{','.join(map(str, self.shape))}:{self.symmetry}"
+        return f"{self.key}:{self.symmetry}"
 
 
 def default_symmetry(shape: tuple[int, int, int]) -> str:
@@ -189,24 +256,44 @@ def check_symmetry(symmetry: str, shape: tuple[int, int, int], what: str = "symm
     return symmetry
 
 
+#: what may follow the size in a mesh spec (for error messages)
+_TOKENS_HELP = f"{'|'.join(SYMMETRIES)}|gR (R >= 1)|{'|'.join(ELEMENTS)}"
+
+
+def _grading(token: str, spec) -> float:
+    """The ratio R of a ``gR`` token; ValueError unless R is a finite number >= 1."""
+    try:
+        ratio = float(token[1:])
+    except ValueError:
+        ratio = float("nan")
+    if not (np.isfinite(ratio) and ratio >= 1.0):
+        raise ValueError(
+            f"mesh {spec!r}: grading {token!r} is out of range; allowed: gR with R a number >= 1 "
+            "(largest / smallest element length)"
+        )
+    return ratio
+
+
 def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
-    """Parse ``MESH[:SYMMETRY]``: MESH a preset (``coarse``, ``paper``, ``fine``), ``NX,NY,NZ`` or a
-    tuple; SYMMETRY ``eighth`` or ``quarter``, by default ``eighth`` where it is exact (NZ even).
-    ValueError for NZ < 2 (every node on a plate: nothing to solve)."""
+    """Parse ``MESH[:TOKEN...]``: MESH a preset (``coarse``, ``paper``, ``fine``, ``xfine``),
+    ``NX,NY,NZ`` or a tuple; then, in any order and each at most once, a symmetry ``eighth`` or
+    ``quarter`` (default ``eighth`` where it is exact, NZ even), a grading ``gR`` (R >= 1 the
+    largest / smallest element length, :func:`graded_box_mesh`; default uniform, ``g1``) and an
+    element ``hex8`` (default) or ``hex27``. ValueError (one line) for anything else and for
+    NZ < 2 (every node on a plate: nothing to solve)."""
     if isinstance(spec, MeshSpec):
         return spec
-    symmetry = None
+    given: dict[str, object] = {}  # symmetry, grading, element
     if isinstance(spec, tuple):
         for name, n in zip("xyz", spec):
             if int(n) != n or n < 1:
                 raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
         shape = tuple(int(n) for n in spec)
     else:
-        base, sep, symmetry = str(spec).partition(":")
-        base, symmetry = base.strip(), (symmetry.strip() if sep else None)
+        base, *tokens = (t.strip() for t in str(spec).split(":"))
         if base in MESH_PRESETS:
             shape = MESH_PRESETS[base]
-        elif re.fullmatch(r"\s*\d+\s*,\s*\d+\s*,\s*\d+\s*", base):
+        elif re.fullmatch(r"\d+\s*,\s*\d+\s*,\s*\d+", base):
             shape = tuple(int(t) for t in base.split(","))
             for name, n in zip("xyz", shape):
                 if n < 1:
@@ -214,22 +301,41 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
         else:
             raise ValueError(
                 f"mesh {spec!r} is unknown; allowed: {', '.join(MESH_PRESETS)} or NX,NY,NZ "
-                f"(whole numbers >= 1), optionally followed by :{'|:'.join(SYMMETRIES)}"
+                f"(whole numbers >= 1), optionally followed by :TOKEN with TOKEN {_TOKENS_HELP}"
             )
+        for token in tokens:
+            if token in SYMMETRIES:
+                kind, value = "symmetry", token
+            elif token in ELEMENTS:
+                kind, value = "element", token
+            elif re.fullmatch(r"g.*", token):
+                kind, value = "grading", _grading(token, spec)
+            else:
+                raise ValueError(
+                    f"mesh {spec!r}: token {token!r} is unknown; allowed after the size: "
+                    f"{_TOKENS_HELP}"
+                )
+            if kind in given:
+                raise ValueError(f"mesh {spec!r}: {kind} given twice; allowed: once each")
+            given[kind] = value
     if shape[2] < 2:
         raise ValueError(
             f"mesh {spec!r}: NZ = {shape[2]} leaves no node between the plates (no free dof); "
             "allowed: NZ >= 2"
         )
-    if symmetry is None:
-        return MeshSpec(shape, default_symmetry(shape))
-    return MeshSpec(shape, check_symmetry(symmetry, shape, f"mesh {spec!r}: symmetry"))
+    symmetry = (
+        check_symmetry(given["symmetry"], shape, f"mesh {spec!r}: symmetry")
+        if "symmetry" in given
+        else default_symmetry(shape)
+    )
+    return MeshSpec(shape, symmetry, given.get("grading", 1.0), given.get("element", "hex8"))
 
 
 def discretisation_key(spec: str | tuple[int, int, int] | MeshSpec) -> str:
-    """``"NX,NY,NZ"`` of a spec: two specs with the same key give the same answer (the eighth and
-    the quarter model of one mesh agree to round-off), whatever their names."""
-    return ",".join(map(str, parse_mesh_spec(spec).shape))
+    """``"NX,NY,NZ[:gR][:hex27]"`` of a spec (:attr:`MeshSpec.key`): two specs with the same key
+    give the same answer (the eighth and the quarter model of one mesh agree to round-off),
+    whatever their names."""
+    return parse_mesh_spec(spec).key
 
 
 def parse_mesh(spec: str | tuple[int, int, int] | MeshSpec) -> Mesh:
