@@ -152,6 +152,7 @@ def test_report_formats_write_the_exports(bbob_dir, tmp_path):
     assert "f − f_min ≤ 1e-08" in md and "ERT to success in evaluations" in md
     assert (tmp_path / "rep" / "coco" / "cma" / "bbobexp_f1.info").is_file()
     assert (tmp_path / "rep" / "ioh" / "de" / "IOHprofiler_f3_bbob-f3.json").is_file()
+    assert (tmp_path / "rep" / "figures" / "user_ecdf.png").is_file()
 
 
 # --- statistics ---

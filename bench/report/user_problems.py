@@ -30,6 +30,8 @@ def user_frame(records) -> pd.DataFrame:
     crashed, message, kind, rule (in words), success (by the problem's rule), evals_success
     (evaluations to success: to the target for an ``f-target`` rule, else the run's), f_ref,
     gap (final best f − f_ref), digits, trace (gaps)."""
+    from bench.report.export import _trace_of
+
     rows = []
     for rec in records:
         if not is_user_record(rec):
@@ -56,7 +58,7 @@ def user_frame(records) -> pd.DataFrame:
                 "f_min": prob.get("f_min"),
                 "cost": float(res.get("cost") if res.get("cost") is not None else math.nan),
                 "digits": prob.get("digits", math.nan),
-                "raw_trace": [(int(n), float(f)) for n, f in res.get("trace") or []],
+                "raw_trace": _trace_of(rec),
             }
         )
     df = pd.DataFrame(rows)
@@ -190,6 +192,13 @@ def section(records, dest: Path, tfmt, source: Path | None = None) -> list[str]:
         "problems, with successes/runs.",
     )
     statistics_blocks(df, table, "user")
+    fig = ecdf_figure(df, dest / "figures" / "user_ecdf.png")
+    md.append(
+        "Runtime ECDF (COCO style): fraction of (run, target) pairs with f − f_ref ≤ 10^k, "
+        f"k = {', '.join(f'{math.log10(t):g}' for t in S.GAP_TARGETS)}, reached within a number "
+        "of evaluations, one line per method over all problems.\n"
+    )
+    md.append(f"![runtime ECDF of the user problems]({fig.relative_to(dest).as_posix()})\n")
     return md
 
 
@@ -333,3 +342,29 @@ def fe_statistics(records, dest: Path, tfmt) -> list[str]:
         "median first cost)",
     )
     return table.md
+
+
+def ecdf_figure(df: pd.DataFrame, path: Path, targets=S.GAP_TARGETS) -> Path:
+    """Runtime ECDF of the frame's runs: per method, the fraction of (run, target) pairs reached
+    within n evaluations (log axis, up to the largest budget); black-and-white line styles."""
+    from bench.plotting import SINGLE, line_style, pyplot, save
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=SINGLE)
+    xmax = float(max(df["budget"].max(), df["n_evals"].max(), 2))
+    for i, (method, g) in enumerate(df.groupby("method", sort=True)):
+        hits = np.array([S.evals_to(t, tg) for t in g["trace"] for tg in targets], float)
+        done = np.sort(hits[np.isfinite(hits)])
+        x = np.concatenate([[1.0], np.maximum(done, 1.0), [xmax]])
+        y = np.concatenate(
+            [[0.0], np.arange(1, done.size + 1) / hits.size, [done.size / hits.size]]
+        )
+        style = line_style(i)
+        ax.step(x, y, where="post", label=method, markevery=max(1, x.size // 8), **style)
+    ax.set_xscale("log")
+    ax.set_xlim(1, xmax)
+    ax.set_ylim(0, 1)
+    ax.set_xlabel("evaluations")
+    ax.set_ylabel("fraction of (run, target) pairs")
+    ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), frameon=False)
+    return save(fig, path)
