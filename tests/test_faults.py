@@ -186,4 +186,73 @@ def test_report_out_replaces_only_its_own_folder_and_clears_stale_temporaries(re
     assert not stale.exists()
     assert cli(args) == 0  # its own folder: replaced
     assert len(store.load_records(results)) == 2
-    assert not [p for p in results.parent.iterdir() if p.name.startswith(".report-")]
+    assert not [p for p in results.parent.glob(".report-*") if p.is_dir()]
+
+
+# --- surrogates: an existing one is replaced only with --force, and as one unit ------------
+
+
+def test_surrogate_refuses_to_replace_a_stored_one_without_force(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("FEMUBENCH_SURROGATE_DIR", str(tmp_path))
+    shipped = tmp_path / "linear-shear__coarse"  # the default folder of the case
+    shipped.mkdir()
+    for name in ("surrogate.json", "surrogate.npz", "build.json"):
+        (shipped / name).write_text(name)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep")
+    for extra in ([], ["--out", str(shipped)], ["--out", str(mine), "--force"]):
+        assert cli(["surrogate", "linear-shear", "--samples", "20", *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0, err
+        assert ("--force" in err) if "--force" not in extra else ("notes.txt" in err)
+    assert sorted(p.read_text() for p in shipped.iterdir()) == sorted(
+        ["surrogate.json", "surrogate.npz", "build.json"]
+    )
+    assert (mine / "notes.txt").read_text() == "keep"
+
+
+@pytest.fixture(scope="module")
+def surrogate():
+    from problems.surrogate import build_surrogate
+    from tests.test_surrogate import BLOCKS, LOWER, SIGMA, UPPER, ToyModel, settings
+
+    return build_surrogate(
+        ToyModel(), LOWER, UPPER, SIGMA, settings=settings(rbf_smoothing=(0.0,)), blocks=BLOCKS
+    )
+
+
+def test_surrogate_files_are_written_as_one_unit(surrogate, tmp_path, monkeypatch):
+    from problems.surrogate import store as sstore
+
+    folder = tmp_path / "s"
+    sstore.save(surrogate, folder, extra=lambda size: {"build.json": f'{{"size": {size}}}'})
+    first = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert sorted(first) == ["build.json", "surrogate.json", "surrogate.npz"]
+    assert (
+        first["build.json"]
+        == f'{{"size": {len(first["surrogate.npz"]) + len(first["surrogate.json"])}}}'.encode()
+    )
+
+    def killed(fh, **arrays):  # the writer dies half way (disk full)
+        fh.write(b"PK half")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", killed)
+    with pytest.raises(OSError, match="No space left"):
+        sstore.save(surrogate, folder)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == first  # the old unit, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
+    monkeypatch.undo()
+    sstore.save(surrogate, folder)  # no build.json given: none stale left behind
+    assert sorted(p.name for p in folder.iterdir()) == ["surrogate.json", "surrogate.npz"]
+    assert sstore.load(folder).hash == surrogate.hash
+
+    (folder / "other.txt").write_text("x")
+    with pytest.raises(ValueError, match="other.txt"):
+        sstore.save(surrogate, folder)
+    (folder / "other.txt").unlink()
+    npz = folder / "surrogate.npz"
+    npz.write_bytes(npz.read_bytes()[:100])
+    with pytest.raises(ValueError, match=f"{npz} is torn"):
+        sstore.load(folder)

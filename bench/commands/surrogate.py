@@ -108,6 +108,12 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--json", metavar="FILE", help="write the summary (hold-out errors, cost, hash) as JSON"
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the surrogate already stored in the output folder (e.g. a shipped default "
+        "one); without it an existing surrogate is refused before any work",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument(
         "--time",
@@ -148,7 +154,7 @@ def time_stored(args) -> int:
         f"{t['speed_ratio']:.3g} (batch {t['fe_eval_s'] / t['misfit_batch_eval_s']:.3g})"
     )
     if args.json:
-        Path(args.json).write_text(json.dumps(doc, indent=1))
+        atomic_write_text(args.json, json.dumps(doc, indent=1))
     return 0
 
 
@@ -197,10 +203,13 @@ def main(args) -> int:
     import json
     from pathlib import Path
 
+    from bench.outputs import refuse_inputs, same_file
     from bench.parallel import mapper
     from problems.inverse.cases import get_case
+    from problems.io.atomic import atomic_write_text
     from problems.io.jsonio import encode
     from problems.surrogate import SurrogateSettings, build_case_surrogate, default_name, save
+    from problems.surrogate.store import BUILD_NAME, JSON_NAME, NPZ_NAME
     from problems.surrogate.validation import format_summary
 
     case = get_case(args.case)
@@ -237,6 +246,8 @@ def main(args) -> int:
     if args.gp_restarts < 0:
         raise ValueError(f"--gp-restarts {args.gp_restarts} is out of range: must be >= 0")
     folder = Path(args.out) if args.out else surrogate_root() / default_name(case.name, args.mesh)
+    check_folder(folder, args.force)
+    refuse_inputs("--json", args.json, [args.data, folder / JSON_NAME, folder / NPZ_NAME])
     print(
         f"surrogate of {case.name} on mesh {args.mesh}: {args.samples} training + {args.local} "
         f"local + {args.holdout} hold-out FE runs planned",
@@ -251,8 +262,15 @@ def main(args) -> int:
             mapper=m,
             progress=not args.quiet,
         )
-    save(sur, folder)
-    size = sum(p.stat().st_size for p in folder.iterdir() if p.is_file())
+    build, written = folder / BUILD_NAME, {}
+
+    def build_summary(size_bytes: int) -> dict:  # written with the surrogate as one unit
+        written["size"] = size_bytes
+        written["doc"] = json.dumps(encode(summary(sur, folder, size_bytes)), indent=1)
+        return {BUILD_NAME: written["doc"]}
+
+    save(sur, folder, extra=build_summary)
+    size, doc = written["size"], written["doc"]
     info = sur.info
     t = info["training"]
     print(
@@ -281,7 +299,30 @@ def main(args) -> int:
         print(format_summary(info["validation"]))
     print(f"total build time {info['cost']['build_wall_s']:.1f} s")
     print(f"wrote {folder} ({size / 1e6:.2f} MB, hash {sur.hash[:12]})")
-    if args.json:
-        Path(args.json).write_text(json.dumps(encode(summary(sur, folder, size)), indent=1))
+    print(f"wrote {build}")
+    if args.json and not same_file(args.json, build):
+        atomic_write_text(args.json, doc)
         print(f"wrote {args.json}")
     return 0
+
+
+def check_folder(folder, force: bool) -> None:
+    """ValueError (before any work) when ``folder`` holds a stored surrogate and ``force`` is not
+    set, or holds files that are not a surrogate's (never replaced)."""
+    from problems.surrogate.store import JSON_NAME, NPZ_NAME, OWN_FILES
+
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"--out {folder}: is a file, not a folder")
+    if not folder.is_dir():
+        return
+    foreign = sorted(p.name for p in folder.iterdir() if p.name not in OWN_FILES)
+    if foreign:
+        raise ValueError(
+            f"--out {folder}: holds files that are not a surrogate's ({', '.join(foreign[:3])}); "
+            "the surrogate replaces its folder as a whole, give a new or empty folder"
+        )
+    if not force and ((folder / JSON_NAME).exists() or (folder / NPZ_NAME).exists()):
+        raise ValueError(
+            f"{folder} already holds a surrogate; give --force to replace it (runs with "
+            "--surrogate default use it) or --out another folder"
+        )

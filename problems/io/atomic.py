@@ -59,9 +59,7 @@ def atomic_write(path: str | Path, write: Callable, *, binary: bool = True) -> P
         raise _named(exc, path) from None
     try:
         with (
-            os.fdopen(fd, "wb")
-            if binary
-            else os.fdopen(fd, "w", encoding="utf-8", newline="")
+            os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
         ) as fh:
             write(fh)
             fh.flush()

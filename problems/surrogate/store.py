@@ -21,6 +21,7 @@ import importlib
 import json
 import os
 import re
+import zipfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -32,6 +33,10 @@ from problems.surrogate.regression import from_stored
 
 FORMAT = "femubench-surrogate/1"
 JSON_NAME, NPZ_NAME = "surrogate.json", "surrogate.npz"
+#: The build summary written beside them by ``femubench surrogate``.
+BUILD_NAME = "build.json"
+#: The files of a surrogate folder (anything else in it is not replaced: :func:`save` refuses).
+OWN_FILES = (JSON_NAME, NPZ_NAME, BUILD_NAME)
 #: environment variable: root folder of named surrogates
 SURROGATE_DIR_ENV = "FEMUBENCH_SURROGATE_DIR"
 
@@ -140,11 +145,29 @@ def _json_ready(value):
     return encode(value)
 
 
-def save(model: SurrogateModel, folder: str | Path) -> Path:
-    """Write ``model`` into ``folder`` (created); returns the folder. Sets
-    ``model.info["hash"]``."""
+def save(model: SurrogateModel, folder: str | Path, extra=None) -> Path:
+    """Write ``model`` (``surrogate.npz`` + ``surrogate.json``) and the text files
+    ``extra(size_bytes) -> {name: text}`` (e.g. ``build.json``; ``size_bytes``: the bytes of the
+    npz and JSON, ``model.hash`` already set) into ``folder`` as one unit: they are written into a
+    temporary folder beside it, which then replaces ``folder`` as a whole
+    (:func:`problems.io.atomic.atomic_dir`), so no file of an older surrogate survives and a kill
+    leaves the old surrogate or the new one. ValueError when ``folder`` holds files other than a
+    surrogate's (:data:`OWN_FILES`). Returns the folder; sets ``model.info["hash"]``."""
+    from problems.io.atomic import atomic_dir
+
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    foreign = (
+        sorted(p.name for p in folder.iterdir() if p.name not in OWN_FILES)
+        if (folder.is_dir())
+        else []
+    )
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"surrogate folder {folder} is a file")
+    if foreign:
+        raise ValueError(
+            f"surrogate folder {folder} holds files that are not a surrogate's "
+            f"({', '.join(foreign[:3])}); a surrogate replaces its folder as a whole, give another"
+        )
     spec, checker_arrays = _checker_spec(model.checker)
     arrays = {
         "pod_mean": model.pod.mean,
@@ -177,12 +200,14 @@ def save(model: SurrogateModel, folder: str | Path) -> Path:
         }
     )
     doc["hash"] = content_hash(doc, arrays)
-    tmp_npz, tmp_json = folder / (NPZ_NAME + ".tmp.npz"), folder / (JSON_NAME + ".tmp")
-    np.savez(tmp_npz, **arrays)
-    tmp_json.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
-    os.replace(tmp_npz, folder / NPZ_NAME)
-    os.replace(tmp_json, folder / JSON_NAME)
-    model.info["hash"] = doc["hash"]
+    with atomic_dir(folder) as tmp:
+        with open(tmp / NPZ_NAME, "wb") as fh:
+            np.savez(fh, **arrays)
+        (tmp / JSON_NAME).write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+        model.info["hash"] = doc["hash"]
+        size = sum((tmp / name).stat().st_size for name in (NPZ_NAME, JSON_NAME))
+        for name, text in (extra(size) if extra else {}).items():
+            (tmp / name).write_text(text, encoding="utf-8")
     return folder
 
 
@@ -205,8 +230,13 @@ def load(
         raise ValueError(f"{jpath} is not valid JSON: {exc}") from None
     if doc.get("format") != FORMAT:
         raise ValueError(f"{jpath} has format {doc.get('format')!r}, expected {FORMAT}")
-    with np.load(npath, allow_pickle=False) as z:
-        arrays = {k: z[k] for k in z.files}
+    try:
+        with np.load(npath, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as exc:
+        raise ValueError(
+            f"{npath} is torn ({type(exc).__name__}: {exc}); build the surrogate again"
+        ) from None
     if set(arrays) != set(doc.get("arrays", {})):
         raise ValueError(f"{folder}: the arrays of {NPZ_NAME} do not match {JSON_NAME}")
     digest = content_hash(doc, arrays)
