@@ -190,3 +190,35 @@ def test_force_sigma_from_the_class_and_the_resolution():
     assert s[1] == pytest.approx(0.01 / np.sqrt(12))
     with pytest.raises(ValueError, match="force_resolution"):
         force_sigma_kN([0.0], 1.0, 0.0)
+
+
+def test_mm_export_gives_the_px_export_dataset(consistent, tmp_path):
+    """The same measurement exported in mm (the face's frame, y up, origin at its bottom-left
+    corner) imports to the same Dataset as the px export with its corner calibration."""
+    exp = load_experiment(consistent)
+    ds_px = import_experiment(exp)
+    A, c = exp.affine[:, :2], exp.affine[:, 2]
+    (tmp_path / "dic").mkdir()
+    for f in exp.dic_files:
+        rows = np.loadtxt(f, delimiter=",", skiprows=1)
+        P = rows[:, :2] @ A.T + c
+        U = rows[:, 2:4] @ A.T
+        S = rows[:, 4] * exp.calibration["mm_per_unit"]
+        out = np.column_stack([P, U, S])
+        np.savetxt(tmp_path / "dic" / f.name, out, delimiter=",", header="X,Y,U,V,S", comments="")
+    text = consistent.read_text()
+    start, end = text.index("[camera]"), text.index("[loading]")
+    text = text[:start] + '[camera]\nunits = "mm"\norigin = [0.0, 0.0]\nroi_margin_mm = 1.0\n\n'
+    text += consistent.read_text()[end:]
+    text = text.replace('log = "machine_log.csv"', f'log = "{consistent.parent}/machine_log.csv"')
+    text = text.replace(
+        'columns = { x = "x", y = "y", u = "u", v = "v", sigma = "sigma" }',
+        'columns = { x = "X", y = "Y", u = "U", v = "V", sigma = "S" }',
+    )
+    f = tmp_path / "mm.toml"
+    f.write_text(text)
+    ds_mm = import_experiment(load_experiment(f))
+    assert np.allclose(ds_mm.points, ds_px.points, atol=1e-9)
+    assert np.abs(ds_mm.u_h - ds_px.u_h).max() < 1e-12, np.abs(ds_mm.u_h - ds_px.u_h).max()
+    assert np.abs(ds_mm.u_v - ds_px.u_v).max() < 1e-12
+    assert np.allclose(ds_mm.std_u_mm, ds_px.std_u_mm, rtol=1e-9)

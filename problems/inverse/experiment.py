@@ -734,11 +734,15 @@ def import_experiment(exp: Experiment) -> Dataset:
     common = set(keys[0]).intersection(*keys[1:])
     all_points = set().union(*keys)
     n_partial = len(all_points) - len(common)
-    ref = np.array(sorted(common))
+    common = sorted(common)
+    ref = per_image[use[0]][0][[keys[0][key] for key in common]] if common else np.zeros((0, 2))
     if len(ref) == 0:
         raise ValueError(f"DIC export: no point is in every image ({exp.dic_files[0].parent})")
     A, c = exp.affine[:, :2], exp.affine[:, 2]
     face = ref @ A.T + c  # (m, 2) s, z mm
+    order = np.lexsort(np.round(face, 6).T[::-1])  # by s, then z: whatever the export's frame
+    ref, face = ref[order], face[order]
+    common = [common[i] for i in order]
     W, H, mrg = exp.width_mm, exp.height_mm, exp.roi_margin_mm
     on = (
         (face[:, 0] >= mrg)
@@ -750,6 +754,7 @@ def import_experiment(exp: Experiment) -> Dataset:
         on &= (face[:, 1] >= exp.plate_margin_mm) & (face[:, 1] <= H - exp.plate_margin_mm)
     n_off = int((~on).sum())
     ref, face = ref[on], face[on]
+    common = [key for key, keep in zip(common, on) if keep]
     if len(ref) < 4:
         raise ValueError(f"DIC export: only {len(ref)} points on the face; check [camera]")
     scale = exp.calibration["mm_per_unit"]
@@ -761,7 +766,7 @@ def import_experiment(exp: Experiment) -> Dataset:
     removed = []
     for row, k in enumerate(use):
         P, U, S = per_image[k]
-        idx = np.array([keys[row][tuple(p)] for p in np.round(ref, 6)])
+        idx = np.array([keys[row][key] for key in common])
         du = U[idx] @ A.T  # (m, 2) mm: [along s, along z]
         s_mm = S[idx] * scale  # sigma (column or declared) is in the export's units
         u = np.concatenate([sign * du[:, 0], du[:, 1]])
