@@ -3,6 +3,7 @@ value and what is allowed, exit code 2, before any work; plausibility warnings w
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -300,3 +301,59 @@ def test_a_suite_run_keeps_the_warnings_in_its_record_and_the_report_lists_them(
     md = "\n".join(warnings_section([record, {**record, "warnings": []}]))
     assert md.startswith("## Plausibility warnings") and "1 run(s) gave numbers" in md
     assert "N instead of kN" in md and "linear-compression/lm/s0/default0/b4" in md
+
+
+# --- samples and walkers: memory estimated before any work ----------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["gsa", "analytic-linear", "--samples", "1e9", "--dry-run"], "--samples 1000000000"),
+        (["gsa", "analytic-linear", "--method", "morris", "--samples", "1e9"], "--samples"),
+        (["uncertainty", "analytic-linear", "--walkers", "1e9"], "--walkers 1000000000"),
+        (["uncertainty", "analytic-linear", "--walkers", "100", "--budget", "1e10"], "--budget"),
+    ],
+)
+def test_samples_and_walkers_beyond_the_memory_are_refused_up_front(
+    capsys, tmp_path, monkeypatch, argv, needle
+):
+    monkeypatch.setenv("FEMUBENCH_MEMORY_BYTES", str(16e9))
+    err = one_line_error(capsys, [*argv, "--out", str(tmp_path / "o")], needle, "8 GB")
+    assert "of memory" in err and not (tmp_path / "o").exists()
+
+
+def test_a_whole_number_in_float_notation_is_accepted():
+    from bench.commands._args import ArgumentTypeError, positive_int
+
+    assert positive_int("1e3") == 1000 and positive_int("2.0") == 2
+    with pytest.raises(ArgumentTypeError, match="'1.5' is not a whole number"):
+        positive_int("1.5")
+
+
+# --- torn numba cache files -----------------------------------------------------------------------
+
+KERNEL = "from numba import njit\n\n\n@njit(cache=True)\ndef twice(x):\n    return 2 * x\n"
+
+
+@pytest.mark.parametrize("suffix", [".nbi", ".nbc"])
+def test_a_torn_numba_cache_file_is_named_and_removed(tmp_path, monkeypatch, suffix):
+    import importlib
+
+    from problems.numba_cache import cache_files, heal
+
+    name = f"i28b_kernel_{suffix[1:]}"
+    (tmp_path / f"{name}.py").write_text(KERNEL)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.invalidate_caches()
+    module = importlib.import_module(name)
+    monkeypatch.delitem(sys.modules, name)
+    assert module.twice(2) == 4  # compiles and writes the cache
+    files = cache_files(vars(module))
+    assert sorted(Path(f).suffix for f in files) == [".nbc", ".nbi"]
+    assert heal(vars(module)) == []  # whole files are kept
+    (torn,) = [f for f in files if f.endswith(suffix)]
+    Path(torn).write_bytes(Path(torn).read_bytes()[:20])
+    with pytest.warns(RuntimeWarning, match=rf"numba cache file .*{name}.* was torn"):
+        assert heal(vars(module)) == [torn]
+    assert not Path(torn).exists()

@@ -32,7 +32,13 @@ def _integer(text: str, minimum: int | None = None, maximum: int | None = None) 
     try:
         value = int(str(text).strip())
     except ValueError:
-        raise ArgumentTypeError(f"{text!r} is not a whole number") from None
+        try:  # 1e9, 2.0: a whole number in float notation
+            number = float(str(text).strip())
+        except ValueError:
+            number = math.nan
+        if not (math.isfinite(number) and number.is_integer()):
+            raise ArgumentTypeError(f"{text!r} is not a whole number") from None
+        value = int(number)
     if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
         allowed = (
             f">= {minimum}"

@@ -83,6 +83,19 @@ def add_arguments(p) -> None:
     )
 
 
+def check_sample_memory(method: str, samples: int, d: int) -> None:
+    """ValueError (one line naming --samples) when the sample of ``samples`` base points of ``d``
+    parameters cannot fit in memory: Sobol N (d + 2) points, Morris r (d + 1), each held three
+    times (drawn, unit-scaled, boxed) with its outputs (bench.resources)."""
+    from bench.resources import check_memory, sample_bytes
+
+    planned = samples * (d + 2 if method == "sobol" else d + 1)
+    check_memory(
+        sample_bytes(planned, 3 * d + 1),
+        f"--samples {samples} ({method}: {planned:,} points of {d} parameters)",
+    )
+
+
 def main(args) -> int:
     import os
 
@@ -100,6 +113,7 @@ def main(args) -> int:
             print(f"wrote {path}")
         return 0
     samples = args.samples if args.samples is not None else (32 if args.method == "sobol" else 10)
+    check_sample_memory(args.method, samples, len(case.names))
     scale = args.box_scale
     workers = 1 if case.is_analytic else (args.workers or os.cpu_count() or 1)
 

@@ -90,6 +90,7 @@ def main(args) -> int:
     from bench.commands._args import assignments
     from bench.parallel import mapper
     from bench.progress import EvaluationProgress, enabled, warn_if_long
+    from bench.resources import check_memory, sample_bytes
     from bench.studies import existing_dir, render_from
     from bench.studies.uncertainty import render_uncertainty, run_uncertainty
     from problems.inverse.cases import get_case
@@ -108,11 +109,20 @@ def main(args) -> int:
         )
     walkers = args.walkers or max(16, 4 * n)
     walkers += walkers % 2  # the mcmc solver makes it even
+    # up front, before the Laplace step: an ensemble (walkers x (n + 1) numbers per step) and a
+    # chain (budget x (n + 1): positions and log-probabilities) that cannot fit in memory
+    check_memory(
+        sample_bytes(walkers, n + 1), f"--walkers {walkers} (an ensemble of {n} parameters)"
+    )
     if args.budget < 2 * walkers:
         raise ValueError(
             f"--budget {args.budget} is out of range: MCMC needs at least 2 steps of the {walkers} "
             f"walkers, i.e. >= {2 * walkers} evaluations"
         )
+    check_memory(
+        sample_bytes(args.budget, n + 1),
+        f"--budget {args.budget} (an MCMC chain of {n} parameters)",
+    )
     analytic = case.is_analytic
     workers = 1 if analytic else (args.workers or os.cpu_count() or 1)
     if not analytic:

@@ -39,6 +39,8 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
+from problems.numba_cache import heal as heal_numba_cache
+
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 
 
@@ -330,3 +332,6 @@ def _strain_kernel(B, u, edofs, out):
                 for a in range(nd):
                     s += B[e, g, i, a] * ue[a]
                 out[p, i] = s
+
+
+heal_numba_cache(globals())  # a torn cache file of these kernels: named, removed

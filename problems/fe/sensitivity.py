@@ -55,6 +55,7 @@ from problems.fe.cache import shared
 from problems.fe.linear_solver import SingularMatrixError, mixed_superlu_factor, superlu_factor
 from problems.materials.base import MaterialUpdate
 from problems.materials.ddm import affine_sensitivity
+from problems.numba_cache import heal as heal_numba_cache
 
 #: relative residual ||K X - F|| / ||F|| of each column of the Krylov solve of the sensitivity
 #: equations. Measured (coarse, linear-compression, against solves to 1e-12): the Jacobian's
@@ -611,3 +612,6 @@ def _affine_kernel(B, dV, edofs, U, c, h, T, eps, dstress, dstate, f):
             d = edofs[e, a]
             for q in range(k):
                 f[d, q] += fe[q, a]
+
+
+heal_numba_cache(globals())  # a torn cache file of these kernels: named, removed

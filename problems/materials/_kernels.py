@@ -37,6 +37,8 @@ import math
 import numpy as np
 from numba import njit
 
+from problems.numba_cache import heal as heal_numba_cache
+
 # numpy semantics: x/0 gives inf/nan, no raise
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 
@@ -1750,3 +1752,6 @@ def third_invariants(s, order):
                 for b in range(6):
                     out[i, 6 * a + b] = H[a, b]
     return out
+
+
+heal_numba_cache(globals())  # a torn cache file of these kernels: named, removed

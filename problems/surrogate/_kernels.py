@@ -31,6 +31,8 @@ import math
 import numpy as np
 from numba import njit, uint64
 
+from problems.numba_cache import heal as heal_numba_cache
+
 _STEPS = 64.0
 #: the reach of the exponential's table: exp(-x) for 0 <= x <= EXP_REACH
 EXP_REACH = 40.0
@@ -280,3 +282,6 @@ class PackedGP:
         out = np.empty((len(Z), self.n_outputs))
         gp_mean(Z, *self.args, out)
         return out
+
+
+heal_numba_cache(globals())  # a torn cache file of these kernels: named, removed
