@@ -41,30 +41,65 @@ class CalibrationSettings:
     """mesh: inverse mesh spec; budget: evaluations of ``lm`` per variant; seed of the method;
     check_mesh: a finer mesh on which the best variant is run once at its optimum to state the
     inverse mesh's discretisation error next to the fit (``auto``: the next finer preset of a
-    preset inverse mesh, problems/inverse/build.py; ``""``: none)."""
+    preset inverse mesh, problems/inverse/build.py; ``""``: none);
+    correction: ``none``, or ``iterated``: the discretisation error at the current optimum, from
+    one run on ``check_mesh``, subtracted from the data and the problem re-solved from there,
+    until the parameters move less than 0.1 % (at most ``correction_rounds`` rounds;
+    solvers/corrected.py). Do not use the mesh that made a virtual experiment's data as
+    ``check_mesh``."""
 
     mesh: str = "coarse"
     budget: int = 80
     seed: int = 0
     check_mesh: str = "auto"
+    correction: str = "none"
+    correction_rounds: int = 5
+
+    def __post_init__(self):
+        if self.correction not in ("none", "iterated"):
+            raise ValueError(
+                f"correction = {self.correction!r} is unknown; allowed: none, iterated"
+            )
+        if self.correction == "iterated" and not self.fine_mesh:
+            raise ValueError(
+                f"correction 'iterated' needs a finer mesh: check_mesh = {self.check_mesh!r} "
+                f"names none for inverse mesh {self.mesh!r}"
+            )
+
+    @property
+    def fine_mesh(self) -> str:
+        """The finer mesh of the discretisation check and correction ('' for none)."""
+        from problems.inverse.build import DEFAULT_HIFI
+
+        if self.check_mesh == "auto":
+            return DEFAULT_HIFI.get(str(self.mesh).partition(":")[0], "")
+        return self.check_mesh
 
 
-def objective_for(data: Dataset, case, mesh: str):
-    """The evaluator of ``case`` (a lab case) on the imported ``data``: the FE model of the
-    specimen on ``mesh`` at the data's points and machine loading, the data's rigid-motion
-    removal applied to it, the data's per-point and per-force standard deviations."""
-    from problems.inverse.evaluator import Evaluator
+def model_for(data: Dataset, case, mesh: str):
+    """The FE model of the specimen of ``data`` on ``mesh`` at its points and machine loading,
+    with the data's rigid-motion removal applied."""
     from problems.inverse.experiment import rigid_free_model
     from problems.inverse.forward import FEForwardModel
-    from problems.inverse.problem import LeastSquaresProblem
 
     fe = FEForwardModel(
         case, mesh, data.settings.loading, data.points, specimen_mm=data.settings.specimen_mm
     )
-    model = rigid_free_model(fe, data)
+    return rigid_free_model(fe, data)
+
+
+def objective_for(data: Dataset, case, mesh: str, correction=None):
+    """The evaluator of ``case`` (a lab case) on the imported ``data``: :func:`model_for`, the
+    data's per-point and per-force standard deviations; with a ``correction``
+    (problems/inverse/model_error.py) its shift subtracted from the data and its runs charged."""
+    from problems.inverse.evaluator import Evaluator
+    from problems.inverse.problem import LeastSquaresProblem
+
+    model = model_for(data, case, mesh)
+    shift = 0.0 if correction is None else correction.shift
     problem = LeastSquaresProblem(
         model,
-        data.values,
+        data.values - shift,
         case.lower,
         case.upper,
         case.reference,
@@ -77,7 +112,11 @@ def objective_for(data: Dataset, case, mesh: str):
             "inverse_mesh": mesh,
         },
     )
-    return Evaluator(problem, exact_jacobian=True)
+    evaluator = Evaluator(problem, exact_jacobian=True)
+    if correction is not None:
+        evaluator.charge("hifi", correction.n_hifi, correction.hifi_wall_s)
+        evaluator.charge("inverse-for-correction", correction.n_inverse, correction.inverse_wall_s)
+    return evaluator
 
 
 def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
@@ -91,6 +130,7 @@ def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
         "mesh": settings.mesh,
         "budget": settings.budget,
         "seed": settings.seed,
+        **({"correction": settings.fine_mesh} if settings.correction != "none" else {}),
     }
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -103,6 +143,31 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
 
     ev = objective_for(data, case, settings.mesh)
     result = solve(ev, "lm", budget=settings.budget, seed=settings.seed, x0=case.start)
+    rounds = []
+    if settings.correction == "iterated" and result.cost < math.inf:
+        from problems.inverse.model_error import one_point
+        from solvers.corrected import solve_iterated
+
+        fine, coarse = (
+            model_for(data, case, settings.fine_mesh),
+            model_for(data, case, settings.mesh),
+        )
+        built = []
+
+        def make_objective(correction):
+            built.append(objective_for(data, case, settings.mesh, correction))
+            return built[-1]
+
+        result = solve_iterated(
+            make_objective,
+            lambda x: one_point(fine, coarse, x),
+            "lm",
+            budget=settings.budget,
+            x0=result.x,
+            seed=settings.seed,
+            max_rounds=settings.correction_rounds,
+        )
+        ev, rounds = built[-1], result.extra["correction_rounds"]
     x = np.asarray(result.x, float)
     z = ev.to_scaled(x)
     J = ev.jacobian(z)
@@ -120,6 +185,8 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
         "n_evals": int(n_evals),
         "wall_s": float(result.wall_s),
         "ok": bool(best.usable),
+        "correction": settings.correction,
+        "correction_rounds": rounds,
     }
     if not best.usable:
         return out | {"x": x.tolist(), "chi2": math.inf}
@@ -133,7 +200,7 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
     r = best.residual
     split = {k: float(np.sum(r[s] ** 2)) for k, s in layout.blocks(N, m).items()}
     counts = {k: len(range(len(r))[s]) for k, s in layout.blocks(N, m).items()}
-    model_values = ev.problem.data - r * data.sigma()
+    model_values = data.values - r * data.sigma()  # the model (plus a correction's shift)
     _, _, model_force = layout.unstack(model_values, N, m)
     warnings = list(ident.warnings)
     if ident.condition > CONDITION_WARNING:
@@ -244,13 +311,7 @@ def discretisation_check(data, case, result, settings, out: Path, progress) -> d
     """The inverse mesh's discretisation error at the best fit: the best variant's response on a
     finer mesh minus the inverse mesh's, in sigma units (rms over each block); stored in
     ``<out>/variants/discretisation.json`` keyed like a variant. ``{}`` when no finer mesh."""
-    from problems.inverse.build import DEFAULT_HIFI
-    from problems.inverse.experiment import rigid_free_model
-    from problems.inverse.forward import FEForwardModel
-
-    fine = settings.check_mesh
-    if fine == "auto":
-        fine = DEFAULT_HIFI.get(str(settings.mesh).partition(":")[0], "")
+    fine = settings.fine_mesh
     if not fine or not result.get("ok"):
         return {}
     key = variant_key(data, case, settings) + f"|{fine}"
@@ -266,10 +327,7 @@ def discretisation_check(data, case, result, settings, out: Path, progress) -> d
     x = np.asarray(result["x"], float)
     values = {}
     for mesh in (settings.mesh, fine):
-        fe = FEForwardModel(
-            case, mesh, data.settings.loading, data.points, specimen_mm=data.settings.specimen_mm
-        )
-        res = rigid_free_model(fe, data)(x)
+        res = model_for(data, case, mesh)(x)
         if not res.ok:
             return {"mesh": fine, "message": res.message}
         values[mesh] = res.values
@@ -478,6 +536,11 @@ def render_markdown(report: dict) -> str:
     ]
     for name, v in report["variants"].items():
         lines += ["", f"### {name}: {v['status']} after {v['n_evals']} evaluations"]
+        if v.get("correction", "none") != "none":
+            lines.append(
+                f"- iterated discretisation correction: {len(v['correction_rounds'])} round(s), "
+                f"last move {v['correction_rounds'][-1]['move']:.2g} (relative)"
+            )
         if not v.get("ok"):
             lines.append(f"- failed: {v['message']}")
             continue

@@ -38,6 +38,13 @@ def add_arguments(p) -> None:
         "--budget", type=int, default=None, help="evaluations of lm per variant (default: file's)"
     )
     p.add_argument(
+        "--correction",
+        choices=["none", "iterated"],
+        default="none",
+        help="iterated: subtract the discretisation error at the optimum (one run on the check "
+        "mesh) from the data and re-solve, until the parameters move < 0.1 %% (default none)",
+    )
+    p.add_argument(
         "--check-mesh",
         default="auto",
         help="finer mesh on which the best variant is rerun once to state the inverse mesh's "
@@ -67,7 +74,10 @@ def main(args) -> int:
         except ValueError as exc:
             raise ValueError(f"--check-mesh {check!r}: {exc}; or auto, none") from None
     settings = CalibrationSettings(
-        args.mesh or exp.mesh, args.budget or exp.budget, check_mesh=check
+        args.mesh or exp.mesh,
+        args.budget or exp.budget,
+        check_mesh=check,
+        correction=args.correction,
     )
     out = Path(args.out) if args.out else Path("calibration") / exp.name
     report = calibrate(exp.path, out, models=models, settings=settings)
