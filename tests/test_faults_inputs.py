@@ -3,6 +3,7 @@ value and what is allowed, exit code 2, before any work; plausibility warnings w
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -357,3 +358,25 @@ def test_a_torn_numba_cache_file_is_named_and_removed(tmp_path, monkeypatch, suf
     with pytest.warns(RuntimeWarning, match=rf"numba cache file .*{name}.* was torn"):
         assert heal(vars(module)) == [torn]
     assert not Path(torn).exists()
+
+
+def test_an_unwritable_output_folder_is_refused_before_the_computation(
+    capsys, tmp_path, monkeypatch
+):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access  # a read-only folder, also for root (who may write anywhere)
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != locked and real_access(p, mode))
+    one_line_error(
+        capsys,
+        ["identify", "analytic-linear", "--solver", "lm", "--json", str(locked / "r.json")],
+        "--json",
+        "not writable",
+    )
+    one_line_error(
+        capsys,
+        ["data", "linear-compression", "--mesh", "2,2,4", "--out", str(locked / "d.json")],
+        "--out",
+        "not writable",
+    )
+    assert list(locked.iterdir()) == []

@@ -141,6 +141,12 @@ def main(args) -> int:
     )
     paths = target_paths(names, settings, args.out, every=every)
     if not args.check:
+        from bench.commands._args import not_writable
+
+        for path in paths.values():
+            if not_writable(path):
+                raise ValueError(f"--out {path} is not writable (permission denied)")
+    if not args.check:
         refuse_shipped(paths.values(), args.force)
     warn_if_long(NAME, len(names), settings.mesh, what=f"{len(names)} data set(s)")
     status = 0
