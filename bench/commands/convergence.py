@@ -1,0 +1,157 @@
+"""``femubench convergence CASE|all``: mesh convergence of the forward model at each case's
+reference (observed orders, Richardson extrapolation, errors in sigma units, linearised parameter
+bias, CPU time per mesh; see bench/studies/convergence.py)."""
+
+from __future__ import annotations
+
+NAME = "convergence"
+HELP = (
+    "mesh convergence study of FE cases at their reference: families of refined meshes per "
+    "element (graded), observed order, Richardson-extrapolated force and front-face field, each "
+    "mesh's error in sigma and linearised parameter bias, CPU time; resumable"
+)
+
+
+def _sizes(text: str) -> tuple[int, ...]:
+    from bench.commands._args import ArgumentTypeError
+
+    try:
+        sizes = tuple(int(t) for t in text.split(","))
+    except ValueError:
+        sizes = ()
+    if len(sizes) < 3 or any(n < 2 for n in sizes) or list(sizes) != sorted(set(sizes)):
+        raise ArgumentTypeError(
+            f"{text!r} is out of range: at least three increasing whole numbers >= 2, "
+            "comma-separated (n gives the 8-node mesh n,n,2n)"
+        )
+    return sizes
+
+
+def _grading(text: str) -> float:
+    import math
+
+    from bench.commands._args import ArgumentTypeError
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 1.0):
+        raise ArgumentTypeError(f"{text!r} is out of range: a number >= 1 (1 = uniform)")
+    return value
+
+
+def _element(text: str) -> str:
+    from bench.commands._args import ArgumentTypeError
+    from problems.fe.mesh import ELEMENTS
+
+    if text not in ELEMENTS:
+        raise ArgumentTypeError(f"{text!r} is unknown; allowed: {', '.join(ELEMENTS)}")
+    return text
+
+
+def add_arguments(p) -> None:
+    from bench.commands._args import add_quiet_argument, comma_list, mesh_spec, output_dir
+    from bench.studies.convergence import DEFAULT_COMPARE, DEFAULT_GRADING, DEFAULT_SIZES
+
+    p.add_argument("cases", nargs="+", metavar="CASE", help="FE case name(s), or all")
+    p.add_argument(
+        "--sizes",
+        type=_sizes,
+        default=DEFAULT_SIZES,
+        help="family sizes n, comma-separated, increasing, >= 3 of them: the 8-node meshes "
+        "n,n,2n, the 27-node n/2,n/2,n (n even; same nodes) "
+        f"(default {','.join(map(str, DEFAULT_SIZES))})",
+    )
+    p.add_argument(
+        "--hex27-sizes",
+        type=_sizes,
+        help="sizes n of the hex27 family (even; default --sizes): its meshes n/2,n/2,n have "
+        "the nodes of the 8-node n,n,2n",
+    )
+    p.add_argument(
+        "--grading",
+        type=_grading,
+        default=DEFAULT_GRADING,
+        help=f"grading ratio of the families, >= 1 (1 = uniform; default {DEFAULT_GRADING:g})",
+    )
+    p.add_argument(
+        "--elements",
+        type=comma_list(_element, what="element"),
+        default=("hex8",),
+        help="one family per element: hex8, hex27 (default hex8)",
+    )
+    p.add_argument(
+        "--compare",
+        type=mesh_spec,
+        nargs="+",
+        metavar="MESH",
+        default=DEFAULT_COMPARE,
+        help="mesh specs judged against the extrapolation, not part of it, space-separated "
+        f"(default {' '.join(DEFAULT_COMPARE)})",
+    )
+    p.add_argument("--no-compare", action="store_true", help="no comparison meshes")
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        type=output_dir,
+        help="output directory (default results/studies/convergence/<case>; with several cases "
+        "DIR/<case>)",
+    )
+    p.add_argument(
+        "--render", action="store_true", help="compute nothing: re-draw from the output folder"
+    )
+    add_quiet_argument(p)
+
+
+def main(args) -> int:
+    from pathlib import Path
+
+    from bench.studies import case_names, default_output_dir, existing_dir, render_from
+    from bench.studies.convergence import (
+        STUDY,
+        family_label,
+        family_specs,
+        render_convergence,
+        render_overview,
+        run_convergence,
+    )
+    from problems.inverse.cases import get_case
+
+    cases = case_names(args.cases)
+    analytic = [c for c in cases if get_case(c).is_analytic]
+    if analytic:
+        raise ValueError(f"case {analytic[0]}: the convergence study needs an FE case")
+    sizes = {"hex8": args.sizes, "hex27": args.hex27_sizes or args.sizes}
+    if "hex27" in args.elements and any(n % 2 for n in sizes["hex27"]):
+        option = "--hex27-sizes" if args.hex27_sizes else "--sizes"
+        raise ValueError(
+            f"{option} {','.join(map(str, sizes['hex27']))}: hex27 families need even sizes "
+            "(n/2 elements per side)"
+        )
+    families = {
+        family_label(e, args.grading): family_specs(sizes[e], args.grading, e)
+        for e in args.elements
+    }
+    compare = () if args.no_compare else args.compare
+    outs = {
+        name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name
+        for name in cases
+    }
+
+    def report(rec, reused):
+        if not args.quiet:
+            what = "reused" if reused else f"{rec['cpu_s']:.1f} CPU s, {rec['wall_s']:.1f} s wall"
+            state = "" if rec["ok"] else f" FAILED: {rec['message']}"
+            print(f"  {rec['case']} {rec['mesh']} ({rec['dofs']} dofs): {what}{state}", flush=True)
+
+    for name in cases:
+        if args.render:
+            folder = existing_dir(STUDY, name, outs[name])
+        else:
+            folder = run_convergence(name, families, compare, outs[name], report)
+        print(f"wrote {render_from(render_convergence, folder)}")
+    if args.out is None or len(cases) > 1:
+        root = Path(args.out) if args.out else default_output_dir(STUDY, cases[0]).parent
+        print(f"wrote {render_overview(root)}")
+    return 0

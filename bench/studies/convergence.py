@@ -1,0 +1,425 @@
+"""Mesh convergence study of one FE case: every mesh solved once at the case's reference (response
+and exact Jacobian), then observed orders, Richardson extrapolation, each mesh's error in sigma
+units and its linearised parameter bias (:mod:`problems.analysis.convergence`).
+
+Meshes come in *families* (one element, one grading, refined: ``n,n,2n`` for the 8-node element,
+``n/2,n/2,n`` with the same nodes for the 27-node one) and *comparison* meshes (e.g. the uniform
+presets) that are judged against the extrapolation without being part of it.
+
+Files, in ``results/studies/convergence/<case>/`` (or ``--out``):
+
+* ``meshes/<key>.json`` — one per mesh: the measurement vector and the exact Jacobian at the
+  reference, CPU and wall time; written atomically with a SHA-256 of its content, so an interrupted
+  study resumes where it stopped and a torn or edited record is recomputed (not committed: ~1 MB
+  each);
+* ``convergence.json`` — the summary: per family the observed orders and the extrapolated force
+  curve, per mesh the errors, biases and times (small);
+* ``extrapolated.json`` — the Richardson-extrapolated measurement vector (front-face fields and
+  forces) the errors are measured against;
+* ``convergence.md`` and ``convergence.png`` (drawn from ``convergence.json`` alone).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.studies import markdown_table, output_dir, read_json
+from problems.analysis import convergence as conv
+from problems.fe.mesh import SIZE_MM, discretisation_key, parse_mesh_spec
+from problems.io import jsonio
+from problems.io.atomic import atomic_write, atomic_write_text
+
+STUDY = "convergence"
+SCHEMA = 1
+#: default family: n = 6, 10, 14 (8-node n x n x 2n, graded with ratio 4)
+DEFAULT_SIZES = (6, 10, 14)
+DEFAULT_GRADING = 4.0
+DEFAULT_ELEMENTS = ("hex8",)
+#: uniform presets judged against the extrapolation
+DEFAULT_COMPARE = ("coarse", "paper")
+
+
+def family_specs(sizes, grading: float, element: str) -> list[str]:
+    """Mesh specs of a family: ``n,n,2n[:gR]`` (hex8) or ``n/2,n/2,n[:gR]:hex27`` (same nodes) for
+    each n of ``sizes`` (even for hex27)."""
+    tail = (f":g{grading:g}" if grading != 1.0 else "") + (":hex27" if element == "hex27" else "")
+    out = []
+    for n in sizes:
+        m = n // 2 if element == "hex27" else n
+        if element == "hex27" and n % 2:
+            raise ValueError(f"size {n} is odd: hex27 families need even sizes (n/2 elements)")
+        out.append(f"{m},{m},{2 * m}{tail}")
+    return out
+
+
+def family_label(element: str, grading: float) -> str:
+    """``hex8 g4``, ``hex27 uniform``, ..."""
+    return f"{element} " + (f"g{grading:g}" if grading != 1.0 else "uniform")
+
+
+def record_path(folder: Path, spec: str) -> Path:
+    """``<folder>/meshes/<key>.json`` with ``,`` -> ``x`` and ``:`` -> ``_`` in the key."""
+    key = discretisation_key(spec).replace(",", "x").replace(":", "_")
+    return Path(folder) / "meshes" / f"{key}.json"
+
+
+def _digest(doc: dict) -> str:
+    body = {k: v for k, v in doc.items() if k != "sha256"}
+    return hashlib.sha256(jsonio.dumps(body, sort_keys=True).encode()).hexdigest()
+
+
+def write_record(path: Path, doc: dict) -> Path:
+    """Write a mesh record atomically with the SHA-256 of its content."""
+    return atomic_write_text(path, jsonio.dumps({**doc, "sha256": _digest(doc)}) + "\n")
+
+
+def read_record(path: Path, case: str, spec: str) -> dict | None:
+    """The record at ``path`` if it is complete, unchanged (checksum), of this schema, ``case``
+    and the discretisation of ``spec``; else None (to be recomputed)."""
+    try:
+        doc = jsonio.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    if not isinstance(doc, dict) or doc.get("sha256") != _digest(doc):
+        return None
+    if (
+        doc.get("schema") != SCHEMA
+        or doc.get("case") != case
+        or doc.get("key") != discretisation_key(spec)
+    ):
+        return None
+    return doc
+
+
+def solve_mesh(case_name: str, spec: str) -> dict:
+    """One mesh at the case's reference: measurement vector, exact Jacobian (columns the case's
+    parameters, physical units), element size (mm), elements, solved dofs, CPU and wall time (s)
+    of the response + Jacobian run (the discretisation is built first, not timed)."""
+    from bench.progress import solved_dofs
+    from problems.inverse.cases import get_case
+    from problems.inverse.forward import FEForwardModel, discretisation
+
+    case = get_case(case_name)
+    model = FEForwardModel(case, mesh=spec)
+    discretisation(spec)  # built once per process, outside the timing
+    cpu, wall = time.process_time(), time.perf_counter()
+    res = model(case.reference, jacobian=True)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    ms = parse_mesh_spec(spec)
+    n_elements = int(np.prod(ms.shape))
+    return {
+        "schema": SCHEMA,
+        "case": case_name,
+        "mesh": spec,
+        "key": discretisation_key(spec),
+        "element": ms.element,
+        "grading": ms.grading,
+        "symmetry": ms.symmetry,
+        "elements": n_elements,
+        "dofs": solved_dofs(spec),
+        "h_mm": conv.element_size_mm(np.prod(SIZE_MM), n_elements),
+        "ok": bool(res.ok and res.jacobian is not None),
+        "message": res.message,
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "plain_wall_s": res.plain_wall_s,
+        "names": list(case.names),
+        "reference": list(case.reference),
+        "n_snapshots": model.loading.snapshots,
+        "n_points": len(model.points),
+        "values": None if res.values is None else res.values,
+        "jacobian": None if res.jacobian is None else res.jacobian,
+    }
+
+
+def run_convergence(
+    case: str,
+    families: dict[str, list[str]],
+    compare=(),
+    out: str | Path | None = None,
+    report=None,
+) -> Path:
+    """Solve (or reuse) every mesh of ``families`` ({label: specs coarse to fine}) and ``compare``
+    for ``case``, write the summary, the extrapolation and the markdown table; returns the output
+    folder. ``report(record, reused)`` is called after each mesh."""
+    folder = output_dir(STUDY, case, out)
+    specs = [s for fam in families.values() for s in fam] + [s for s in compare]
+    records = {}
+    for spec in dict.fromkeys(specs):
+        path = record_path(folder, spec)
+        rec = read_record(path, case, spec)
+        reused = rec is not None
+        if rec is None:
+            rec = solve_mesh(case, spec)
+            write_record(path, rec)
+        records[spec] = rec
+        if report is not None:
+            report(rec, reused)
+    summary, extrapolated = analyse(case, families, list(compare), records)
+    atomic_write_text(folder / "convergence.json", jsonio.dumps(summary, indent=1) + "\n")
+    atomic_write_text(
+        folder / "extrapolated.json",
+        jsonio.dumps(
+            {
+                "case": case,
+                "reference_family": summary["reference_family"],
+                "values": [float(f"{v:.9g}") for v in extrapolated],
+            }
+        )
+        + "\n",
+    )
+    atomic_write_text(folder / "convergence.md", markdown(summary))
+    return folder
+
+
+def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[dict, np.ndarray]:
+    """The summary of a study from its mesh records and the extrapolated measurement vector.
+
+    Each family with three or more solved meshes is extrapolated from its last three; the
+    reference is the extrapolation of the family whose finest mesh it moves least (the smallest
+    Richardson error estimate). ValueError when no family can be extrapolated."""
+    first = next(iter(records.values()))
+    N, m = first["n_snapshots"], first["n_points"]
+    sd = conv.noise_sd(N, m)
+    fam_out = {}
+    for label, specs in families.items():
+        recs = [records[s] for s in specs if records[s]["ok"]]
+        entry = {"meshes": list(specs), "solved": [r["mesh"] for r in recs]}
+        if len(recs) >= 3:
+            ex = conv.extrapolate(
+                [r["h_mm"] for r in recs], np.array([r["values"] for r in recs]), N, m
+            )
+            entry.update({k: v for k, v in ex.items() if k != "values"})
+            entry["extrapolated_force_kN"] = ex["values"][-N:].tolist()
+            entry["_values"] = ex["values"]
+        fam_out[label] = entry
+    usable = {k: v for k, v in fam_out.items() if "_values" in v}
+    if not usable:
+        raise ValueError(
+            f"case {case}: no family has 3 solved meshes; nothing to extrapolate (see the mesh "
+            "records' messages)"
+        )
+    ref_label = min(usable, key=lambda k: usable[k]["finest_error_sigma"])
+    ref = usable[ref_label]["_values"]
+    for v in fam_out.values():
+        v.pop("_values", None)
+    rows = []
+    for label, specs in [*families.items(), ("compare", compare)]:
+        for spec in specs:
+            r = records[spec]
+            row = {
+                "mesh": spec,
+                "family": label,
+                "element": r["element"],
+                "grading": r["grading"],
+                "elements": r["elements"],
+                "dofs": r["dofs"],
+                "h_mm": r["h_mm"],
+                "ok": r["ok"],
+                "message": r["message"],
+                "cpu_s": r["cpu_s"],
+                "wall_s": r["wall_s"],
+            }
+            if r["ok"]:
+                row.update(conv.errors(r["values"], ref, N, m))
+                bias = conv.linearised_bias(
+                    np.asarray(r["jacobian"]), np.asarray(r["values"]) - ref, sd, r["reference"]
+                )
+                row["bias_pct"] = {n: 100.0 * b for n, b in zip(r["names"], bias)}
+                worst = int(np.argmax(np.abs(bias)))
+                row["worst_bias"] = {"parameter": r["names"][worst], "pct": 100.0 * bias[worst]}
+            rows.append(row)
+    summary = {
+        "schema": SCHEMA,
+        "case": case,
+        "sigma_displacement_mm": conv.SIGMA_DISPLACEMENT_MM,
+        "sigma_force_kN": conv.SIGMA_FORCE_KN,
+        "n_snapshots": N,
+        "n_points": m,
+        "parameters": first["names"],
+        "reference_family": ref_label,
+        "families": fam_out,
+        "meshes": rows,
+    }
+    return summary, ref
+
+
+def _fmt(value, spec: str) -> str:
+    return (
+        "n/a"
+        if value is None or (isinstance(value, float) and not math.isfinite(value))
+        else (format(value, spec))
+    )
+
+
+def markdown(summary: dict) -> str:
+    """The study's markdown: orders per family, then one row per mesh."""
+    lines = [
+        f"# Mesh convergence: {summary['case']}",
+        "",
+        f"Errors against the Richardson extrapolation of the **{summary['reference_family']}** "
+        f"family; sigma = {summary['sigma_displacement_mm'] * 1e3:.3f} um per displacement, "
+        f"{summary['sigma_force_kN']:g} kN for the force; {summary['n_snapshots']} snapshots x "
+        f"{summary['n_points']} front-face points. Bias: linearised Gauss-Newton step from the "
+        "reference with the mesh's exact Jacobian.",
+        "",
+        "| family | meshes | order (field) | order (force) | finest's error (sigma) | "
+        "extrapolated force at the last snapshot (kN) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for label, fam in summary["families"].items():
+        force = fam.get("extrapolated_force_kN")
+        lines.append(
+            f"| {label} | {', '.join(fam['meshes'])} | {_fmt(fam.get('order_field'), '.2f')} | "
+            f"{_fmt(fam.get('order_force'), '.2f')} | "
+            f"{_fmt(fam.get('finest_error_sigma'), '.2f')} | "
+            f"{_fmt(force[-1] if force else None, '.2f')} |"
+        )
+    rows = []
+    for r in summary["meshes"]:
+        row = {
+            "mesh": r["mesh"],
+            "elements": r["elements"],
+            "dofs": r["dofs"],
+            "RMS field error (sigma)": r.get("rms_sigma", math.nan),
+            "force error (%)": r.get("force_last_pct", math.nan),
+            "worst bias": (
+                f"{r['worst_bias']['parameter']} {r['worst_bias']['pct']:+.2f} %"
+                if "worst_bias" in r
+                else r["message"]
+            ),
+            "CPU s": r["cpu_s"],
+            "wall s": r["wall_s"],
+        }
+        rows.append(row)
+    table = markdown_table(
+        rows,
+        {
+            "RMS field error (sigma)": ".2f",
+            "force error (%)": "+.3f",
+            "CPU s": ".1f",
+            "wall s": ".1f",
+        },
+    )
+    bias_rows = [
+        {"mesh": r["mesh"], **{k: v for k, v in r["bias_pct"].items()}}
+        for r in summary["meshes"]
+        if "bias_pct" in r
+    ]
+    bias = markdown_table(bias_rows, {p: "+.2f" for p in summary["parameters"]})
+    return "\n".join(
+        lines + ["", "## Meshes", "", table, "", "## Linearised parameter bias (%)", "", bias, ""]
+    )
+
+
+def render_convergence(folder: str | Path) -> Path:
+    """Draw ``convergence.png`` from ``convergence.json``: RMS front-face error (sigma), force
+    error (%) and worst |bias| (%) against solved dofs, one line per family, markers for the
+    comparison meshes."""
+    from bench.plotting import DPI, pyplot, row
+
+    folder = Path(folder)
+    summary = read_json(folder / "convergence.json")
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=row(3))
+    panels = (
+        ("rms_sigma", "RMS front-face error (sigma)"),
+        ("force_last_pct", "|force error| at the last snapshot (%)"),
+        ("worst_bias", "worst |linearised bias| (%)"),
+    )
+    groups: dict[str, list[dict]] = {}
+    for r in summary["meshes"]:
+        if r.get("ok") and "rms_sigma" in r:
+            groups.setdefault(r["family"], []).append(r)
+    for ax, (key, title) in zip(axes, panels):
+        for label, rs in groups.items():
+            x = [r["dofs"] for r in rs]
+            y = [abs(r["worst_bias"]["pct"] if key == "worst_bias" else r[key]) for r in rs]
+            if label == "compare":
+                ax.plot(x, y, "s", color="0.4", label="uniform (compare)")
+                for r, xi, yi in zip(rs, x, y):
+                    ax.annotate(
+                        r["mesh"], (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points"
+                    )
+            else:
+                ax.plot(x, y, marker="o", label=label)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("solved dofs")
+        ax.set_title(title, fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(
+        f"{summary['case']}: errors against the extrapolated {summary['reference_family']}",
+        fontsize=10,
+    )
+    path = folder / "convergence.png"
+    atomic_write(
+        path,
+        lambda fh: fig.savefig(
+            fh, format="png", dpi=DPI, bbox_inches="tight", metadata={"Software": None}
+        ),
+    )
+    plt.close(fig)
+    return path
+
+
+def render_overview(root: str | Path) -> Path:
+    """``overview.md`` of every case folder under ``root`` that holds a ``convergence.json``:
+    per case and mesh the RMS error (sigma), force error (%), worst bias and CPU s."""
+    root = Path(root)
+    rows, orders = [], []
+    for path in sorted(root.glob("*/convergence.json")):
+        s = read_json(path)
+        for label, fam in s["families"].items():
+            orders.append(
+                {
+                    "case": s["case"],
+                    "family": label,
+                    "order (field)": fam.get("order_field", math.nan),
+                    "order (force)": fam.get("order_force", math.nan),
+                    "finest's error (sigma)": fam.get("finest_error_sigma", math.nan),
+                }
+            )
+        for r in s["meshes"]:
+            rows.append(
+                {
+                    "case": s["case"],
+                    "mesh": r["mesh"],
+                    "dofs": r["dofs"],
+                    "RMS (sigma)": r.get("rms_sigma", math.nan),
+                    "force (%)": r.get("force_last_pct", math.nan),
+                    "worst bias": (
+                        f"{r['worst_bias']['parameter']} {r['worst_bias']['pct']:+.2f} %"
+                        if "worst_bias" in r
+                        else "failed"
+                    ),
+                    "CPU s": r["cpu_s"],
+                }
+            )
+    text = "\n".join(
+        [
+            "# Mesh convergence of every case",
+            "",
+            "Per case: `convergence.md` and `convergence.png` in its folder. Errors against the "
+            "Richardson extrapolation of each case's reference family.",
+            "",
+            "## Observed orders",
+            "",
+            markdown_table(
+                orders,
+                {"order (field)": ".2f", "order (force)": ".2f", "finest's error (sigma)": ".2f"},
+            ),
+            "",
+            "## Meshes",
+            "",
+            markdown_table(rows, {"RMS (sigma)": ".2f", "force (%)": "+.3f", "CPU s": ".1f"}),
+            "",
+        ]
+    )
+    return atomic_write_text(root / "overview.md", text)

@@ -1,0 +1,149 @@
+"""Mesh convergence of the forward model: observed order, Richardson extrapolation, errors in
+sigma units and the linearised parameter bias of a mesh (the mathematics; the study's runs and
+files are in :mod:`bench.studies.convergence`).
+
+A *family* is a sequence of meshes of one element and one grading refined by element count
+(h_0 > h_1 > h_2 > ..., h the mean element edge, mm). For three successive members with answers
+q_0, q_1, q_2 (a number or a whole measurement block) the observed order p solves
+
+    |q_1 - q_0| / |q_2 - q_1| = (h_0^p - h_1^p) / (h_1^p - h_2^p)
+
+(norms for blocks; any refinement ratios), and the Richardson extrapolation of the last two is
+
+    q_inf = q_2 + (q_2 - q_1) h_2^p / (h_1^p - h_2^p).
+
+Errors are in units of the data's noise: sigma = 1 um / sqrt(12) (the rounding of a displacement
+to 1 um) for each front-face displacement and 1 kN for the plate force (issue 25). The linearised
+bias of a mesh is the Gauss-Newton step a perfect optimiser would take from the reference x_ref,
+when the mesh's response at x_ref misses the reference data by r = U_mesh(x_ref) - U_ref:
+dx = -(J^T W J)^-1 J^T W r, W = diag(1 / sigma^2), J the mesh's exact Jacobian.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+
+from problems.inverse import layout
+
+#: one front-face displacement's noise, mm: the rounding of a value to 1 um
+SIGMA_DISPLACEMENT_MM = 1e-3 / math.sqrt(12.0)
+#: the plate force's noise, kN
+SIGMA_FORCE_KN = 1.0
+#: observed orders outside this range are reported, but extrapolation uses the clipped value
+ORDER_RANGE = (0.5, 4.0)
+
+
+def element_size_mm(volume_mm3: float, n_elements: int) -> float:
+    """Mean element edge of a mesh, mm: (volume / elements)^(1/3)."""
+    return (float(volume_mm3) / int(n_elements)) ** (1.0 / 3.0)
+
+
+def observed_order(h, q) -> float:
+    """Observed order p of three successive answers ``q`` (3, ...) on meshes of sizes ``h`` (3,)
+    mm, coarse to fine (see the module docstring); nan when the differences do not shrink
+    monotonically (no asymptotic range) or p would lie outside (0.05, 12)."""
+    h = np.asarray(h, float)
+    q = np.asarray(q, float).reshape(3, -1)
+    if not (h[0] > h[1] > h[2] > 0):
+        raise ValueError(f"mesh sizes h = {h.tolist()} mm must decrease (coarse to fine)")
+    d1, d2 = np.linalg.norm(q[1] - q[0]), np.linalg.norm(q[2] - q[1])
+    if q.shape[1] == 1 and (q[1, 0] - q[0, 0]) * (q[2, 0] - q[1, 0]) <= 0:
+        return math.nan  # oscillating: no order
+    if not (d1 > 0 and d2 > 0):
+        return math.nan
+    target = math.log(d1 / d2)
+
+    def gap(p):
+        return math.log((h[0] ** p - h[1] ** p) / (h[1] ** p - h[2] ** p)) - target
+
+    lo, hi = 0.05, 12.0
+    if gap(lo) * gap(hi) > 0:
+        return math.nan
+    return float(brentq(gap, lo, hi, xtol=1e-10))
+
+
+def richardson(h1: float, h2: float, q1, q2, p: float) -> np.ndarray:
+    """Richardson extrapolation to h = 0 of the answers ``q1``, ``q2`` on meshes of sizes
+    ``h1 > h2`` (mm) with order ``p``."""
+    q1, q2 = np.asarray(q1, float), np.asarray(q2, float)
+    return q2 + (q2 - q1) * h2**p / (h1**p - h2**p)
+
+
+def noise_sd(n_snapshots: int, n_points: int) -> np.ndarray:
+    """Noise standard deviation of each entry of the measurement vector (mm or kN)."""
+    b = layout.blocks(n_snapshots, n_points)
+    sd = np.empty(layout.size(n_snapshots, n_points))
+    sd[b["displacement"]] = SIGMA_DISPLACEMENT_MM
+    sd[b["force"]] = SIGMA_FORCE_KN
+    return sd
+
+
+def extrapolate(h, values, n_snapshots: int, n_points: int) -> dict:
+    """Observed orders and the Richardson-extrapolated measurement vector of the last three
+    members of a family.
+
+    h      : (k >= 3,) element sizes, mm, coarse to fine
+    values : (k, 2 N m + N) measurement vectors at the same parameters
+
+    Returns ``order_field`` (from the norm of the front-face displacement differences),
+    ``order_force`` (force at the last snapshot), ``orders_field_all`` (every triple),
+    ``values`` (the extrapolated vector: displacements with the field order, forces with the force
+    order, each clipped to :data:`ORDER_RANGE`; the finest member where an order is nan) and
+    ``finest_error_sigma`` (RMS front-face distance of the finest member to the extrapolation, in
+    sigma: Richardson's estimate of its own error).
+    """
+    h = np.asarray(h, float)
+    v = np.asarray(values, float)
+    if len(h) < 3 or v.shape[0] != len(h):
+        raise ValueError(f"extrapolation needs >= 3 meshes with answers, got {len(h)}")
+    b = layout.blocks(n_snapshots, n_points)
+    disp, force = b["displacement"], b["force"]
+    triples = [slice(i, i + 3) for i in range(len(h) - 2)]
+    orders_field = [observed_order(h[t], v[t, disp]) for t in triples]
+    orders_force = [observed_order(h[t], v[t, force][:, -1]) for t in triples]
+    p_u, p_f = orders_field[-1], orders_force[-1]
+    out = v[-1].copy()
+    for sl, p in ((disp, p_u), (force, p_f)):
+        if np.isfinite(p):
+            out[sl] = richardson(
+                h[-2], h[-1], v[-2, sl], v[-1, sl], float(np.clip(p, *ORDER_RANGE))
+            )
+    return {
+        "order_field": p_u,
+        "order_force": p_f,
+        "orders_field_all": orders_field,
+        "orders_force_all": orders_force,
+        "values": out,
+        "finest_error_sigma": errors(v[-1], out, n_snapshots, n_points)["rms_sigma"],
+    }
+
+
+def errors(values, reference, n_snapshots: int, n_points: int) -> dict:
+    """A mesh's answer against a reference measurement vector: ``rms_sigma`` (RMS front-face
+    displacement error, both components and every snapshot, in sigma), ``force_rms_sigma`` (RMS
+    force error over the snapshots, in sigma = kN) and ``force_last_pct`` (force error at the last
+    snapshot, %)."""
+    v, ref = np.asarray(values, float), np.asarray(reference, float)
+    b = layout.blocks(n_snapshots, n_points)
+    du = v[b["displacement"]] - ref[b["displacement"]]
+    df = v[b["force"]] - ref[b["force"]]
+    return {
+        "rms_sigma": float(np.sqrt(np.mean(du**2)) / SIGMA_DISPLACEMENT_MM),
+        "force_rms_sigma": float(np.sqrt(np.mean(df**2)) / SIGMA_FORCE_KN),
+        "force_last_pct": float(100.0 * df[-1] / ref[b["force"]][-1]),
+    }
+
+
+def linearised_bias(jacobian, residual, sd, x_ref) -> np.ndarray:
+    """Relative Gauss-Newton step dx / x_ref (fractions) from ``x_ref`` for a residual
+    ``residual`` = model - data (m,) with exact Jacobian ``jacobian`` (m, n) and noise ``sd`` (m,):
+    dx = -(J^T W J)^-1 J^T W r, W = diag(sd^-2), solved by least squares on the whitened,
+    column-scaled system (columns scaled by x_ref for conditioning)."""
+    x_ref = np.asarray(x_ref, float)
+    A = np.asarray(jacobian, float) * x_ref[None, :] / np.asarray(sd, float)[:, None]
+    rhs = np.asarray(residual, float) / np.asarray(sd, float)
+    dz, *_ = np.linalg.lstsq(A, -rhs, rcond=None)
+    return dz
