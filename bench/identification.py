@@ -227,6 +227,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     )
     from problems.inverse.cases import get_case
     from problems.inverse.model_error import one_point
+    from problems.inverse.plausibility import warn_data, warn_result
     from problems.inverse.starts import start_point
     from solvers import solve
     from solvers.corrected import solve_iterated
@@ -252,6 +253,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
             **jacobian_options(spec.method, spec.options, spec.jacobian),
         )
     data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
+    warn_data(data)  # wrong units, all zero: before any run (problems/inverse/plausibility.py)
     requested = spec.treatment
     spec = with_default_treatment(spec, data.settings.tier)
     region = Region(spec.plate_margin_mm)
@@ -346,9 +348,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         "jacobian": spec.jacobian,
         "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
     }
-    from problems.inverse.plausibility import warn_implausible
-
-    warn_implausible(case, data, region, result)  # wrong units, cost, bounds: with the numbers
+    warn_result(case, data, region, result)  # a cost far above the data's size, bounds
     return replace(result, provenance=provenance)
 
 

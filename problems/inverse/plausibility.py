@@ -15,7 +15,8 @@ them in its record's ``warnings``): :func:`data_warnings` (all zero, displacemen
 the plate's, a force no concrete can carry, points on a sliver of the face) and
 :func:`result_warnings` (a final cost >= :data:`COST_FACTOR` x the number of data, which it
 should be close to when model and data agree to the data's noise; parameters on a bound).
-:func:`warn_implausible` issues both for a finished FE identification.
+An FE identification issues the first with :func:`warn_data` before it runs and the second with
+:func:`warn_result` when it has finished.
 
 Units: mm, kN, MPa (= N/mm^2).
 """
@@ -144,12 +145,19 @@ def n_data(data, region) -> int:
     return int(np.isfinite(data.std_u_mm[:, :, keep]).sum()) + len(data.reaction_kN)
 
 
-def warn_implausible(case, data, region, result) -> list[str]:
-    """Issue a :class:`PlausibilityWarning` for each of :func:`data_warnings` and
-    :func:`result_warnings` of an FE identification; returns the messages."""
-    messages = data_warnings(data) + result_warnings(
-        result, n_data(data, region), case.lower, case.upper
-    )
+def warn_data(data) -> list[str]:
+    """Issue a :class:`PlausibilityWarning` for each of :func:`data_warnings` (before any run);
+    returns the messages."""
+    return _warn(data_warnings(data))
+
+
+def warn_result(case, data, region, result) -> list[str]:
+    """Issue a :class:`PlausibilityWarning` for each of :func:`result_warnings` of a finished FE
+    identification of ``case`` on ``data`` in ``region``; returns the messages."""
+    return _warn(result_warnings(result, n_data(data, region), case.lower, case.upper))
+
+
+def _warn(messages: list[str]) -> list[str]:
     for message in messages:
-        warnings.warn(PlausibilityWarning(message), stacklevel=2)
+        warnings.warn(PlausibilityWarning(message), stacklevel=3)
     return messages
