@@ -127,13 +127,13 @@ def add_arguments(p) -> None:
 def time_stored(args) -> int:
     """``--time``: the evaluation costs of a stored surrogate, measured now."""
     import json
-    from pathlib import Path
 
     import numpy as np
 
     from bench.surrogate_run import load_for
     from problems.inverse.data import get_data, load
     from problems.inverse.forward import FEForwardModel
+    from problems.io.atomic import atomic_write_text
     from problems.surrogate.validation import time_evaluations
 
     sur = load_for(args.out or "default", args.case, args.mesh)
