@@ -166,6 +166,8 @@ def test_plastic_cube_runs_to_1_5_mm_and_agrees_with_a_fine_8_node_mesh():
 
 @pytest.mark.parametrize("name", ["linear-compression", "exponent-tension"])
 def test_ddm_sensitivities_match_central_differences(name):
+    """Every material parameter, relative step 1e-5 (measured 1e-10 to 8e-10 on
+    linear-compression; 1e-9 to 2e-8 at 1e-4, so truncation is below the bound)."""
     from problems.materials.drucker_prager import make_material
 
     case, mat = _case(name)
