@@ -114,12 +114,19 @@ def run_femubench(method: str, function: int, instance: int, seed: int, budget: 
     }
 
 
+def _defaults(options: dict) -> dict:
+    """``{name: default}`` of a method's declared options (solvers.options.Option)."""
+    return {
+        k: getattr(v, "default", v[0] if isinstance(v, tuple) else v) for k, v in options.items()
+    }
+
+
 def _cma(f, x0, seed, budget):
     import cma
 
     from solvers.cma_ import CMA_OPTIONS
 
-    d = {k: v[0] for k, v in CMA_OPTIONS.items()}
+    d = _defaults(CMA_OPTIONS)
     cma.fmin2(
         f,
         x0,
@@ -158,14 +165,14 @@ def _pymoo(kind):
         if kind == "de":
             from pymoo.algorithms.soo.nonconvex.de import DE
 
-            d = {k: v[0] for k, v in DE_OPTIONS.items()}
+            d = _defaults(DE_OPTIONS)
             alg = DE(pop_size=d["pop_size"], variant=d["variant"], CR=d["CR"], F=d["F"])
         else:
             from pymoo.algorithms.soo.nonconvex.ga import GA
             from pymoo.operators.crossover.sbx import SBX
             from pymoo.operators.mutation.pm import PM
 
-            d = {k: v[0] for k, v in GA_OPTIONS.items()}
+            d = _defaults(GA_OPTIONS)
             alg = GA(
                 pop_size=d["pop_size"],
                 crossover=SBX(prob=d["crossover_prob"], eta=d["crossover_eta"]),
@@ -186,7 +193,7 @@ def _pso(f, x0, seed, budget):
     with mock.patch.object(logging.config, "dictConfig", lambda config: None):
         from pyswarms.single import GlobalBestPSO
 
-    d = {k: v[0] for k, v in PSO_OPTIONS.items()}
+    d = _defaults(PSO_OPTIONS)
     np.random.seed(seed)  # pyswarms draws from NumPy's global generator
     clamp = d["velocity_clamp"] * (HI - LO)
     with mock.patch.object(logging.config, "dictConfig", lambda config: None):
@@ -229,7 +236,7 @@ def _nlopt(name):
         opt.set_upper_bounds(np.full(DIM, HI))
         opt.set_maxeval(budget)
         if "MLSL" in full:
-            d = {k: v[0] for k, v in MLSL_OPTIONS.items()}
+            d = _defaults(MLSL_OPTIONS)
             local = nlopt.opt(algorithm_code(d["local"])[0], DIM)
             local.set_xtol_rel(d["local_xtol_rel"])
             local.set_ftol_rel(d["local_ftol_rel"])
