@@ -65,10 +65,40 @@ class WorkerClientMapper:
 
 
 @contextlib.contextmanager
+def sigint_ignored() -> Iterator[None]:
+    """Ignore SIGINT while worker processes start, so that they inherit that (a terminal's
+    Ctrl-C reaches the whole process group): the parent alone handles it, closes the workers and
+    says so in one line, instead of every worker printing a traceback. A no-op outside the main
+    thread."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def cap_workers(workers: int | None) -> int:
+    """Local worker processes for ``workers`` (None: one per core), capped at the cores."""
+    try:
+        cores = max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        cores = max(1, os.cpu_count() or 1)
+    return cores if workers is None else max(1, min(workers, cores))
+
+
+@contextlib.contextmanager
 def cluster(workers: int | None = None, scheduler: str | None = None) -> Iterator:
     """A Dask client: connect to ``scheduler`` or start a local cluster of ``workers`` processes.
 
-    ``workers=None`` means one per core. Yields ``None`` for ``workers == 1`` (run in-process).
+    ``workers=None`` means one per core, and more than the cores are capped at the cores
+    (:func:`cap_workers`). Yields ``None`` for ``workers == 1`` (run in-process). The workers
+    ignore Ctrl-C (:func:`sigint_ignored`).
     """
     if workers is not None and workers < 1:
         raise ValueError(f"workers = {workers} is out of range: must be >= 1")
@@ -85,17 +115,15 @@ def cluster(workers: int | None = None, scheduler: str | None = None) -> Iterato
             client.close()
         return
     os.environ.update(SINGLE_THREAD_ENV)  # inherited by the worker processes
-    n = workers or os.cpu_count() or 1
-    with (
-        LocalCluster(
-            n_workers=n,
+    with sigint_ignored():
+        lc = LocalCluster(
+            n_workers=cap_workers(workers),
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
             silence_logs=logging.ERROR,
-        ) as lc,
-        Client(lc) as client,
-    ):
+        )
+    with lc, Client(lc) as client:
         yield client
 
 

@@ -4,10 +4,14 @@
   raises — any exception becomes a record with ``status == "failed"`` and the traceback in the
   message (and in ``record["error"]``), so one crash never takes a suite down.
 * :func:`run_suite` skips every run that already has a record in ``DIR/runs/`` and runs the
-  rest (a record file that cannot be read is moved into ``DIR/runs/corrupt/``, logged, and its
-  run runs again): ``workers=1`` in a plain loop in this process (debugging, profiling), otherwise
-  on a Dask ``LocalCluster`` of ``workers`` single-threaded worker processes (default: one per core,
-  BLAS/OpenMP pinned to one thread), or on an existing cluster given by ``scheduler``.
+  rest (a record file that cannot be read, or whose content or config does not match, is moved
+  into ``DIR/runs/corrupt/``, one made on other data than today's into ``DIR/runs/stale/``; both
+  are logged and their runs run again); it writes ``DIR/<suite>.plan.json`` (every planned run)
+  for the report. Runs go with ``workers=1`` in a plain loop in this process (debugging,
+  profiling), otherwise on a Dask ``LocalCluster`` of ``workers`` single-threaded worker processes
+  (default: one per core; capped at the cores and the pending runs; BLAS/OpenMP pinned to one
+  thread; Ctrl-C ignored, the client handles it), or on an existing cluster given by
+  ``scheduler``.
   Records are written by this process (the client) as runs complete, atomically, so a
   ``kill -9`` at any moment loses at most the runs in flight and never leaves half a record.
 
@@ -36,13 +40,15 @@ from typing import Any, Callable
 from bench import store
 
 # thread pinning for every worker process
-from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper
+from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper, cap_workers, sigint_ignored
 from bench.suite import RunConfig, Suite, config_hash
 
 log = logging.getLogger("femubench.runner")
 
 #: Distinct warnings kept per record.
 MAX_WARNINGS = 20
+#: Format tag of ``DIR/<suite>.plan.json`` (:func:`write_plan`).
+PLAN_FORMAT = "femubench-plan/1"
 #: Packages whose versions go into every record.
 VERSIONED = (
     "femubench",
@@ -394,6 +400,9 @@ class SuiteSummary:
     log_file: Path | None = None
     failures: list[str] = field(default_factory=list)
     set_aside: list[Path] = field(default_factory=list)
+    stale: list[Path] = field(default_factory=list)
+    #: labels of the runs skipped now whose record is a crash (rerun with ``retry_failed``)
+    crashed_before: list[str] = field(default_factory=list)
 
     def __str__(self) -> str:
         text = (
@@ -406,14 +415,17 @@ class SuiteSummary:
                 f"; {len(self.set_aside)} unreadable record(s) moved to "
                 f"{store.corrupt_dir(self.out_dir)} (their runs were run again)"
             )
+        if self.stale:
+            text += (
+                f"; {len(self.stale)} record(s) made on other data moved to "
+                f"{store.runs_dir(self.out_dir) / store.STALE} (their runs were run again)"
+            )
         return text
 
 
 def default_workers() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover
-        return max(1, os.cpu_count() or 1)
+    """One worker per core this process may use."""
+    return cap_workers(None)
 
 
 @contextmanager
@@ -455,15 +467,93 @@ def pending_runs(
     suite: Suite, out_dir: str | Path, *, force: bool = False, retry_failed: bool = False
 ):
     """``(all_runs, pending)``: the suite's runs and those to run now (no readable record yet, or
-    all of them with ``force``, or also the crashed ones with ``retry_failed``)."""
+    a record made on other data than today's (:func:`stale_records`), or all of them with
+    ``force``, or also the crashed ones with ``retry_failed``)."""
     runs = suite.runs()
     if force:
         return runs, list(runs)
     done = {rec["config_hash"]: rec for rec in store.scan_records(out_dir)[0]}
+    for rec, _ in stale_records(runs, done):
+        del done[rec["config_hash"]]
     pending = [r for r in runs if config_hash(r) not in done]
     if retry_failed:
         pending += [r for r in runs if done.get(config_hash(r), {}).get("error")]
     return runs, pending
+
+
+def crashed_records(runs: list[RunConfig], pending: list[RunConfig], out_dir) -> list[str]:
+    """Labels of the runs not in ``pending`` whose record in ``out_dir`` is a crash."""
+    crashed = {r["config_hash"] for r in store.scan_records(out_dir)[0] if r.get("error")}
+    todo = {config_hash(r) for r in pending}
+    return [r.label for r in runs if config_hash(r) in crashed - todo]
+
+
+def current_data_hash(config: RunConfig) -> str | None:
+    """The hash of the data set ``config`` would use today (its file, which
+    ``$FEMUBENCH_DATA_DIR`` may change), or None: no data set (analytic case, user problem) or
+    none on disk yet (it will be made from the run's settings, as the record's was)."""
+    if config.problem or is_analytic(config.case):
+        return None
+    from problems.inverse.data import data_path, load, tier_settings
+
+    path = data_path(
+        config.case, tier_settings(config.tier, inverse_mesh=config.mesh, **config.data)
+    )
+    try:
+        return load(path).hash
+    except (OSError, ValueError):  # missing or torn: made (or reported) when the run runs
+        return None
+
+
+def stale_records(runs: list[RunConfig], done: dict[str, dict]) -> list[tuple[dict, str]]:
+    """``(record, reason)`` of every record in ``done`` (by config hash) of one of ``runs`` that
+    was made on other data than the run would use today (its ``data_hash`` differs from
+    :func:`current_data_hash`; a record without ``data_hash`` is accepted)."""
+    today: dict = {}
+    out = []
+    for cfg in runs:
+        rec = done.get(config_hash(cfg))
+        if rec is None or not rec.get("data_hash"):
+            continue
+        key = data_key(cfg)
+        if key not in today:
+            today[key] = current_data_hash(cfg)
+        if today[key] is not None and today[key] != rec["data_hash"]:
+            out.append(
+                (rec, f"made on data {rec['data_hash'][:12]}, today's data is {today[key][:12]}")
+            )
+    return out
+
+
+def set_aside_stale(runs: list[RunConfig], out_dir: Path) -> list[Path]:
+    """Move the records of ``runs`` made on other data than today's into ``DIR/runs/stale/``
+    (logged; only call while holding the directory lock); return their new paths."""
+    done = {rec["config_hash"]: rec for rec in store.scan_records(out_dir)[0]}
+    moved = []
+    for rec, why in stale_records(runs, done):
+        new = store.set_aside(store.record_path(out_dir, rec["config_hash"]), store.STALE)
+        log.warning("record %s %s: moved to %s, its run runs again", new.name, why, new.parent)
+        moved.append(new)
+    return moved
+
+
+def write_plan(suite: Suite, runs: list[RunConfig], out_dir: Path) -> Path:
+    """Write ``DIR/<suite>.plan.json``: the config hash and label of every planned run, so that a
+    report can say which runs are missing (:mod:`bench.report.completeness`)."""
+    from problems.io.jsonio import dumps
+
+    doc = {
+        "format": PLAN_FORMAT,
+        "suite": suite.name,
+        "runs": [{"hash": config_hash(r), "label": r.label} for r in runs],
+    }
+    return store.atomic_write_text(out_dir / f"{suite.name}.plan.json", dumps(doc, indent=0) + "\n")
+
+
+def worker_count(workers: int | None, n_pending: int) -> int:
+    """Worker processes of a local cluster: ``workers`` (default: one per core) capped at the
+    cores and at the pending runs (at least 1)."""
+    return max(1, min(cap_workers(workers), n_pending))
 
 
 def set_aside_unreadable(out_dir: Path) -> list[Path]:
@@ -503,7 +593,9 @@ def run_suite(
         log_file = out_dir / f"{suite.name}.log"
         with _suite_log(log_file):
             set_aside = set_aside_unreadable(out_dir)
+            stale = [] if force else set_aside_stale(suite.runs(), out_dir)
             runs, pending = pending_runs(suite, out_dir, force=force, retry_failed=retry_failed)
+            write_plan(suite, runs, out_dir)
             summary = SuiteSummary(
                 suite.name,
                 out_dir,
@@ -512,14 +604,22 @@ def run_suite(
                 removed_tmp=removed,
                 log_file=log_file,
                 set_aside=set_aside,
+                stale=stale,
+                crashed_before=crashed_records(runs, pending, out_dir),
             )
             if removed:
                 log.warning(
                     "removed %d stray temporary file(s) left by an interrupted run", removed
                 )
-            n_workers = (
-                workers if workers is not None else min(default_workers(), max(1, len(pending)))
-            )
+            n_workers = worker_count(workers, len(pending))
+            if workers is not None and n_workers < workers and scheduler is None:
+                log.info(
+                    "--workers %d capped at %d (%d cores, %d pending runs)",
+                    workers,
+                    n_workers,
+                    default_workers(),
+                    len(pending),
+                )
             where = scheduler or (
                 "in-process" if n_workers == 1 else f"local cluster of {n_workers} workers"
             )
@@ -669,14 +769,15 @@ def _run_dask(
 
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=n_workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=":0",
-            env=dict(SINGLE_THREAD_ENV),
-            silence_logs=logging.ERROR,
-        )
+        with sigint_ignored():  # Ctrl-C stops this process, which closes the workers quietly
+            cluster = LocalCluster(
+                n_workers=n_workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",
+                env=dict(SINGLE_THREAD_ENV),
+                silence_logs=logging.ERROR,
+            )
         client = Client(cluster)
     else:
         try:

@@ -7,8 +7,14 @@ and lives in ``DIR/runs/<hash>.json``. It is written to a temporary file in the 
 none. Stray ``*.tmp`` files left by a killed writer are ignored by the loaders and removed by
 :func:`clean_tmp` (which the runner calls while holding the directory lock).
 
+A record carries ``digest``, the sha256 of its canonical JSON without that field
+(:func:`record_digest`); a reader recomputes it, and recomputes the hash of the record's
+``config`` (it must be the file name). Records written before digests existed have none and are
+read as they are (their config is still checked).
+
 A record file that cannot be read as a record (truncated, empty, not JSON, JSON of the wrong
-shape, or named after another hash) counts as missing: the loaders skip it and return it in
+shape, a config that does not hash to the file name, or a content hash that does not match: a
+record changed after it was written) counts as missing: the loaders skip it and return it in
 :func:`scan_records`'s ``unreadable`` list, and the runner moves it into ``DIR/runs/corrupt/``
 (as ``<hash>.json.corrupt-<UTC time>``, see :func:`set_aside_unreadable`) before running its
 run again.
@@ -27,10 +33,16 @@ Record (JSON object)::
     machine      {hostname, platform, python, cpu_count, ...}
     started      ISO-8601 UTC time
     finished     ISO-8601 UTC time
+    digest       str, sha256 of the canonical JSON of the record without this field
+
+A record whose ``data_hash`` differs from the hash of the data set the run would use today (e.g.
+another ``FEMUBENCH_DATA_DIR``) is stale: the runner moves it into ``DIR/runs/stale/`` and runs it
+again (a record without ``data_hash`` is accepted).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import math
@@ -46,6 +58,10 @@ RECORD_SCHEMA = 1
 RUNS = "runs"
 #: Sub-folder of ``DIR/runs`` holding the unreadable records the runner moved aside.
 CORRUPT = "corrupt"
+#: Sub-folder of ``DIR/runs`` holding the records made on other data than today's.
+STALE = "stale"
+#: The record field holding its content hash (:func:`record_digest`).
+DIGEST = "digest"
 #: Keys the ``config`` of a record must have.
 CONFIG_KEYS = ("case", "method", "seed", "start", "start_index", "budget")
 
@@ -67,10 +83,23 @@ def corrupt_dir(out_dir: str | Path) -> Path:
     return runs_dir(out_dir) / CORRUPT
 
 
+def _canonical(record: dict[str, Any]) -> str:
+    """The canonical JSON of a record without its ``digest`` (what the digest covers)."""
+    body = {k: v for k, v in record.items() if k != DIGEST}
+    return json.dumps(jsonio.encode(body), sort_keys=True, separators=(",", ":"))
+
+
+def record_digest(record: dict[str, Any]) -> str:
+    """sha256 of the record's canonical JSON, its ``digest`` field left out."""
+    return hashlib.sha256(_canonical(record).encode()).hexdigest()
+
+
 def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:
-    """Write one record atomically to ``DIR/runs/<config_hash>.json``; return its path."""
+    """Write one record atomically to ``DIR/runs/<config_hash>.json`` with its content hash
+    (``digest``, :func:`record_digest`); return its path."""
     h = record["config_hash"]
     path = record_path(out_dir, h)
+    record = {**record, DIGEST: record_digest(record)}
     atomic_write_text(
         path, json.dumps(jsonio.encode(record), sort_keys=True, separators=(",", ":")) + "\n"
     )
@@ -113,6 +142,17 @@ def check_record(rec, config_hash: str) -> None:
     missing = [k for k in CONFIG_KEYS if k not in config]
     if missing:
         raise ValueError(f"config lacks {', '.join(missing)}")
+    from bench.suite import RunConfig
+    from bench.suite import config_hash as hash_of
+
+    try:
+        actual = hash_of(RunConfig.from_dict(config))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"config cannot be read ({type(exc).__name__}: {exc})") from None
+    if actual != config_hash:
+        raise ValueError(f"config does not match the file name (its hash is {actual[:12]})")
+    if DIGEST in rec and rec[DIGEST] != record_digest(rec):
+        raise ValueError("content hash mismatch (the record was changed after it was written)")
 
 
 def has_record(out_dir: str | Path, config_hash: str) -> bool:
@@ -177,12 +217,12 @@ def done_hashes(out_dir: str | Path) -> set[str]:
     return {rec["config_hash"] for rec in scan_records(out_dir)[0]}
 
 
-def set_aside(path: Path) -> Path:
-    """Move the record file ``path`` into ``runs/corrupt/<name>.corrupt-<UTC time>``; return the new
-    path."""
-    dest_dir = path.parent / CORRUPT
+def set_aside(path: Path, folder: str = CORRUPT) -> Path:
+    """Move the record file ``path`` into ``runs/<folder>/<name>.<folder>-<UTC time>`` (folder
+    :data:`CORRUPT` or :data:`STALE`); return the new path."""
+    dest_dir = path.parent / folder
     dest_dir.mkdir(exist_ok=True)
-    stem = f"{path.name}.corrupt-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    stem = f"{path.name}.{folder}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
     dest, n = dest_dir / stem, 1
     while dest.exists():
         dest, n = dest_dir / f"{stem}-{n}", n + 1
@@ -196,9 +236,10 @@ def set_aside_unreadable(out_dir: str | Path) -> list[tuple[Path, Path, str]]:
     return [(p, set_aside(p), why) for p, why in scan_records(out_dir)[1]]
 
 
-def set_aside_files(out_dir: str | Path) -> list[Path]:
-    """The unreadable record files moved aside so far (``DIR/runs/corrupt/``)."""
-    d = corrupt_dir(out_dir)
+def set_aside_files(out_dir: str | Path, folder: str = CORRUPT) -> list[Path]:
+    """The record files moved aside so far: unreadable ones (``DIR/runs/corrupt/``), or with
+    ``folder=STALE`` those made on other data (``DIR/runs/stale/``)."""
+    d = runs_dir(out_dir) / folder
     return sorted(p for p in d.iterdir() if p.is_file()) if d.is_dir() else []
 
 

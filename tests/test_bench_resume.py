@@ -47,7 +47,7 @@ def _comparable_records(out_dir):
     out = {}
     for rec in store.load_records(out_dir):
         rec = json.loads(json.dumps(rec))
-        for key in ("started", "finished", "machine", "versions"):
+        for key in ("started", "finished", "machine", "versions", "digest"):  # digest: of all
             rec.pop(key)
         rec["result"].pop("wall_s")
         for row in rec["result"].get("history", []):

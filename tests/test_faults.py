@@ -256,3 +256,18 @@ def test_surrogate_files_are_written_as_one_unit(surrogate, tmp_path, monkeypatc
     npz.write_bytes(npz.read_bytes()[:100])
     with pytest.raises(ValueError, match=f"{npz} is torn"):
         sstore.load(folder)
+
+
+def test_atomic_writes_keep_permissions_not_private_temporaries(tmp_path):
+    mask = os.umask(0o022)
+    try:
+        new = atomic.atomic_write_text(tmp_path / "new.json", "{}")
+        assert new.stat().st_mode & 0o777 == 0o644  # not mkstemp's 0600
+        new.chmod(0o640)
+        atomic.atomic_write_text(new, "{1}")
+        assert new.stat().st_mode & 0o777 == 0o640  # a replacement keeps the file's mode
+        with atomic.atomic_dir(tmp_path / "d") as tmp:
+            (tmp / "a").write_text("1")
+        assert (tmp_path / "d").stat().st_mode & 0o777 == 0o755  # not mkdtemp's 0700
+    finally:
+        os.umask(mask)

@@ -17,7 +17,8 @@ def add_arguments(parser) -> None:
         metavar="DIR",
         default=None,
         type=output_dir,
-        help="results directory (default: results/<suite name>)",
+        help="results directory (default: <results root>/<suite name>: $FEMUBENCH_RESULTS_DIR, "
+        "else the checkout's results/)",
     )
     add_cluster_arguments(parser)
     parser.add_argument(
@@ -26,7 +27,8 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--retry-failed",
         action="store_true",
-        help="also rerun the runs whose record is a crash (an exception)",
+        help="also rerun the runs whose record is a crash (an exception, or a worker that was "
+        "killed); a plain rerun keeps crash records",
     )
     parser.add_argument(
         "--fan-out",
@@ -46,8 +48,9 @@ def main(args) -> int:
     from pathlib import Path
 
     from bench.commands.identify import problem_spec
+    from bench.paths import results_root
     from bench.progress import enabled, warn_if_long
-    from bench.runner import pending_runs
+    from bench.runner import default_workers, pending_runs, worker_count
     from bench.suite import load_suite
     from problems.inverse.cases import get_case
 
@@ -55,8 +58,16 @@ def main(args) -> int:
     spec = problem_spec(args)
     if spec is not None:  # the suite's methods, budgets and seeds on this problem
         suite = suite.with_problem(spec["entry"].rpartition(":")[2], spec)
-    out = Path(args.out) if args.out else Path("results") / suite.name
+    out = Path(args.out) if args.out else results_root() / suite.name
     runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
+    if args.workers is not None and args.scheduler is None:
+        n = worker_count(args.workers, len(pending))
+        if n < args.workers:
+            print(
+                f"--workers {args.workers}: capped at {n} ({default_workers()} cores, "
+                f"{len(pending)} pending runs)",
+                file=sys.stderr,
+            )
     fe_evals = sum(
         r.polish_budget if r.track == "surrogate" else r.budget
         for r in pending
@@ -111,7 +122,17 @@ def main(args) -> int:
         print(
             f"{summary.crashed} run(s) crashed (see {summary.log_file}): "
             + ", ".join(summary.failures[:5])
-            + (" ..." if summary.crashed > 5 else ""),
+            + (" ..." if summary.crashed > 5 else "")
+            + "; rerun with --retry-failed to run them again",
             file=sys.stderr,
         )
-    return 0
+    if summary.crashed_before:
+        n = len(summary.crashed_before)
+        print(
+            f"{n} run(s) kept their crash record from an earlier run: "
+            + ", ".join(summary.crashed_before[:5])
+            + (" ..." if n > 5 else "")
+            + "; rerun with --retry-failed to run them again",
+            file=sys.stderr,
+        )
+    return 1 if summary.crashed or summary.crashed_before else 0

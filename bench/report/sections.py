@@ -14,6 +14,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench.report.completeness import section_completeness
+
 TABLE_FORMATS = ("md", "csv", "tex")
 
 
@@ -548,6 +550,7 @@ def section_data(rep: Report) -> list[str]:
 #: The sections of report.md in order.
 SECTIONS = (
     section_overview,
+    section_completeness,
     section_unreadable,
     section_findings,
     section_success,

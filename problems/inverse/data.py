@@ -502,13 +502,19 @@ def cached_path(case: str, settings: DataSettings) -> Path:
     return cache_dir() / f"{case}__{key}.json"
 
 
+def data_path(case: str, settings: DataSettings) -> Path:
+    """The file of the data set of ``case`` for ``settings``: the tier's default one
+    (:func:`default_path`) or the cache file (:func:`cached_path`)."""
+    if is_default(settings):
+        return default_path(case, settings.tier)
+    return cached_path(case, settings)
+
+
 def get_data(case: str, settings: DataSettings | None = None, *, progress: bool = False) -> Dataset:
     """The data set of ``case`` for ``settings`` (default: shipped), computed and cached if
     missing."""
     settings = settings or DataSettings()
-    path = (
-        default_path(case, settings.tier) if is_default(settings) else cached_path(case, settings)
-    )
+    path = data_path(case, settings)
     if path.exists():
         try:
             return load(path)

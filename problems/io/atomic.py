@@ -34,6 +34,21 @@ def _named(exc: OSError, path: Path) -> OSError:
     return type(exc)(exc.errno, exc.strerror or str(exc), str(path)) if exc.errno else exc
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _mode(path: Path, default: int) -> int:
+    """The permissions a replacement of ``path`` gets: those of the file it replaces, else
+    ``default`` less the umask (temporary files are created private, 0600/0700)."""
+    try:
+        return path.stat().st_mode & 0o7777
+    except OSError:
+        return default & ~_umask()
+
+
 def fsync_dir(folder: str | Path) -> None:
     """Make a rename in ``folder`` durable (no-op where folders cannot be fsync'ed)."""
     try:
@@ -58,6 +73,7 @@ def atomic_write(path: str | Path, write: Callable, *, binary: bool = True) -> P
     except OSError as exc:
         raise _named(exc, path) from None
     try:
+        os.fchmod(fd, _mode(path, 0o666))
         with (
             os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
         ) as fh:
@@ -107,6 +123,7 @@ def atomic_dir(final: str | Path) -> Iterator[Path]:
     except OSError as exc:
         raise _named(exc, final) from None
     try:
+        tmp.chmod(_mode(final, 0o777))
         yield tmp
         try:
             _replace_dir(tmp, final)
