@@ -262,13 +262,21 @@ def test_a_cost_far_above_the_data_size_and_bounds_are_flagged():
 
 
 @pytest.fixture(scope="module")
-def force_in_newton(tmp_path_factory):
-    """Consistent data of linear-compression on the 2,2,4 mesh with the force in N (x 1000)."""
+def small_data():
+    """Consistent data of linear-compression on the 2,2,4 mesh."""
+    from problems.inverse.data import make_data
+
+    return make_data("linear-compression", tier="consistent", mesh="2,2,4")
+
+
+@pytest.fixture(scope="module")
+def force_in_newton(tmp_path_factory, small_data):
+    """``small_data`` with the force in N (x 1000), and its file."""
     from dataclasses import replace
 
-    from problems.inverse.data import make_data, save
+    from problems.inverse.data import save
 
-    ds = make_data("linear-compression", tier="consistent", mesh="2,2,4")
+    ds = small_data
     bad = replace(ds, reaction_kN=ds.reaction_kN * 1e3)
     return bad, save(bad, tmp_path_factory.mktemp("data") / "newton.json")
 
@@ -380,3 +388,35 @@ def test_an_unwritable_output_folder_is_refused_before_the_computation(
         "not writable",
     )
     assert list(locked.iterdir()) == []
+
+
+def test_an_infinite_sigma_gives_its_value_no_weight(small_data):
+    """Infinite standard deviation = not measured (a failed DIC subset): no weight (it used to
+    stop every objective with "sigma must be positive and finite")."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from problems.inverse.build import build_objective
+
+    x = np.array([27000.0, 33.0, 0.9, 14.0, 21.0, 1400.0])  # off the reference: residuals != 0
+    full = build_objective("linear-compression", mesh="2,2,4", data=small_data)
+    ev_full = full.evaluate(x / full.reference)
+    std = small_data.std_u_mm.copy()
+    std[0, :, :3] = np.inf  # u_h of the first 3 points, every snapshot
+    part = build_objective(
+        "linear-compression", mesh="2,2,4", data=replace(small_data, std_u_mm=std)
+    )
+    ev_part = part.evaluate(x / part.reference)
+    n, m = std.shape[1], std.shape[2]
+    dropped = [k * m + j for k in range(n) for j in range(3)]  # u_h block first, snapshot-major
+    assert ev_part.cost == pytest.approx(ev_full.cost - np.sum(ev_full.residual[dropped] ** 2))
+    assert 0 < ev_part.cost < ev_full.cost
+    std[:] = np.inf  # and the force's: nothing measured
+    with pytest.raises(ValueError, match="sigma: .* all infinite"):
+        build_objective(
+            "linear-compression",
+            mesh="2,2,4",
+            data=replace(small_data, std_u_mm=std),
+            sigma_force_kN=np.inf,
+        )

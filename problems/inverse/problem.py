@@ -48,7 +48,9 @@ class LeastSquaresProblem:
     model      : the forward model (see :mod:`problems.inverse.protocol`)
     data       : (m,) measured vector ``U_E`` (same layout as the model's values)
     lower, upper, reference : (n,) physical bounds and reference values (reference != 0)
-    sigma      : scalar or (m,) standard deviations (diagonal covariance); default 1
+    sigma      : scalar or (m,) standard deviations (diagonal covariance); default 1; an
+                 infinite one gives its value no weight (a point not measured, e.g. a failed DIC
+                 subset)
     covariance : (m, m) full covariance (exclusive with ``sigma``)
     covariance_factor : (m, k) V of an added low-rank covariance ``V V^T`` (with ``sigma``)
     blocks     : names of slices of the measurement vector, for :meth:`split`
@@ -105,8 +107,12 @@ class LeastSquaresProblem:
                 if self.sigma is None
                 else np.broadcast_to(np.asarray(self.sigma, float), (m,)).copy()
             )
-            if np.any(s <= 0) or not np.all(np.isfinite(s)):
-                raise ValueError("sigma must be positive and finite")
+            if np.any(np.isnan(s) | (s <= 0)) or not np.isfinite(s).any():
+                bad = int(np.sum(np.isnan(s) | (s <= 0))) or m
+                raise ValueError(
+                    f"sigma: {bad} of {m} standard deviations are NaN, <= 0 or all infinite; "
+                    "allowed: > 0 (infinite: a value not measured, no weight), some finite"
+                )
             self._sigma = s
         self._lowrank = None
         if self.covariance_factor is not None:
