@@ -113,6 +113,7 @@ def write_suite(tmp_path, text: str | bytes, name: str = "s.toml") -> Path:
     "extra, case, needle",
     [
         ('mesh = "1,1,1"\n', "linear-compression", "NZ = 1"),
+        ('mesh = "200,200,400"\n', "linear-compression", "of memory"),
         ('tracks = ["fe", "surrogate"]\n', "analytic-linear", "surrogate track is for the FE"),
         ('tracks = ["surrogate"]\n', "linear-compression", "no default surrogate of"),
     ],
@@ -122,6 +123,7 @@ def test_a_suite_that_cannot_run_is_refused_before_any_work(
     capsys, tmp_path, monkeypatch, extra, case, needle, dry
 ):
     monkeypatch.setenv("FEMUBENCH_SURROGATE_DIR", str(tmp_path / "no-surrogates"))
+    monkeypatch.setenv("FEMUBENCH_MEMORY_BYTES", str(16e9))
     suite = write_suite(tmp_path, SUITE.format(case=case) + extra)
     out = tmp_path / "out"
     code = main(["run", str(suite), "--out", str(out), "--workers", "1", *(["--dry-run"] * dry)])

@@ -36,7 +36,7 @@ def add_arguments(p) -> None:
         type=positive_float,
         default=1.5,
         metavar="MM",
-        help="top-plate displacement, mm, > 0 (default 1.5)",
+        help="top-plate displacement, mm, > 0 and <= 10%% of the height: 15 (default 1.5)",
     )
     p.add_argument(
         "--snapshots",
