@@ -238,3 +238,48 @@ def test_ctrl_c_on_a_local_cluster_is_one_clean_line_and_exit_130(tmp_path):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
     assert "interrupted" in err
+
+
+# --- disk full while a record is written; a torn data cache -------------------------------
+
+
+def test_disk_full_during_a_run_names_the_record_path_and_leaves_nothing_torn(
+    tmp_path, capsys, monkeypatch
+):
+    import errno
+
+    from problems.io import atomic
+
+    def full(fh):
+        fh.write("{half a record")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def record_writer(path, text):  # the disk fills up when the first record is written
+        if path.parent.name == "runs":
+            return atomic.atomic_write(path, full, binary=False)
+        return atomic.atomic_write_text(path, text)
+
+    out = tmp_path / "res"
+    monkeypatch.setattr(store, "atomic_write_text", record_writer)
+    assert cli(["run", str(_suite(tmp_path)), "--out", str(out), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "[Errno 28] No space left on device" in err
+    assert f"{out / 'runs'}/" in err and ".json'" in err  # the record that could not be written
+    monkeypatch.undo()
+    assert store.scan_records(out) == ([], []) and store.stray_tmp(out) == []
+    assert cli(["run", str(_suite(tmp_path)), "--out", str(out), "--quiet", "--workers", "1"]) == 0
+    assert len(store.load_records(out)) == 3
+
+
+def test_a_torn_data_cache_is_set_aside_and_made_again(tmp_path, monkeypatch):
+    from problems.inverse import data as D
+
+    monkeypatch.setenv("FEMUBENCH_CACHE_DIR", str(tmp_path))
+    settings = D.tier_settings("consistent", seed=7)  # not the shipped settings: a cache
+    path = D.cached_path("linear-shear", settings)
+    made = D.get_data("linear-shear", D.tier_settings("consistent"))
+    path.write_text(made.to_json()[:500])  # killed while writing (before the atomic writer)
+    monkeypatch.setattr(D, "make_data", lambda *a, **k: made)
+    with pytest.warns(UserWarning, match=f"data file {path}.*moved to {path}.torn"):
+        assert D.get_data("linear-shear", settings).hash == made.hash
+    assert D.load(path).hash == made.hash and (tmp_path / f"{path.name}.torn").is_file()
