@@ -66,6 +66,7 @@ def test_identify_writes_run_result_plus_errors(tmp_path, capsys):
     doc = json.loads(out.read_text())
     errors = doc.pop("errors_percent")
     assert doc.pop("package_version") and doc.pop("iterations") == doc["n_iterations"]
+    assert doc.pop("warnings") == []  # plausibility warnings (FE cases only)
     res = RunResult.from_dict(doc)  # the rest is exactly a RunResult
     assert (
         res.n_evals <= 250
