@@ -67,6 +67,8 @@ class Identification:
     budget_unit      : ``evaluations`` (budget counts forward evaluations, ``n_evals``) or
                        ``forward-equivalents`` (nominal: a response + exact Jacobian counts the
                        model's ``jacobian_cost``; see problems/inverse/evaluator.py)
+    free_repeats     : repeated points served free (FE economy) instead of charged (every call
+                       counts, the default; see problems/inverse/evaluator.py)
     """
 
     case: str
@@ -89,6 +91,7 @@ class Identification:
     polish_budget: int = 60
     jacobian: str = "exact"
     budget_unit: str = "evaluations"
+    free_repeats: bool = False
 
     def __post_init__(self):
         if self.treatment not in TREATMENTS:
@@ -242,6 +245,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
             mapper=mapper,
             exact_jacobian=spec.jacobian == "exact",
             budget_unit=spec.budget_unit,
+            free_repeats=spec.free_repeats,
         )
         objective.observers.extend(observers)
         return solve(
@@ -284,6 +288,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
                 forward=forward,
                 exact_jacobian=spec.jacobian == "exact",
                 budget_unit=spec.budget_unit,
+                free_repeats=spec.free_repeats,
             )
             obj.observers.extend(observers)
             if forward is not None:

@@ -208,6 +208,8 @@ def identification_extras(config: RunConfig) -> dict[str, Any]:
         extra["jacobian"] = config.jacobian
     if config.budget_unit != "evaluations":
         extra["budget_unit"] = config.budget_unit
+    if config.free_repeats:
+        extra["free_repeats"] = True
     if config.track == "surrogate":
         extra.update(surrogate="default", polish=True, polish_budget=config.polish_budget)
     return extra

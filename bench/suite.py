@@ -73,6 +73,10 @@ SUITE_KEYS = {
     ),
     "budget_unit": '"evaluations" or "forward-equivalents" (nominal; default "evaluations")',
     "polish_budget": "FE evaluations of the polish after a surrogate-track run (default 100)",
+    "free_repeats": (
+        "true: repeated points are free (FE economy); default false: every call counts, repeats "
+        "included (COCO's rule)"
+    ),
 }
 PART_KEYS = tuple(k for k in SUITE_KEYS if k not in ("name", "description"))
 TOP_KEYS = ("suite", "part", "data", "options", "problems")
@@ -111,6 +115,7 @@ class RunConfig:
     budget_unit: str = "evaluations"
     polish_budget: int = 0
     problem: dict = field(default_factory=dict)
+    free_repeats: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """The configuration as a dict; the keys added after schema 2 appear only when they differ
@@ -179,6 +184,7 @@ _LATER_KEYS = {
     "budget_unit": "evaluations",
     "polish_budget": 0,
     "problem": {},
+    "free_repeats": False,
 }
 TRACKS = ("fe", "surrogate")
 JACOBIANS = ("exact", "forward", "central")
@@ -214,6 +220,7 @@ class Part:
     jacobians: tuple[str, ...] = ("exact",)
     budget_unit: str = "evaluations"
     polish_budget: int = 100
+    free_repeats: bool = False
 
     def runs(self, data: dict, options: dict, problems: dict | None = None) -> list[RunConfig]:
         """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
@@ -262,6 +269,7 @@ class Part:
                         budget_unit=self.budget_unit,
                         polish_budget=self.polish_budget if track == "surrogate" else 0,
                         problem=dict((problems or {}).get(case, {})),
+                        free_repeats=self.free_repeats,
                     )
                 )
         return out
@@ -819,6 +827,10 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
     if isinstance(polish_budget, bool) or not isinstance(polish_budget, int) or polish_budget < 1:
         err(f"[suite] polish_budget = {polish_budget!r} is out of range: a whole number >= 1")
         polish_budget = 100
+    free_repeats = s.get("free_repeats", False)
+    if not isinstance(free_repeats, bool):
+        err(f"[suite] free_repeats = {free_repeats!r} is not true/false")
+        free_repeats = False
     return dict(
         cases=tuple(cases),
         methods=tuple(methods),
@@ -834,6 +846,7 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
         jacobians=tuple(jacobians),
         budget_unit=budget_unit,
         polish_budget=int(polish_budget),
+        free_repeats=free_repeats,
     )
 
 

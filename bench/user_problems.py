@@ -59,7 +59,12 @@ def run_user(config, *, mapper=None, observers=()):
     from solvers import solve
 
     up = problem_of(config)
-    ev = Evaluator(up.problem, mapper=mapper, budget_unit=config.budget_unit)
+    ev = Evaluator(
+        up.problem,
+        mapper=mapper,
+        budget_unit=config.budget_unit,
+        free_repeats=getattr(config, "free_repeats", False),
+    )
     ev.observers.extend(observers)
     result = solve(
         ev,

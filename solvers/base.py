@@ -18,10 +18,13 @@ with :meth:`Run.record`, and returns an :class:`Outcome` (status, message, itera
   replayed; libraries that use NumPy's global generator are run inside :func:`isolated_global_rng`.
 
 ``x0`` is physical; ``None`` means the centre of the box (not the reference, which is the answer
-on the analytic problems). A start outside the box raises ``ValueError``.
+on the analytic problems; where a bound is infinite, the reference clipped into the box). A start
+outside the box raises ``ValueError``; a global or sampling method on a box with an infinite
+bound is refused (:func:`finite_box_error`).
 
 ``success`` is true when the status is ``"converged"``, and also for global and sampling methods
-when they stopped at their budget or generation limit (their normal end).
+when they stopped at their budget or generation limit (their normal end), except the
+least-squares hybrids of :data:`OPTIMALITY_TESTED` (converged only).
 """
 
 from __future__ import annotations
@@ -45,6 +48,40 @@ FAMILIES = ("local", "global", "sampling")
 #: (problems.user.ScalarProblem), whose cost is f itself
 LEAST_SQUARES_ONLY = ("lm", "lm-minpack", "trf", "gauss-newton", "multistart-lm", "pso+lm", "mcmc")
 STATUSES = ("converged", "budget", "max_iterations", "failed", "stalled")
+
+#: Methods whose status comes from the first-order test of :mod:`solvers.optimality`: their
+#: success is ``converged`` only, whatever their family (a multistart that spent its budget
+#: has not succeeded unless its best point passes the test)
+OPTIMALITY_TESTED = ("lm", "lm-minpack", "trf", "gauss-newton", "multistart-lm", "pso+lm")
+
+
+def finite_box_error(info: "MethodInfo", objective) -> str | None:
+    """Why ``info``'s method cannot run on ``objective``'s box, or None: the global and sampling
+    methods search or sample the box (uniform populations, Latin hypercubes, box-relative step
+    sizes), so they need every bound finite; the local methods work with infinite bounds
+    (``lm-minpack`` refuses finite ones itself)."""
+    if info.family == "local":
+        return None
+    lo, hi = np.asarray(objective.lower, float), np.asarray(objective.upper, float)
+    bad = ~(np.isfinite(lo) & np.isfinite(hi))
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad)[0])
+    return (
+        f"method {info.name!r} searches the box and needs finite bounds; "
+        f"{objective.names[i]} has [{lo[i]:g}, {hi[i]:g}] (use a local method: lm, trf, "
+        "lm-minpack, gauss-newton, nlopt:BOBYQA, ...)"
+    )
+
+
+def default_start(objective) -> np.ndarray:
+    """The physical start used when ``x0`` is None: the centre of the box where both bounds of a
+    parameter are finite, else its reference clipped into the box."""
+    lo, hi = objective.lower, objective.upper
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    with np.errstate(invalid="ignore"):
+        centre = 0.5 * (lo + hi)
+    return np.where(finite, centre, np.clip(objective.reference, lo, hi))
 
 
 @dataclass(frozen=True)
@@ -306,6 +343,9 @@ def solve(
             "scalar objective f(x): use a global or derivative-free method"
         )
     opts = resolve_options(info, options)
+    why = finite_box_error(info, objective)
+    if why:
+        raise ValueError(why)
     budget = int(budget)
     if budget < 1:
         raise ValueError(f"budget must be at least 1 forward evaluation, got {budget}")
@@ -314,12 +354,14 @@ def solve(
     seed = int(seed)
     obj = objective
     if x0 is None:
-        x0 = 0.5 * (obj.lower + obj.upper)
+        x0 = default_start(obj)
     x0 = np.asarray(x0, dtype=float).ravel()
     if x0.size != obj.n_params:
         raise ValueError(
             f"x0 has {x0.size} values, expected {obj.n_params} ({', '.join(obj.names)})"
         )
+    if not np.all(np.isfinite(x0)):
+        raise ValueError(f"x0 must be finite, got {x0.tolist()}")
     span = obj.upper - obj.lower
     if np.any(x0 < obj.lower - 1e-9 * span) or np.any(x0 > obj.upper + 1e-9 * span):
         raise ValueError(
@@ -362,7 +404,9 @@ def solve(
     else:
         x, cost = best.x.copy(), best.cost
     success = status == "converged" or (
-        info.family != "local" and status in ("budget", "max_iterations")
+        info.family != "local"
+        and info.name not in OPTIMALITY_TESTED
+        and status in ("budget", "max_iterations")
     )
     extra = {k: jsonio.plain(v) for k, v in out.extra.items()}
     if obj.n_jacobian_failures:

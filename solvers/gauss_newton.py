@@ -14,9 +14,12 @@ exact one, or one parallel batch of finite differences):
 With exact Jacobians the trial points of the line search are run with their Jacobians (the
 accepted point's is then at hand: one run per iteration when the full step is taken).
 
-Stops: relative cost decrease < ftol or relative step < xtol ("converged"), projected gradient
-< gtol ("converged"), no acceptable step after ``max_backtracks`` halvings ("stalled"),
-``max_iterations`` ("max_iterations").
+Stops: relative cost decrease < ftol or relative step < xtol, projected gradient < gtol, no
+acceptable step after ``max_backtracks`` halvings, ``max_iterations``. At every stop but the
+last the first-order test of :mod:`solvers.optimality` gives the status: ``"converged"`` when it
+passes at the returned point (the line search failing *at* the optimum, where no decrease is
+left to find, is convergence), else ``"stalled"``. After an accepted step the test uses the new
+residual with the last Jacobian (no extra evaluation; the step is small when the test matters).
 """
 
 from __future__ import annotations
@@ -24,8 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from solvers.base import Outcome, Run, register
+from solvers.optimality import data_cost, first_order
 from solvers.options import count, nonnegative, number
-from solvers.scipy_ import JAC_OPTIONS
+from solvers.scipy_ import JAC_OPTIONS, OPT_OPTION
 
 GN_OPTIONS = {
     **JAC_OPTIONS,
@@ -35,6 +39,7 @@ GN_OPTIONS = {
     "gtol": nonnegative(1e-12, "stop when the projected gradient's infinity norm is below gtol"),
     "c1": nonnegative(1e-4, "Armijo sufficient-decrease constant"),
     "max_backtracks": count(30, "maximum number of step halvings in the line search"),
+    **OPT_OPTION,
 }
 
 
@@ -57,12 +62,20 @@ def run_gauss_newton(r: Run) -> Outcome:
         return Outcome("failed", f"start point failed: {ev.message}")
     f, res = ev.cost, ev.residual
     r.record(z, f)
+    scale, tol = data_cost(obj), float(o["opt_tol"])
+
+    def verdict(why: str, z, res, J, it: int) -> Outcome:
+        opt = first_order(z, res, J, lo, hi, scale, tol)
+        extra = {"optimality_step": opt.step, "flat": opt.flat}
+        status = "converged" if opt.converged else "stalled"
+        return Outcome(status, f"{why}; {opt.message}", it, extra)
+
     for it in range(1, int(o["max_iterations"]) + 1):
         J = obj.jacobian(z, scheme=o["scheme"], rel_step=o["rel_step"], r0=res)
         g = 2.0 * J.T @ res
         pg = z - np.clip(z - g, lo, hi)
         if np.max(np.abs(pg)) <= o["gtol"]:
-            return Outcome("converged", "projected gradient below gtol", it - 1)
+            return verdict("projected gradient below gtol", z, res, J, it - 1)
         active = ((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0))
         free = ~active
         p = np.zeros_like(z)
@@ -80,13 +93,13 @@ def run_gauss_newton(r: Run) -> Outcome:
                 break
             alpha *= 0.5
         if accepted is None:
-            return Outcome("stalled", "line search found no sufficient decrease", it)
+            return verdict("line search found no sufficient decrease", z, res, J, it)
         zt, evt = accepted
         decrease, step = f - evt.cost, np.linalg.norm(zt - z)
         z, f, res = zt, evt.cost, evt.residual
         r.record(z, f, step_length=alpha)
         if decrease <= o["ftol"] * f:
-            return Outcome("converged", "relative cost decrease below ftol", it)
+            return verdict("relative cost decrease below ftol", z, res, J, it)
         if step <= o["xtol"] * (o["xtol"] + np.linalg.norm(z)):
-            return Outcome("converged", "relative step below xtol", it)
+            return verdict("relative step below xtol", z, res, J, it)
     return Outcome("max_iterations", f"{o['max_iterations']} iterations", int(o["max_iterations"]))

@@ -1,8 +1,10 @@
 """Hybrids a practitioner would use: ``multistart-lm`` and ``pso+lm``.
 
 ``multistart-lm``: LM from ``n_starts`` starts (the start point first if ``include_x0``, then a
-seeded Latin hypercube over the box); each start gets an equal share of what is left of the
-budget (a start that converges early leaves its unused share to the next ones).
+seeded Latin hypercube over the box); every start may use all that is left of the budget (a
+start that converges leaves the rest to the next ones; the first is never handicapped against a
+single ``lm`` run). Status and success are those of the best start (``converged`` only when its
+point passes the first-order test, :mod:`solvers.optimality`).
 
 ``pso+lm``: a short particle-swarm phase (``global_fraction`` of the budget) hands its best point
 to LM, which gets the rest.
@@ -15,12 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from problems.inverse.evaluator import BudgetExhausted
 from solvers.base import Outcome, Run, lhs, register
 from solvers.options import count, flag, fraction
 from solvers.pyswarms_ import PSO_OPTIONS
 from solvers.scipy_ import LM_OPTIONS
 
-_LM_KEYS = ("scheme", "rel_step", "ftol", "xtol", "gtol", "x_scale")
+_LM_KEYS = ("scheme", "rel_step", "ftol", "xtol", "gtol", "x_scale", "opt_tol")
 
 MULTISTART_OPTIONS = {
     "n_starts": count(5, "number of LM starts"),
@@ -54,11 +57,14 @@ def run_multistart(r: Run) -> Outcome:
     lm_opts = {key: o[key] for key in _LM_KEYS}
     summary, statuses = [], []
     for i, z0 in enumerate(starts):
-        share = int((r.budget - obj.spent) // (k - i))
+        share = int(r.budget - obj.spent)
         if share < 1:
             break
         log0, n0 = len(obj.log), obj.n_evals
-        out = r.sub("lm", z0, share, lm_opts, phase=f"lm[{i}]")
+        try:
+            out = r.sub("lm", z0, share, lm_opts, phase=f"lm[{i}]")
+        except BudgetExhausted as exc:  # the whole budget spent: this start ends, the run too
+            out = Outcome("budget", str(exc))
         cost, x = _best_in_log(obj, log0)
         summary.append(
             {
@@ -71,8 +77,8 @@ def run_multistart(r: Run) -> Outcome:
         )
         statuses.append(out.status)
     best = min(range(len(summary)), key=lambda j: summary[j]["cost"]) if summary else None
-    status = "converged" if best is not None and statuses[best] == "converged" else "max_iterations"
-    if obj.remaining == 0 and status != "converged":
+    status = "converged" if best is not None and statuses[best] == "converged" else "stalled"
+    if obj.remaining < 1 and status != "converged":
         status = "budget"
     return Outcome(
         status,

@@ -149,7 +149,7 @@ def _make_run(full: str):
                 raise pending[0] from None  # e.g. BudgetExhausted, handled by solve()
             if isinstance(exc, nlopt.RoundoffLimited):
                 return Outcome("stalled", "nlopt: roundoff limited", calls[0])
-            if not isinstance(exc, (RuntimeError, ValueError, SystemError)):
+            if not isinstance(exc, (RuntimeError, ValueError, SystemError, nlopt.exception)):
                 raise
             status = "failed" if obj.best is None else "stalled"
             return Outcome(status, f"nlopt: {type(exc).__name__} {exc}", calls[0])

@@ -1,2 +1,1 @@
-"""Standard test problems as user problems (:mod:`problems.user`): BBOB through ``cocoex``
-(:mod:`problems.benchmarks.bbob`) and NIST StRD nonlinear regression."""
+"""Standard problem families with certified or community reference answers (NIST StRD, ...)."""

@@ -114,6 +114,7 @@ def build_objective(
     forward=None,
     exact_jacobian: bool = True,
     budget_unit: str = "evaluations",
+    free_repeats: bool = False,
 ) -> Evaluator:
     """The evaluator (a solver's objective) of ``case`` with the FE model on ``mesh``.
 
@@ -130,6 +131,8 @@ def build_objective(
                  model-error data (the honesty rule)
     exact_jacobian : the model's exact Jacobians where it provides them (False: finite
                  differences with the solver's ``scheme``, as for models without them)
+    free_repeats : repeated points served free (FE economy) instead of charged (every call
+                 counts, the default; :class:`~problems.inverse.evaluator.Evaluator`)
     budget_unit : ``"evaluations"`` or ``"forward-equivalents"``: what a solver's budget counts
                  (:class:`~problems.inverse.evaluator.Evaluator`; forward-equivalents charge a
                  response + exact Jacobian the model's declared ``jacobian_cost``)
@@ -147,6 +150,7 @@ def build_objective(
             cache=evaluator.cache,
             exact_jacobian=exact_jacobian,
             budget_unit=budget_unit,
+            free_repeats=free_repeats,
         )
     ds = resolve_data(case, mesh, tier, data)
     if ds.case != case.name:
@@ -218,6 +222,7 @@ def build_objective(
         cache=cache,
         exact_jacobian=exact_jacobian,
         budget_unit=budget_unit,
+        free_repeats=free_repeats,
     )
     if correction is not None:
         evaluator.charge("hifi", correction.n_hifi, correction.hifi_wall_s)
