@@ -466,15 +466,23 @@ def _suite_log(path: Path):
 
 
 def pending_runs(
-    suite: Suite, out_dir: str | Path, *, force: bool = False, retry_failed: bool = False
+    suite: Suite,
+    out_dir: str | Path,
+    *,
+    force: bool = False,
+    retry_failed: bool = False,
+    records: list[dict] | None = None,
 ):
     """``(all_runs, pending)``: the suite's runs and those to run now (no readable record yet, or
     a record made on other data than today's (:func:`stale_records`), or all of them with
-    ``force``, or also the crashed ones with ``retry_failed``)."""
+    ``force``, or also the crashed ones with ``retry_failed``). ``records``: the readable
+    records of ``out_dir`` when the caller has them (default: scanned now)."""
     runs = suite.runs()
     if force:
         return runs, list(runs)
-    done = {rec["config_hash"]: rec for rec in store.scan_records(out_dir)[0]}
+    if records is None:
+        records = store.scan_records(out_dir)[0]
+    done = {rec["config_hash"]: rec for rec in records}
     for rec, _ in stale_records(runs, done):
         del done[rec["config_hash"]]
     pending = [r for r in runs if config_hash(r) not in done]
@@ -483,9 +491,9 @@ def pending_runs(
     return runs, pending
 
 
-def crashed_records(runs: list[RunConfig], pending: list[RunConfig], out_dir) -> list[str]:
-    """Labels of the runs not in ``pending`` whose record in ``out_dir`` is a crash."""
-    crashed = {r["config_hash"] for r in store.scan_records(out_dir)[0] if r.get("error")}
+def crashed_records(runs: list[RunConfig], pending: list[RunConfig], records) -> list[str]:
+    """Labels of the runs not in ``pending`` whose record (among ``records``) is a crash."""
+    crashed = {r["config_hash"] for r in records if r.get("error")}
     todo = {config_hash(r) for r in pending}
     return [r.label for r in runs if config_hash(r) in crashed - todo]
 
@@ -527,15 +535,17 @@ def stale_records(runs: list[RunConfig], done: dict[str, dict]) -> list[tuple[di
     return out
 
 
-def set_aside_stale(runs: list[RunConfig], out_dir: Path) -> list[Path]:
-    """Move the records of ``runs`` made on other data than today's into ``DIR/runs/stale/``
-    (logged; only call while holding the directory lock); return their new paths."""
-    done = {rec["config_hash"]: rec for rec in store.scan_records(out_dir)[0]}
+def set_aside_stale(runs: list[RunConfig], out_dir: Path, records: list[dict]) -> list[Path]:
+    """Move the records of ``runs`` (among ``records``, the readable records of ``out_dir``) made
+    on other data than today's into ``DIR/runs/stale/`` and drop them from ``records`` (logged;
+    only call while holding the directory lock); return their new paths."""
+    done = {rec["config_hash"]: rec for rec in records}
     moved = []
     for rec, why in stale_records(runs, done):
         new = store.set_aside(store.record_path(out_dir, rec["config_hash"]), store.STALE)
         log.warning("record %s %s: moved to %s, its run runs again", new.name, why, new.parent)
         moved.append(new)
+        records.remove(rec)
     return moved
 
 
@@ -558,10 +568,12 @@ def worker_count(workers: int | None, n_pending: int) -> int:
     return max(1, min(cap_workers(workers), n_pending))
 
 
-def set_aside_unreadable(out_dir: Path) -> list[Path]:
-    """Move the unreadable records of ``out_dir`` aside (logged); return their new paths."""
+def set_aside_unreadable(out_dir: Path, unreadable=None) -> list[Path]:
+    """Move the unreadable records of ``out_dir`` (``unreadable``: ``(path, reason)`` found by
+    :func:`bench.store.scan_records`, default: scanned now) aside (logged); return their new
+    paths."""
     moved = []
-    for old, new, why in store.set_aside_unreadable(out_dir):
+    for old, new, why in store.set_aside_unreadable(out_dir, unreadable):
         log.warning(
             "unreadable record %s (%s) moved to %s; its run counts as not done", old.name, why, new
         )
@@ -594,9 +606,12 @@ def run_suite(
             store.atomic_write_text(out_dir / f"{suite.name}.suite.toml", suite.source)
         log_file = out_dir / f"{suite.name}.log"
         with _suite_log(log_file):
-            set_aside = set_aside_unreadable(out_dir)
-            stale = [] if force else set_aside_stale(suite.runs(), out_dir)
-            runs, pending = pending_runs(suite, out_dir, force=force, retry_failed=retry_failed)
+            records, unreadable = store.scan_records(out_dir)  # read once
+            set_aside = set_aside_unreadable(out_dir, unreadable)
+            stale = [] if force else set_aside_stale(suite.runs(), out_dir, records)
+            runs, pending = pending_runs(
+                suite, out_dir, force=force, retry_failed=retry_failed, records=records
+            )
             write_plan(suite, runs, out_dir)
             summary = SuiteSummary(
                 suite.name,
@@ -607,7 +622,7 @@ def run_suite(
                 log_file=log_file,
                 set_aside=set_aside,
                 stale=stale,
-                crashed_before=crashed_records(runs, pending, out_dir),
+                crashed_before=crashed_records(runs, pending, records),
             )
             if removed:
                 log.warning(

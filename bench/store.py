@@ -230,10 +230,15 @@ def set_aside(path: Path, folder: str = CORRUPT) -> Path:
     return dest
 
 
-def set_aside_unreadable(out_dir: str | Path) -> list[tuple[Path, Path, str]]:
-    """Move every unreadable record of ``DIR/runs`` into ``DIR/runs/corrupt/`` (only call while no
-    writer is active: the runner's lock); return ``(old path, new path, reason)`` of each."""
-    return [(p, set_aside(p), why) for p, why in scan_records(out_dir)[1]]
+def set_aside_unreadable(
+    out_dir: str | Path, unreadable: list[tuple[Path, str]] | None = None
+) -> list[tuple[Path, Path, str]]:
+    """Move every unreadable record of ``DIR/runs`` (``unreadable``: those :func:`scan_records`
+    found, default: scanned now) into ``DIR/runs/corrupt/`` (only call while no writer is
+    active: the runner's lock); return ``(old path, new path, reason)`` of each."""
+    if unreadable is None:
+        unreadable = scan_records(out_dir)[1]
+    return [(p, set_aside(p), why) for p, why in unreadable]
 
 
 def set_aside_files(out_dir: str | Path, folder: str = CORRUPT) -> list[Path]:

@@ -136,7 +136,7 @@ def test_records_made_on_other_data_are_set_aside_and_rerun(tmp_path, monkeypatc
     assert len(pending_runs(suite, out)[1]) == 1
     from bench.runner import set_aside_stale
 
-    moved = set_aside_stale(suite.runs(), out)
+    moved = set_aside_stale(suite.runs(), out, store.scan_records(out)[0])
     assert [p.parent.name for p in moved] == ["stale"] and not store.has_record(out, cfg.hash)
     monkeypatch.setenv(D.DATA_DIR_ENV, str(tmp_path / "empty"))  # no file: accepted as made
     assert current_data_hash(cfg) is None
