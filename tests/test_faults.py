@@ -154,7 +154,9 @@ def _files(folder):
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
 
 
-@pytest.mark.parametrize("where", ["dir", "runs", "runs/sub", "parent", "foreign", "file"])
+@pytest.mark.parametrize(
+    "where", ["dir", "runs", "runs/sub", "parent", "foreign", "file", "posterior input"]
+)
 def test_report_out_refuses_inputs_and_foreign_folders(results, where, capsys):
     foreign = results.parent / "mine"
     foreign.mkdir(exist_ok=True)
@@ -167,11 +169,14 @@ def test_report_out_refuses_inputs_and_foreign_folders(results, where, capsys):
         "parent": results.parent,
         "foreign": foreign,
         "file": results.parent / "notes.txt",
+        "posterior input": results.parent / "studies",  # holds DIR/../studies/posterior
     }[where]
+    (results.parent / "studies" / "posterior").mkdir(parents=True, exist_ok=True)
     before = _files(results.parent)
     assert cli(["report", str(results), "--out", str(dest), "--no-figures", "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and f"--out {dest}:" in err
+    assert ("input folder" in err) == (where == "posterior input")
     assert _files(results.parent) == before  # nothing deleted, nothing written
 
 
