@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from problems.io import jsonio
-from problems.io.atomic import atomic_write_text  # noqa: F401  (the one atomic writer)
+from problems.io.atomic import atomic_write, atomic_write_text
 
 RECORD_SCHEMA = 1
 RUNS = "runs"
@@ -442,7 +442,5 @@ def write_parquet(out_dir: str | Path, dest: str | Path | None = None) -> tuple[
     for df, p in zip((runs, history), paths):
         df = df.copy()
         df.attrs = {}
-        tmp = p.with_suffix(".parquet.tmp")
-        df.to_parquet(tmp, index=False)
-        os.replace(tmp, p)
+        atomic_write(p, lambda fh, df=df: df.to_parquet(fh, index=False))
     return paths
