@@ -143,8 +143,9 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
 
     ev = objective_for(data, case, settings.mesh)
     result = solve(ev, "lm", budget=settings.budget, seed=settings.seed, x0=case.start)
-    rounds = []
+    rounds, first = [], 0
     if settings.correction == "iterated" and result.cost < math.inf:
+        first = result.n_evals  # the uncorrected run the rounds start from
         from problems.inverse.model_error import one_point
         from solvers.corrected import solve_iterated
 
@@ -168,11 +169,12 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
             max_rounds=settings.correction_rounds,
         )
         ev, rounds = built[-1], result.extra["correction_rounds"]
+    solved = ev.n_evals  # the run's evaluations on the last objective (in result.n_evals)
     x = np.asarray(result.x, float)
     z = ev.to_scaled(x)
     J = ev.jacobian(z)
     best = ev.evaluate(z)
-    n_evals = ev.n_evals
+    n_evals = first + result.n_evals + ev.n_evals - solved  # every run, the final Jacobian
     out = {
         "variant": case.name,
         "names": list(case.names),
@@ -187,6 +189,7 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
         "ok": bool(best.usable),
         "correction": settings.correction,
         "correction_rounds": rounds,
+        "n_fine_runs": len(rounds),
     }
     if not best.usable:
         return out | {"x": x.tolist(), "chi2": math.inf}

@@ -148,5 +148,6 @@ def test_iterated_correction_removes_the_discretisation_bias(tmp_path):
         )
         v = rep["variants"]["linear-compression"]
         errors[corr] = np.abs(np.array(v["x"]) / truth - 1).max()
+        assert v["n_evals"] > sum(r["n_evals"] for r in v["correction_rounds"])
     assert errors["none"] > 0.1 and errors["iterated"] < 0.005, errors
     assert rep["discretisation"]["rms_sigma"] > 0
