@@ -151,3 +151,21 @@ def test_iterated_correction_removes_the_discretisation_bias(tmp_path):
         assert v["n_evals"] > sum(r["n_evals"] for r in v["correction_rounds"])
     assert errors["none"] > 0.1 and errors["iterated"] < 0.005, errors
     assert rep["discretisation"]["rms_sigma"] > 0
+
+
+def test_shipped_calibration_matches_the_example():
+    """results/calibration/cube100 is keyed by the example as it imports today: rerunning the
+    command there resumes (reads every variant) instead of recomputing."""
+    from problems.inverse.lab import curve_summary, lab_case
+
+    out = ROOT / "results" / "calibration" / "cube100"
+    exp = load_experiment(EXAMPLE / "experiment.toml")
+    data = import_experiment(exp)
+    summary = curve_summary(data)
+    settings = CalibrationSettings(exp.mesh, exp.budget)
+    report = json.loads((out / "report.json").read_text())
+    assert report["data_hash"] == data.hash and len(report["variants"]) == 9
+    for name in exp.models:
+        done = json.loads((out / "variants" / f"{name}.json").read_text())
+        assert done["key"] == cal.variant_key(data, lab_case(name, data, summary), settings)
+    assert report["ranking"][0]["variant"].startswith("linear-")

@@ -40,7 +40,7 @@ import hashlib
 import math
 import os
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -155,7 +155,6 @@ class Experiment:
     budget: int = 80
     use_images: tuple[int, ...] = ()
     plate_margin_mm: float = 0.0
-    raw: dict = field(default_factory=dict)
 
     @property
     def specimen_mm(self) -> tuple[float, float, float]:
@@ -503,7 +502,6 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
         budget=int(budget),
         use_images=tuple(use),
         plate_margin_mm=margin,
-        raw=raw,
     )
 
 
@@ -682,8 +680,6 @@ class RigidMotionFree:
         return np.concatenate([out_h.reshape(-1, k), out_v.reshape(-1, k), f])
 
     def __call__(self, x, jacobian: bool = False):
-        from dataclasses import replace
-
         res = self.model(x, jacobian=jacobian) if jacobian else self.model(x)
         if not res.ok:
             return res
@@ -817,6 +813,8 @@ def import_experiment(exp: Experiment) -> Dataset:
         "images_used": [int(k) + 1 for k in use],
         "force_accuracy_percent": exp.force_accuracy_percent,
     }
+    if exp.images is not None:
+        meta["images"] = os.path.relpath(exp.images, exp.path.parent)
     return Dataset(
         f"experiment:{exp.name}",
         settings,
