@@ -55,6 +55,55 @@ def test_extrapolate_uses_separate_orders_for_the_field_and_the_force():
     assert err["force_last_pct"] == pytest.approx(100 * shape[-1] * 36.0 / exact[-1])
 
 
+def test_a_family_is_asymptotic_when_its_last_two_orders_agree():
+    assert conv.asymptotic([1.68, 1.68], [1.69, 1.44])
+    assert not conv.asymptotic([0.70, 2.86], [1.44, 1.36])  # the field order jumps
+    assert not conv.asymptotic([1.5], [1.5])  # one triple: unknown
+    assert not conv.asymptotic([1.5, math.nan], [1.5, 1.5])
+
+
+def test_the_reference_is_the_best_asymptotic_family():
+    from bench.studies.convergence import analyse
+
+    N, m = 1, 1
+    exact = np.array([1.0, 2.0, 100.0])
+    J = np.eye(3)[:, :2]
+
+    def rec(spec, h, p, c):
+        return {
+            "mesh": spec,
+            "ok": True,
+            "h_mm": h,
+            "values": (exact + c * h**p).tolist(),
+            "n_snapshots": N,
+            "n_points": m,
+            "names": ["a", "b"],
+            "reference": [1.0, 1.0],
+            "jacobian": J.tolist(),
+            "element": "hex8",
+            "grading": 1.0,
+            "elements": 1,
+            "dofs": 1,
+            "message": "",
+            "cpu_s": 0.0,
+            "wall_s": 0.0,
+        }
+
+    hs = [8.0, 6.0, 4.0, 3.0]
+    records = {f"a{h}": rec(f"a{h}", h, 1.0, 0.01) for h in hs}  # clean order 1
+    # a family whose finest is nearer but whose orders disagree (pre-asymptotic)
+    jumpy = dict(zip(hs, [0.9, 0.1, 0.05, 0.001]))
+    for h in hs:
+        records[f"b{h}"] = rec(f"b{h}", h, 1.0, 0.0)
+        records[f"b{h}"]["values"] = (exact + jumpy[h]).tolist()
+    families = {"clean": [f"a{h}" for h in hs], "jumpy": [f"b{h}" for h in hs]}
+    summary, ref = analyse("x", families, [], records)
+    assert summary["families"]["clean"]["asymptotic"]
+    assert not summary["families"]["jumpy"]["asymptotic"]
+    assert summary["reference_family"] == "clean"
+    np.testing.assert_allclose(ref, exact, atol=1e-9)
+
+
 def test_linearised_bias_is_the_gauss_newton_step_of_a_linear_model():
     rng = np.random.default_rng(1)
     J = rng.normal(size=(40, 3))

@@ -183,7 +183,9 @@ def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[di
 
     Each family with three or more solved meshes is extrapolated from its last three; the
     reference is the extrapolation of the family whose finest mesh it moves least (the smallest
-    Richardson error estimate). ValueError when no family can be extrapolated."""
+    Richardson error estimate) among the families in their asymptotic range (the last two observed
+    orders agree: :func:`problems.analysis.convergence.asymptotic`), or among all when none is.
+    ValueError when no family can be extrapolated."""
     first = next(iter(records.values()))
     N, m = first["n_snapshots"], first["n_points"]
     sd = conv.noise_sd(N, m)
@@ -205,7 +207,9 @@ def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[di
             f"case {case}: no family has 3 solved meshes; nothing to extrapolate (see the mesh "
             "records' messages)"
         )
-    ref_label = min(usable, key=lambda k: usable[k]["finest_error_sigma"])
+    # prefer families in their asymptotic range (their estimate can be trusted)
+    trusted = {k: v for k, v in usable.items() if v["asymptotic"]} or usable
+    ref_label = min(trusted, key=lambda k: trusted[k]["finest_error_sigma"])
     ref = usable[ref_label]["_values"]
     for v in fam_out.values():
         v.pop("_values", None)
@@ -258,6 +262,11 @@ def _fmt(value, spec: str) -> str:
     )
 
 
+def _orders(values) -> str:
+    """Observed orders of successive triples, ``0.70 -> 2.86``."""
+    return " -> ".join(_fmt(v, ".2f") for v in values) if values else "n/a"
+
+
 def markdown(summary: dict) -> str:
     """The study's markdown: orders per family, then one row per mesh."""
     lines = [
@@ -266,18 +275,20 @@ def markdown(summary: dict) -> str:
         f"Errors against the Richardson extrapolation of the **{summary['reference_family']}** "
         f"family; sigma = {summary['sigma_displacement_mm'] * 1e3:.3f} um per displacement, "
         f"{summary['sigma_force_kN']:g} kN for the force; {summary['n_snapshots']} snapshots x "
-        f"{summary['n_points']} front-face points. Bias: linearised Gauss-Newton step from the "
-        "reference with the mesh's exact Jacobian.",
+        f"{summary['n_points']} front-face points. Orders: of each triple of successive meshes "
+        "(the last one extrapolates; asymptotic when the last two agree within 25 %). Bias: "
+        "linearised Gauss-Newton step from the reference with the mesh's exact Jacobian.",
         "",
-        "| family | meshes | order (field) | order (force) | finest's error (sigma) | "
-        "extrapolated force at the last snapshot (kN) |",
-        "|---|---|---|---|---|---|",
+        "| family | meshes | orders (field) | orders (force) | asymptotic | finest's error (sigma) "
+        "| extrapolated force at the last snapshot (kN) |",
+        "|---|---|---|---|---|---|---|",
     ]
     for label, fam in summary["families"].items():
         force = fam.get("extrapolated_force_kN")
         lines.append(
-            f"| {label} | {', '.join(fam['meshes'])} | {_fmt(fam.get('order_field'), '.2f')} | "
-            f"{_fmt(fam.get('order_force'), '.2f')} | "
+            f"| {label} | {', '.join(fam['meshes'])} | {_orders(fam.get('orders_field_all'))} | "
+            f"{_orders(fam.get('orders_force_all'))} | "
+            f"{'yes' if fam.get('asymptotic') else 'no'} | "
             f"{_fmt(fam.get('finest_error_sigma'), '.2f')} | "
             f"{_fmt(force[-1] if force else None, '.2f')} |"
         )

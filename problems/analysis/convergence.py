@@ -34,6 +34,8 @@ SIGMA_DISPLACEMENT_MM = 1e-3 / math.sqrt(12.0)
 SIGMA_FORCE_KN = 1.0
 #: observed orders outside this range are reported, but extrapolation uses the clipped value
 ORDER_RANGE = (0.5, 4.0)
+#: the last two observed orders of an asymptotic family agree within this fraction
+ORDER_AGREEMENT = 0.25
 
 
 def element_size_mm(volume_mm3: float, n_elements: int) -> float:
@@ -88,7 +90,8 @@ def extrapolate(h, values, n_snapshots: int, n_points: int) -> dict:
     h      : (k >= 3,) element sizes, mm, coarse to fine
     values : (k, 2 N m + N) measurement vectors at the same parameters
 
-    Returns ``order_field`` (from the norm of the front-face displacement differences),
+    Returns ``asymptotic`` (:func:`asymptotic`), ``order_field`` (from the norm of the front-face
+    displacement differences),
     ``order_force`` (force at the last snapshot), ``orders_field_all`` (every triple),
     ``values`` (the extrapolated vector: displacements with the field order, forces with the force
     order, each clipped to :data:`ORDER_RANGE`; the finest member where an order is nan) and
@@ -112,6 +115,7 @@ def extrapolate(h, values, n_snapshots: int, n_points: int) -> dict:
                 h[-2], h[-1], v[-2, sl], v[-1, sl], float(np.clip(p, *ORDER_RANGE))
             )
     return {
+        "asymptotic": asymptotic(orders_field, orders_force),
         "order_field": p_u,
         "order_force": p_f,
         "orders_field_all": orders_field,
@@ -119,6 +123,18 @@ def extrapolate(h, values, n_snapshots: int, n_points: int) -> dict:
         "values": out,
         "finest_error_sigma": errors(v[-1], out, n_snapshots, n_points)["rms_sigma"],
     }
+
+
+def asymptotic(orders_field, orders_force, tolerance: float = ORDER_AGREEMENT) -> bool:
+    """True when the observed orders of the last two triples agree, field and force each within
+    ``tolerance`` (relative): the family is in its asymptotic range, where Richardson's
+    extrapolation and error estimate hold. False with fewer than two triples (unknown)."""
+    for orders in (orders_field, orders_force):
+        if len(orders) < 2 or not np.all(np.isfinite(orders[-2:])):
+            return False
+        if abs(orders[-1] - orders[-2]) > tolerance * abs(orders[-1]):
+            return False
+    return True
 
 
 def errors(values, reference, n_snapshots: int, n_points: int) -> dict:
