@@ -26,8 +26,13 @@ Seeding: besides ``parametrization.random_state``, the run is wrapped in
 generator. One of them, ``CmaFmin2`` (NGOpt's choice for a few hundred evaluations in 2-5
 dimensions with one worker), calls ``cma.fmin`` on a background thread without a seed, which
 seeds cma from the clock: during the run ``cma.fmin`` is wrapped to pass a seed drawn from the run's
-seed when none is given (the thread and the main thread hand over synchronously, so the draws are
-in a fixed order). Without this, the same seed gave different results.
+seed when none is given. The thread (cma's sampling, nevergrad's restart points) and the main thread
+(NGOpt's quadratic surrogate, whose inner Powell/DE optimisers seed themselves from NumPy's global
+generator) both draw from that global generator; nevergrad lets the thread compute its next point
+while the main thread goes on, so the order of the draws depended on thread scheduling and a loaded
+machine gave a different trajectory for the same seed. During the run a ``tell`` to such a
+thread therefore waits until the thread has posted its next point (or ended), see
+:func:`_synchronous_recast`: the thread and the main thread never run at the same time.
 """
 
 from __future__ import annotations
@@ -75,7 +80,12 @@ def run_ngopt(r: Run) -> Outcome:
         u0 = np.clip((r.z0 - r.lower) / width, 0.0, 1.0)
     else:
         u0 = r.rng(2).uniform(0.0, 1.0, r.lower.size)
-    with isolated_global_rng(r.seed), _seeded_cma_fmin(r.rng(3)), warnings.catch_warnings():
+    with (
+        isolated_global_rng(r.seed),
+        _seeded_cma_fmin(r.rng(3)),
+        _synchronous_recast(),
+        warnings.catch_warnings(),
+    ):
         warnings.simplefilter("ignore")  # nevergrad warns about settings and bad tells
         import nevergrad as ng
 
@@ -170,6 +180,35 @@ def _seeded_cma_fmin(rng: np.random.Generator):
         yield
     finally:
         cma.fmin = original
+
+
+@contextlib.contextmanager
+def _synchronous_recast():
+    """Within the block, a ``tell`` to a nevergrad optimizer that runs a library on a background
+    thread (``SequentialRecastOptimizer``: CmaFmin2, Powell, Cobyla, ...) returns only once that
+    thread has posted its next point, its end or its error: the thread's computation (and its draws
+    from NumPy's global generator) happens while the main thread waits, never alongside it.
+
+    Safe: ``_internal_tell_candidate`` is called only for a point the thread asked for, so a living
+    thread is blocked on that answer and posts exactly one message after it; the message is taken
+    and put back on the (otherwise empty) queue, where the next ``ask`` reads it."""
+    from nevergrad.optimization.recaster import SequentialRecastOptimizer
+
+    original = SequentialRecastOptimizer._internal_tell_candidate
+
+    def tell(self, candidate, loss):
+        thread = self._messaging_thread
+        alive = thread is not None and thread.is_alive()
+        original(self, candidate, loss)
+        if alive:
+            queue = thread.messages_ask
+            queue.put(queue.get())
+
+    SequentialRecastOptimizer._internal_tell_candidate = tell
+    try:
+        yield
+    finally:
+        SequentialRecastOptimizer._internal_tell_candidate = original
 
 
 def _chosen(opt) -> str:

@@ -71,6 +71,31 @@ def test_ngopt_is_reproducible_when_it_delegates_to_cma_fmin():
     assert _trajectory(runs[0]) != _trajectory(runs[1])
 
 
+def test_ngopt_result_does_not_depend_on_how_fast_cma_thread_runs(monkeypatch):
+    # cma's sampling on nevergrad's thread and NGOpt's surrogate on the main thread both draw from
+    # NumPy's global generator; a slow thread (a loaded machine) reordered the draws and changed
+    # the trajectory (before the synchronous hand-over: cost 0.171 fast vs 0.061 slow)
+    import time
+
+    import cma
+
+    def run():
+        obj = analytic_objective("analytic-smooth")
+        return solve(obj, "ngopt", budget=210, seed=0, x0=SMOOTH.start)
+
+    fast = run()
+    ask = cma.CMAEvolutionStrategy.ask
+
+    def slow_ask(self, *args, **kwargs):
+        time.sleep(0.02)
+        return ask(self, *args, **kwargs)
+
+    monkeypatch.setattr(cma.CMAEvolutionStrategy, "ask", slow_ask)
+    slow = run()
+    assert "CmaFmin2" in slow.extra["optimizer"]
+    assert _trajectory(slow) == _trajectory(fast) and slow.x == fast.x
+
+
 @pytest.mark.parametrize("budget", [1, 7, 23])
 @pytest.mark.parametrize("method", NEW)
 def test_budget_is_spent_exactly_and_the_result_returned(method, budget):
