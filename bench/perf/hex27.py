@@ -2,17 +2,20 @@
 equal degrees of freedom, for one plastic case; cost and accuracy measured in the same run.
 
     OMP_NUM_THREADS=1 python -m bench.perf.hex27 [--case linear-compression] [--pairs 6,8,12]
-                                                 [--reference 12] [--repeat 2] [--json PATH]
+                                                 [--grading 1] [--reference 12] [--repeat 2]
+                                                 [--json PATH]
 
 Each pair is an 8-node n x n x 2n quarter mesh and the 27-node (n/2) x (n/2) x n mesh with the
-same nodes (so the same dofs), both solved as the eighth model (uniform meshes). For each: the CPU
+same nodes (so the same dofs), both solved as the eighth model, uniform or graded (``--grading R``:
+the mesh spec token ``gR``, the same for every mesh and the reference). For each: the CPU
 time (process clock, best of ``--repeat``, the two elements alternating so both see the same
 machine load) of the default plastic run (1.5 mm in 10 snapshots, friction plates,
 FORWARD_SETTINGS) and of the same run with exact sensitivities of every material parameter
 (response + Jacobian), where the time went (assembly, material, factorisation, solve: wall s of
 the best run), and the errors against a fine reference (the 27-node ``--reference`` R x R x 2R
-mesh): plate force at 1.5 mm (%) and the RMS front-face error over the 14 x 29 grid, both
-components and all snapshots, in units of sigma = 1 um / sqrt(12) (the data's rounding error).
+mesh, same grading): plate force at 1.5 mm (%) and the RMS front-face error over the 14 x 29
+grid, both components and all snapshots, in units of sigma = 1 um / sqrt(12) (the data's rounding
+error).
 Printed: one row per mesh and, per pair, the ratios 27-node / 8-node of time and errors.
 """
 
@@ -28,8 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from problems.fe.front_face import front_face_operator, measurement_grid
-from problems.fe.mesh import box_mesh
-from problems.fe.mesh_quadratic import quadratic_mesh
+from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Loading, discretise, run
 from problems.inverse.cases import CASES, get_case
 from problems.inverse.forward import FORWARD_SETTINGS, case_material
@@ -70,6 +72,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--case", default="linear-compression", choices=sorted(CASES))
     ap.add_argument("--pairs", default="6,8,12", help="8-node n of each pair (even): n x n x 2n")
+    ap.add_argument("--grading", type=float, default=1.0, help="gR of every mesh (1: uniform)")
     ap.add_argument("--reference", type=int, default=12, help="27-node reference R x R x 2R")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--json", type=Path, help="write the rows as JSON here (atomically)")
@@ -78,6 +81,14 @@ def main(argv=None) -> int:
     if any(n < 2 or n % 2 for n in pairs):
         print(f"--pairs {args.pairs!r}: each n must be an even whole number >= 2")
         return 2
+    if not (np.isfinite(args.grading) and args.grading >= 1.0):
+        print(f"--grading {args.grading!r}: a number >= 1 (largest / smallest element length)")
+        return 2
+    grading = f":g{args.grading:g}"
+
+    def mesh(n, element):
+        return parse_mesh_spec(f"{n},{n},{2 * n}{grading}:{element}").mesh
+
     case = get_case(args.case)
     material = case_material(case, case.reference)
     points = measurement_grid()
@@ -85,7 +96,7 @@ def main(argv=None) -> int:
     t = time.perf_counter()
     R = args.reference
     ref_resp = run(
-        discretise(quadratic_mesh(box_mesh(R, R, 2 * R)), symmetry="eighth"),
+        discretise(mesh(R, "hex27"), symmetry="eighth"),
         material,
         LOADING,
         FORWARD_SETTINGS,
@@ -94,7 +105,8 @@ def main(argv=None) -> int:
         raise SystemExit(f"reference did not converge: {ref_resp.message}")
     ref = measured(ref_resp, points)
     print(
-        f"{args.case}: reference 27-node {R}x{R}x{2 * R} ({ref_resp.mesh.n_dofs} dofs quarter), "
+        f"{args.case}: reference 27-node {R}x{R}x{2 * R}{grading} ({ref_resp.mesh.n_dofs} dofs "
+        "quarter), "
         f"force {ref['force'][-1]:.2f} kN at 1.5 mm, {time.perf_counter() - t:.1f} s wall"
     )
     print(
@@ -104,8 +116,8 @@ def main(argv=None) -> int:
     rows = []
     for n in pairs:
         meshes = {
-            "8-node": box_mesh(n, n, 2 * n),
-            "27-node": quadratic_mesh(box_mesh(n // 2, n // 2, n)),
+            "8-node": mesh(n, "hex8"),
+            "27-node": mesh(n // 2, "hex27"),
         }
         discs = {k: discretise(m, symmetry="eighth") for k, m in meshes.items()}
         best = {k: [np.inf, np.inf, None] for k in meshes}
@@ -150,7 +162,8 @@ def main(argv=None) -> int:
     if args.json:
         payload = {
             "case": args.case,
-            "reference": f"27-node {R}x{R}x{2 * R}",
+            "reference": f"27-node {R}x{R}x{2 * R}{grading}",
+            "grading": args.grading,
             "reference_force_kN": float(ref["force"][-1]),
             "omp_num_threads": os.environ.get("OMP_NUM_THREADS"),
             "rows": rows,
