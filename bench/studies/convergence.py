@@ -391,9 +391,10 @@ def render_overview(root: str | Path) -> Path:
             orders.append(
                 {
                     "case": s["case"],
-                    "family": label,
-                    "order (field)": fam.get("order_field", math.nan),
-                    "order (force)": fam.get("order_force", math.nan),
+                    "family": label + (" (reference)" if label == s["reference_family"] else ""),
+                    "orders (field)": _orders(fam.get("orders_field_all")),
+                    "orders (force)": _orders(fam.get("orders_force_all")),
+                    "asymptotic": "yes" if fam.get("asymptotic") else "no",
                     "finest's error (sigma)": fam.get("finest_error_sigma", math.nan),
                 }
             )
@@ -424,7 +425,7 @@ def render_overview(root: str | Path) -> Path:
             "",
             markdown_table(
                 orders,
-                {"order (field)": ".2f", "order (force)": ".2f", "finest's error (sigma)": ".2f"},
+                {"finest's error (sigma)": ".2f"},
             ),
             "",
             "## Meshes",
