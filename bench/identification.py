@@ -217,110 +217,66 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
     """Run the identification ``spec``; returns the solver's RunResult with totals and provenance.
 
     ``dataset``: the measured data when the caller prepared it (else the tier's or ``spec.data``).
-    ``observers``: callables added to the objective's observers (progress bars).
+    ``observers``: callables added to the objective's observers (progress bars). The objective is
+    assembled by :func:`bench.experiment.objective.prepare` (which checks the honesty rule).
     """
     from dataclasses import replace
 
-    from problems.inverse.build import (
-        Region,
-        build_objective,
-        hifi_mesh_for,
-        model_pair,
-        resolve_data,
-    )
-    from problems.inverse.cases import get_case
-    from problems.inverse.model_error import one_point
+    from bench.experiment.objective import prepare
     from problems.inverse.plausibility import warn_data, warn_result
-    from problems.inverse.starts import start_point
     from solvers import solve
     from solvers.corrected import solve_iterated
 
-    case = get_case(spec.case)
-    x0 = start_point(case, kind=spec.start, seed=spec.seed, index=spec.start_index)
-    if case.is_analytic:
-        if spec.surrogate:
-            raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
-        objective = build_objective(
-            case,
-            mapper=mapper,
-            exact_jacobian=spec.jacobian == "exact",
-            budget_unit=spec.budget_unit,
-            free_repeats=spec.free_repeats,
-        )
-        objective.observers.extend(observers)
+    surrogate = None
+    if spec.surrogate:
+        from bench.surrogate_run import load_for
+        from problems.inverse.cases import get_case
+
+        if get_case(spec.case).is_analytic:
+            raise ValueError(f"case {spec.case} is analytic: a surrogate is for the FE cases")
+        surrogate = load_for(spec.surrogate, spec.case, spec.mesh)
+    requested = spec.treatment
+    asm = prepare(spec, mapper=mapper, dataset=dataset, forward=surrogate)
+    x0 = asm.start()
+    if asm.case.is_analytic:
         return solve(
-            objective,
+            asm.objective(observers=observers),
             spec.method,
             budget=spec.budget,
             seed=spec.seed,
             x0=x0,
             **jacobian_options(spec.method, spec.options, spec.jacobian),
         )
-    data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
-    warn_data(data)  # wrong units, all zero: before any run (problems/inverse/plausibility.py)
-    requested = spec.treatment
-    spec = with_default_treatment(spec, data.settings.tier)
-    region = Region(spec.plate_margin_mm)
-    hifi_mesh = None
-    if spec.treatment != "none":
-        hifi_mesh = spec.hifi_mesh or hifi_mesh_for(spec.mesh)
-
-    surrogate = None
-    if spec.surrogate:
-        from bench.surrogate_run import load_for
-
-        surrogate = load_for(spec.surrogate, case.name, spec.mesh)
+    warn_data(asm.data)  # wrong units, all zero: before any run (problems/inverse/plausibility.py)
+    spec = asm.spec
     built = []  # the objectives on the surrogate (their logs give its evaluations' wall time)
-    fixed = {}  # the one-point or BAE correction, made once for both phases
 
     def run_phase(method, budget, start, options, forward):
         options = jacobian_options(method, options, spec.jacobian)
 
         def objective_with(correction):
-            obj = build_objective(
-                case,
-                mesh=spec.mesh,
-                data=data,
-                region=region,
-                correction=correction,
-                hifi_mesh=hifi_mesh,
-                mapper=mapper if forward is None else vectorised_mapper(),
+            obj = asm.objective(
+                correction,
                 forward=forward,
-                exact_jacobian=spec.jacobian == "exact",
-                budget_unit=spec.budget_unit,
-                free_repeats=spec.free_repeats,
+                mapper=None if forward is None else vectorised_mapper(),
+                observers=observers,
             )
-            obj.observers.extend(observers)
             if forward is not None:
                 built.append(obj)
             return obj
 
-        if spec.treatment == "none":
-            return solve(
-                objective_with(None), method, budget=budget, seed=spec.seed, x0=start, **options
-            )
-        objective_with(None)  # checks the honesty rule before any high-fidelity run
-        if forward is not None:
-            built.pop()
-        hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
         if spec.treatment == "iterated":
             return solve_iterated(
                 objective_with,
-                lambda x: one_point(hifi, inverse, x, mapper=mapper),
+                asm.one_point,
                 method,
                 budget=budget,
                 seed=spec.seed,
                 x0=start,
                 **options,
             )
-        if "corr" not in fixed:
-            fixed["corr"] = (
-                one_point(hifi, inverse, x0, mapper=mapper)
-                if spec.treatment == "one-point"
-                else bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
-            )
         return solve(
-            objective_with(fixed["corr"]),
+            objective_with(asm.correction()),
             method,
             budget=budget,
             seed=spec.seed,
@@ -353,56 +309,5 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         "jacobian": spec.jacobian,
         "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
     }
-    warn_result(case, data, region, result)  # a cost far above the data's size, bounds
+    warn_result(asm.case, asm.data, asm.region, result)  # a cost far above the data's size, bounds
     return replace(result, provenance=provenance)
-
-
-def treated_objective(spec: Identification, *, mapper=None, dataset=None):
-    """``(objective, resolved spec)``: the objective of ``spec`` with its data, region and
-    model-error correction, without solving (the studies' objective). The one-point correction is
-    made at the start; ``iterated`` needs a solver's solutions and is refused."""
-    from problems.inverse.build import (
-        Region,
-        build_objective,
-        hifi_mesh_for,
-        model_pair,
-        resolve_data,
-    )
-    from problems.inverse.cases import get_case
-    from problems.inverse.model_error import one_point
-    from problems.inverse.starts import start_point
-
-    case = get_case(spec.case)
-    if case.is_analytic:
-        return build_objective(case, mapper=mapper), spec
-    data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
-    spec = with_default_treatment(spec, data.settings.tier)
-    if spec.treatment == "iterated":
-        raise ValueError(
-            "treatment 'iterated' re-evaluates the correction at a solver's solutions: it exists "
-            "for identifications only; allowed here: none, one-point, bae, default"
-        )
-    region = Region(spec.plate_margin_mm)
-    hifi_mesh = None if spec.treatment == "none" else spec.hifi_mesh or hifi_mesh_for(spec.mesh)
-
-    def objective_with(correction):
-        return build_objective(
-            case,
-            mesh=spec.mesh,
-            data=data,
-            region=region,
-            correction=correction,
-            hifi_mesh=hifi_mesh,
-            mapper=mapper,
-        )
-
-    if spec.treatment == "none":
-        return objective_with(None), spec
-    objective_with(None)  # checks the honesty rule before any high-fidelity run
-    hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
-    if spec.treatment == "one-point":
-        x0 = start_point(case, kind=spec.start, seed=spec.seed, index=spec.start_index)
-        corr = one_point(hifi, inverse, x0, mapper=mapper)
-    else:
-        corr = bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
-    return objective_with(corr), spec

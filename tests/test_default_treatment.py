@@ -5,7 +5,8 @@ import json
 
 import pytest
 
-from bench.identification import Identification, bae_path, treated_objective, with_default_treatment
+from bench.experiment.objective import assemble
+from bench.identification import Identification, bae_path, with_default_treatment
 from problems.inverse.cases import CASES, default_treatment
 
 
@@ -92,7 +93,7 @@ def test_the_default_bae_statistics_are_shipped(name):
 
 
 def test_default_objective_uses_the_shipped_statistics_without_a_run():
-    obj, spec = treated_objective(Identification("linear-compression", "lm", treatment="default"))
+    obj = assemble(Identification("linear-compression", "lm", treatment="default"))
     prov = obj.provenance
     assert (prov["treatment"], prov["hifi_mesh"], prov["region_plate_margin_mm"]) == (
         "bae",

@@ -94,18 +94,17 @@ def study_objective(
                       inverse ``mesh`` (in place of ``data``, which must then be ``auto``)
     correction      : model-error treatment of the objective: ``none``, ``one-point`` (at the
                       default start), ``bae`` or ``default`` (the case's default treatment, with its
-                      plate margin); see :func:`bench.identification.treated_objective`
+                      plate margin); see :func:`bench.experiment.objective.assemble`
     plate_margin_mm : leave out front-face points within this distance of the plates
     """
+    from bench.experiment.objective import assemble
+    from bench.identification import Identification
     from problems.inverse.cases import get_case
 
     case = get_case(case_name)
     if case.is_analytic:
-        from problems.inverse.build import build_objective
-
-        return build_objective(
-            case, mapper=mapper
-        ), "analytic synthetic data (noise-free, at the reference)"
+        text = "analytic synthetic data (noise-free, at the reference)"
+        return assemble(Identification(case.name, "none"), mapper=mapper), text
     from problems.inverse.data import default_path, get_data, make_data
 
     if correction == "default" and plate_margin_mm:
@@ -141,8 +140,6 @@ def study_objective(
                 raise ValueError(f"--data {data!r}: no such file; allowed: {DATA_CHOICES}")
             ds = data
             text = f"data file {path}"
-    from bench.identification import Identification, treated_objective
-
     spec = Identification(
         case.name,
         "none",
@@ -151,7 +148,7 @@ def study_objective(
         treatment=correction,
         plate_margin_mm=plate_margin_mm,
     )
-    obj, spec = treated_objective(spec, mapper=mapper, dataset=ds)
+    obj = assemble(spec, mapper=mapper, dataset=ds)
     prov = obj.provenance
     text += (
         f" ({prov['data_tier']} tier, data mesh {prov['data_mesh']}, hash "

@@ -78,17 +78,11 @@ def one_row(
     ``data``: the model-error data set (default: the shipped one, or the DIC route's);
     ``hifi_mesh``:
     the correction's high-fidelity mesh (default: the next finer preset of the inverse mesh)."""
+    from bench.experiment.objective import prepare
     from bench.identification import Identification, identify
-    from problems.inverse.build import (
-        Region,
-        build_objective,
-        hifi_mesh_for,
-        model_pair,
-        resolve_data,
-    )
+    from problems.inverse.build import hifi_mesh_for, resolve_data
     from problems.inverse.cases import get_case
     from problems.inverse.data import get_data, tier_settings
-    from problems.inverse.model_error import one_point
 
     t0 = time.perf_counter()
     c = get_case(case)
@@ -112,31 +106,19 @@ def one_row(
         plate_margin_mm=cfg.plate_margin_mm,
         budget=budget,
     )
+    asm = prepare(spec, mapper=mapper, dataset=data)
     if cfg.bias_only:
-        return _bias_row(case, cfg, spec, data, mapper, t0)
+        return _bias_row(case, cfg, asm, t0)
     result = identify(spec, mapper=mapper, dataset=data)
-    region = Region(cfg.plate_margin_mm)
-    correction = None
-    if cfg.treatment in ("one-point", "iterated"):
-        hifi, inverse = model_pair(c, cfg.mesh, hifi_mesh, data, region)
-        # the linearised bias of the correction the solver ended with: at the start (one-point) or
-        # at the LM solution (iterated, the fixed point)
-        at = c.start if cfg.treatment == "one-point" else np.asarray(result.x)
-        correction = one_point(hifi, inverse, at, mapper=mapper)
-    elif cfg.treatment == "bae":
-        from bench.identification import bae_correction
-
-        hifi, inverse = model_pair(c, cfg.mesh, hifi_mesh, data, region)
-        correction = bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
-    objective = build_objective(
-        c,
-        mesh=cfg.mesh,
-        data=data,
-        region=region,
-        correction=correction,
-        hifi_mesh=hifi_mesh,
-        mapper=mapper,
-    )
+    # the linearised bias of the correction the solver ended with: at the start (one-point), at
+    # the LM solution (iterated, the fixed point), or the BAE statistics
+    if cfg.treatment == "one-point":
+        correction = asm.one_point(c.start)
+    elif cfg.treatment == "iterated":
+        correction = asm.one_point(np.asarray(result.x))
+    else:
+        correction = asm.correction()
+    objective = asm.objective(correction)
     bias = linearised_bias(objective)
     errors = result.errors_percent()
     total_fe = result.forward_equivalents + sum(
@@ -163,42 +145,19 @@ def one_row(
     }
 
 
-def _hifi_limit_objective(spec, data, mapper):
-    """The objective with the one-point correction made at the reference (:data:`HIFI_LIMIT`)."""
-    from problems.inverse.build import Region, build_objective, hifi_mesh_for, model_pair
-    from problems.inverse.cases import get_case
-    from problems.inverse.model_error import one_point
-
-    case = get_case(spec.case)
-    region = Region(spec.plate_margin_mm)
-    hifi_mesh = spec.hifi_mesh or hifi_mesh_for(spec.mesh)
-    build_objective(case, mesh=spec.mesh, data=data, region=region)  # the honesty rule first
-    hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
-    corr = one_point(hifi, inverse, case.reference, mapper=mapper)
-    corr.treatment = HIFI_LIMIT
-    return build_objective(
-        case,
-        mesh=spec.mesh,
-        data=data,
-        region=region,
-        correction=corr,
-        hifi_mesh=hifi_mesh,
-        mapper=mapper,
-    )
-
-
-def _bias_row(case: str, cfg: Configuration, spec, data, mapper, t0: float) -> dict:
+def _bias_row(case: str, cfg: Configuration, asm, t0: float) -> dict:
     """The linearised perfect-optimiser bias alone (one residual and one Jacobian: one run with
-    sensitivities on the FE model, plus the correction's runs); the one-point correction is made
-    at the default start, ``iterated`` needs the LM solution and is refused."""
-    from bench.identification import treated_objective
-
+    sensitivities on the FE model, plus the correction's runs) of the assembly ``asm``; the
+    one-point correction is made at the default start (at the reference for :data:`HIFI_LIMIT`),
+    ``iterated`` needs the LM solution and is refused."""
     if cfg.treatment == "iterated":
         raise ValueError("a bias-only row of treatment 'iterated' needs the LM solution: run LM")
     if cfg.treatment == HIFI_LIMIT:
-        objective = _hifi_limit_objective(spec, data, mapper)
+        corr = asm.one_point(asm.case.reference)
+        corr.treatment = HIFI_LIMIT
+        objective = asm.objective(corr)
     else:
-        objective, spec = treated_objective(spec, mapper=mapper, dataset=data)
+        objective = asm.treated()
     bias = linearised_bias(objective)
     charged = objective.charged_equivalents()
     charges = {k: {**c, "forward_equivalents": charged[k]} for k, c in objective.charges.items()}

@@ -88,40 +88,16 @@ def exponent_a_gradient(case, x: np.ndarray) -> np.ndarray:
 def _objective(case, tier, treatment, surrogate, mapper=None):
     """``(evaluator, spec)``: the objective on ``surrogate`` (None: the FE model) with the
     treatment's region and correction."""
-    from bench.identification import Identification, bae_correction, with_default_treatment
-    from problems.inverse.build import (
-        Region,
-        build_objective,
-        hifi_mesh_for,
-        model_pair,
-        resolve_data,
-    )
+    from bench.experiment.objective import prepare
+    from bench.identification import Identification
 
     spec = Identification(case.name, "lm", tier=tier, treatment=treatment)
-    data = resolve_data(case, spec.mesh, tier, None)
-    spec = with_default_treatment(spec, data.settings.tier)
-    if spec.treatment not in ("none", "bae"):
+    asm = prepare(spec, mapper=mapper, forward=surrogate)
+    if asm.spec.treatment not in ("none", "bae"):  # the default treatment resolved to either
         raise ValueError(
-            f"posterior: treatment {spec.treatment!r} is not supported (none, bae, default)"
+            f"posterior: treatment {asm.spec.treatment!r} is not supported (none, bae, default)"
         )
-    region = Region(spec.plate_margin_mm)
-    corr, hifi_mesh = None, None
-    if spec.treatment == "bae":
-        hifi_mesh = spec.hifi_mesh or hifi_mesh_for(spec.mesh)
-        build_objective(case, mesh=spec.mesh, data=data, region=region)  # honesty first
-        hifi, inverse = model_pair(case, spec.mesh, hifi_mesh, data, region)
-        corr = bae_correction(spec, hifi, inverse, hifi_mesh, data, mapper)
-    obj = build_objective(
-        case,
-        mesh=spec.mesh,
-        data=data,
-        region=region,
-        correction=corr,
-        hifi_mesh=hifi_mesh,
-        mapper=mapper,
-        forward=surrogate,
-    )
-    return obj, spec
+    return asm.treated(forward=surrogate), asm.spec
 
 
 def inflated_problem(problem):

@@ -99,6 +99,40 @@ def model_pair(
     )
 
 
+def check_discretisations(
+    case: Case, ds: Dataset, mesh: str, *, hifi_mesh: str | None = None, forward=None
+) -> None:
+    """Raise ValueError unless the data ``ds`` may be fitted with the inverse model on ``mesh``,
+    a correction's high-fidelity model on ``hifi_mesh`` (None: no correction) and the surrogate
+    ``forward`` (None: the FE model): the data are ``case``'s, consistent-tier data were made on
+    the inverse mesh, and no model of the inverse loop uses the discretisation that made
+    model-error data (the honesty rule, :func:`~problems.inverse.model_error.check_honest`).
+    Cheap (no model run): call it before a correction's high-fidelity runs."""
+    if ds.case != case.name:
+        raise ValueError(f"data set is for case {ds.case!r}, not {case.name!r}")
+    tier = ds.settings.tier
+    data_key, inverse_key = discretisation_key(ds.settings.mesh), discretisation_key(mesh)
+    if tier == "consistent" and data_key != inverse_key:
+        raise ValueError(
+            f"consistent-tier data were made on mesh {ds.settings.mesh} ({data_key}); the inverse "
+            f"model uses {mesh} ({inverse_key}): use data made on the inverse mesh"
+        )
+    hifi_key = discretisation_key(hifi_mesh) if hifi_mesh else None
+    check_honest(data_key, tier, forward=inverse_key, hifi=hifi_key)
+    if forward is not None:
+        from problems.surrogate.model import discretisation_of
+
+        trained_on = discretisation_of(forward)
+        if trained_on is None:
+            raise ValueError("the surrogate does not say which discretisation it was trained on")
+        check_honest(data_key, tier, surrogate=trained_on)
+        if trained_on != inverse_key:
+            raise ValueError(
+                f"the surrogate was trained on discretisation {trained_on}; the inverse mesh "
+                f"{mesh} is {inverse_key}: use a surrogate of the inverse mesh"
+            )
+
+
 def build_objective(
     case: Case | str,
     *,
@@ -153,29 +187,10 @@ def build_objective(
             free_repeats=free_repeats,
         )
     ds = resolve_data(case, mesh, tier, data)
-    if ds.case != case.name:
-        raise ValueError(f"data set is for case {ds.case!r}, not {case.name!r}")
     tier = ds.settings.tier
-    data_key, inverse_key = discretisation_key(ds.settings.mesh), discretisation_key(mesh)
-    if tier == "consistent" and data_key != inverse_key:
-        raise ValueError(
-            f"consistent-tier data were made on mesh {ds.settings.mesh} ({data_key}); the inverse "
-            f"model uses {mesh} ({inverse_key}): use data made on the inverse mesh"
-        )
-    hifi_key = discretisation_key(hifi_mesh) if (correction is not None and hifi_mesh) else None
-    check_honest(data_key, tier, forward=inverse_key, hifi=hifi_key)
-    if forward is not None:
-        from problems.surrogate.model import discretisation_of
-
-        trained_on = discretisation_of(forward)
-        if trained_on is None:
-            raise ValueError("the surrogate does not say which discretisation it was trained on")
-        check_honest(data_key, tier, surrogate=trained_on)
-        if trained_on != inverse_key:
-            raise ValueError(
-                f"the surrogate was trained on discretisation {trained_on}; the inverse mesh "
-                f"{mesh} is {inverse_key}: use a surrogate of the inverse mesh"
-            )
+    check_discretisations(
+        case, ds, mesh, hifi_mesh=hifi_mesh if correction is not None else None, forward=forward
+    )
     points, values, std = subset(ds, region)
     sigma = np.concatenate([std.ravel(), np.full(len(ds.reaction_kN), sigma_force_kN)])
     if not sigma_force_kN > 0:

@@ -1,0 +1,1 @@
+"""The experiment side of the bench: how a run's objective is assembled (:mod:`.objective`)."""

@@ -1,0 +1,142 @@
+"""The one assembly of a run's objective: data, measurement region, inverse model (FE or a
+surrogate), model-error correction, and the honesty check.
+
+``femubench identify``, the suite runner, the studies and the model-error and posterior studies
+all go through :func:`prepare` (or :func:`assemble`, its treated objective): the spec's data are
+resolved once, ``treatment = "default"`` is replaced by the case's default, and the honesty rule
+(the discretisation that made model-error data is used by no model of the inverse loop:
+:func:`problems.inverse.build.check_discretisations`) is checked once, before any high-fidelity
+run, for the inverse mesh, the correction's high-fidelity mesh and the surrogate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from bench.identification import Identification, bae_correction, with_default_treatment
+
+
+@dataclass
+class Assembly:
+    """A spec joined to its data, region and models; makes its objectives.
+
+    spec      : the resolved spec (``treatment = "default"`` replaced)
+    case      : the problems.inverse Case
+    data      : the measured Dataset (None for an analytic case)
+    region    : the measurement region (problems.inverse.build.Region; None for analytic)
+    hifi_mesh : the correction's high-fidelity mesh (None without a correction)
+    mapper    : the objectives' mapper (FE runs of a batch)
+    """
+
+    spec: Identification
+    case: Any
+    data: Any = None
+    region: Any = None
+    hifi_mesh: str | None = None
+    mapper: Any = None
+    _pair: tuple | None = field(default=None, repr=False)
+    _fixed: Any = field(default=None, repr=False)
+
+    def objective(self, correction=None, *, forward=None, mapper=None, observers=()):
+        """The Evaluator with ``correction`` (None: uncorrected) on ``forward`` (a surrogate;
+        None: the FE model); ``mapper`` overrides the assembly's. ``observers`` are added."""
+        from problems.inverse.build import build_objective
+
+        s = self.spec
+        flags = {
+            "exact_jacobian": s.jacobian == "exact",
+            "budget_unit": s.budget_unit,
+            "free_repeats": s.free_repeats,
+            "mapper": self.mapper if mapper is None else mapper,
+        }
+        if self.case.is_analytic:
+            obj = build_objective(self.case, **flags)
+        else:
+            obj = build_objective(
+                self.case,
+                mesh=s.mesh,
+                data=self.data,
+                region=self.region,
+                correction=correction,
+                hifi_mesh=self.hifi_mesh,
+                forward=forward,
+                **flags,
+            )
+        obj.observers.extend(observers)
+        return obj
+
+    def models(self):
+        """``(hifi, inverse)`` FE forward models of the correction (made once)."""
+        from problems.inverse.build import model_pair
+
+        if self._pair is None:
+            s = self.spec
+            self._pair = model_pair(self.case, s.mesh, self.hifi_mesh, self.data, self.region)
+        return self._pair
+
+    def one_point(self, at):
+        """The one-point correction (high-fidelity minus inverse model) at the physical ``at``."""
+        from problems.inverse.model_error import one_point
+
+        return one_point(*self.models(), at, mapper=self.mapper)
+
+    def correction(self):
+        """The spec's fixed correction (made once): None for ``none``, the one-point correction at
+        the spec's start, or the BAE statistics; ``iterated`` has none (it follows a solver)."""
+        s = self.spec
+        if s.treatment == "none" or self.case.is_analytic:
+            return None
+        if s.treatment == "iterated":
+            raise ValueError(
+                "treatment 'iterated' re-evaluates the correction at a solver's solutions: it "
+                "exists for identifications only; allowed here: none, one-point, bae, default"
+            )
+        if self._fixed is None:
+            if s.treatment == "one-point":
+                self._fixed = self.one_point(self.start())
+            else:
+                hifi, inverse = self.models()
+                self._fixed = bae_correction(
+                    s, hifi, inverse, self.hifi_mesh, self.data, self.mapper
+                )
+        return self._fixed
+
+    def start(self):
+        """The spec's physical start point."""
+        from problems.inverse.starts import start_point
+
+        s = self.spec
+        return start_point(self.case, kind=s.start, seed=s.seed, index=s.start_index)
+
+    def treated(self, *, forward=None, mapper=None, observers=()):
+        """The objective with the spec's fixed correction (see :meth:`correction`)."""
+        return self.objective(
+            self.correction(), forward=forward, mapper=mapper, observers=observers
+        )
+
+
+def prepare(spec: Identification, *, mapper=None, dataset=None, forward=None) -> Assembly:
+    """The :class:`Assembly` of ``spec``: its data (``dataset`` when the caller prepared it,
+    else ``spec.data`` or the tier's), the default treatment resolved, the region and the
+    high-fidelity mesh; the honesty rule checked once (with ``forward``, the surrogate of the
+    run, when given). No model is run."""
+    from problems.inverse.build import Region, check_discretisations, hifi_mesh_for, resolve_data
+    from problems.inverse.cases import get_case
+
+    case = get_case(spec.case)
+    if case.is_analytic:
+        if forward is not None:
+            raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
+        return Assembly(spec, case, mapper=mapper)
+    data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
+    spec = with_default_treatment(spec, data.settings.tier)
+    hifi_mesh = None if spec.treatment == "none" else spec.hifi_mesh or hifi_mesh_for(spec.mesh)
+    check_discretisations(case, data, spec.mesh, hifi_mesh=hifi_mesh, forward=forward)
+    return Assembly(spec, case, data, Region(spec.plate_margin_mm), hifi_mesh, mapper)
+
+
+def assemble(spec: Identification, *, mapper=None, dataset=None, forward=None):
+    """The objective of ``spec`` with its data, region and fixed model-error correction (the
+    studies' objective; see :func:`prepare` and :meth:`Assembly.correction`)."""
+    return prepare(spec, mapper=mapper, dataset=dataset, forward=forward).treated(forward=forward)
