@@ -200,21 +200,6 @@ def dataset_for(config: RunConfig, *, progress: bool = False):
     )
 
 
-def identification_extras(config: RunConfig) -> dict[str, Any]:
-    """The Identification settings of a run's later dimensions (track, Jacobian, budget unit),
-    only where they differ from the defaults."""
-    extra: dict[str, Any] = {}
-    if config.jacobian != "exact":
-        extra["jacobian"] = config.jacobian
-    if config.budget_unit != "evaluations":
-        extra["budget_unit"] = config.budget_unit
-    if config.free_repeats:
-        extra["free_repeats"] = True
-    if config.track == "surrogate":
-        extra.update(surrogate="default", polish=True, polish_budget=config.polish_budget)
-    return extra
-
-
 def failed_result(
     config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0
 ):
@@ -305,27 +290,14 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
 
             count = [lambda ev, _: evaluations.__setitem__(0, ev.n_evals)]
             return run_user(config, mapper=mapper, observers=count), None, None
-        from bench.identification import Identification, identify
+        from bench.identification import identify
         from problems.inverse.cases import get_case
 
         case = get_case(config.case)
         if dataset is None and not is_analytic(config.case):
             dataset = dataset_for(config)
         x0 = initial_point(case, config)
-        spec = Identification(
-            config.case,
-            config.method,
-            mesh=config.mesh,
-            tier=config.tier,
-            treatment=config.treatment,
-            plate_margin_mm=config.plate_margin_mm,
-            budget=config.budget,
-            seed=config.seed,
-            start=config.start,
-            start_index=config.start_index,
-            options=dict(config.options),
-            **identification_extras(config),
-        )
+        spec = config.identification()
         result = identify(
             spec,
             mapper=mapper,

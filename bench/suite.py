@@ -156,6 +156,37 @@ class RunConfig:
             **{k: type(v)(d.get(k, v)) for k, v in _LATER_KEYS.items()},
         )
 
+    def identification(self):
+        """The :class:`~bench.identification.Identification` that runs this configuration (the
+        one translation from a suite's run to an identification; ``data`` settings are not part of
+        it: they pick the data set, which the runner passes to ``identify``). A surrogate-track
+        run identifies on the default surrogate, then polishes on the FE model with at most
+        ``polish_budget`` evaluations."""
+        from bench.identification import Identification
+
+        surrogate = (
+            {"surrogate": "default", "polish": True, "polish_budget": self.polish_budget}
+            if self.track == "surrogate"
+            else {}
+        )
+        return Identification(
+            self.case,
+            self.method,
+            mesh=self.mesh,
+            tier=self.tier,
+            treatment=self.treatment,
+            plate_margin_mm=self.plate_margin_mm,
+            budget=self.budget,
+            seed=self.seed,
+            start=self.start,
+            start_index=self.start_index,
+            options=dict(self.options),
+            jacobian=self.jacobian,
+            budget_unit=self.budget_unit,
+            free_repeats=self.free_repeats,
+            **surrogate,
+        )
+
     @property
     def hash(self) -> str:
         return config_hash(self)

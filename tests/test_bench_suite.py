@@ -350,14 +350,12 @@ def test_later_keys_keep_the_hash_of_earlier_records_when_default():
 
 
 def test_the_runner_passes_the_later_dimensions_to_the_identification():
-    from bench.runner import identification_extras
-
-    fe = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse")
-    assert identification_extras(fe) == {}
+    fe = RunConfig("analytic-smooth", "lm", 3, "random", 2, 50, "coarse").identification()
+    assert (fe.seed, fe.start, fe.start_index, fe.budget, fe.mesh) == (3, "random", 2, 50, "coarse")
+    assert (fe.jacobian, fe.surrogate, fe.polish, fe.free_repeats) == ("exact", None, False, False)
     fd = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", jacobian="central")
-    assert identification_extras(fd) == {"jacobian": "central"}
+    assert fd.identification().jacobian == "central"
     sur = RunConfig(
         "analytic-smooth", "cma", 0, "default", 0, 50, "coarse", track="surrogate", polish_budget=9
-    )
-    expected = {"surrogate": "default", "polish": True, "polish_budget": 9}
-    assert identification_extras(sur) == expected
+    ).identification()
+    assert (sur.surrogate, sur.polish, sur.polish_budget) == ("default", True, 9)
