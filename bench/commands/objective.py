@@ -82,12 +82,13 @@ def main(args) -> int:
     import json
     import math
 
-    from problems.inverse.build import build_objective
+    from bench.experiment.objective import assemble
+    from bench.identification import Identification
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
     x = point(case, args.x)
-    objective = build_objective(case, mesh=args.mesh, data=args.data)
+    objective = assemble(Identification(case.name, "none", mesh=args.mesh, data=args.data))
     doc = evaluate(objective, x)
     if args.json:
         doc["split"] = {
