@@ -290,7 +290,7 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
 
             count = [lambda ev, _: evaluations.__setitem__(0, ev.n_evals)]
             return run_user(config, mapper=mapper, observers=count), None, None
-        from bench.identification import identify
+        from bench.experiment.identify import identify
         from problems.inverse.cases import get_case
 
         case = get_case(config.case)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from bench.experiment.identify import identify
 from bench.experiment.objective import Assembly, assemble, prepare
-from bench.identification import Identification, identify
+from bench.identification import Identification
 from problems.inverse.model_error import HonestyError
 
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.identification import Identification, identify, jacobian_options
+from bench.experiment.identify import identify
+from bench.identification import Identification, jacobian_options
 from problems.inverse.evaluator import Evaluator
 from problems.inverse.problem import LeastSquaresProblem
 from problems.inverse.protocol import ForwardResult

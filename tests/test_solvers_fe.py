@@ -38,7 +38,8 @@ def test_lm_with_exact_jacobians_converges_in_at_most_16_iterations(name):
     on pt0's lower bound; exponent-tension took 33 iterations with trf): iterations = Jacobian
     evaluations; every evaluation is one run with sensitivities, cheaper in forward-equivalents
     than the n + 1 = 7 runs of one forward-difference Jacobian per iteration."""
-    from bench.identification import Identification, identify
+    from bench.experiment.identify import identify
+    from bench.identification import Identification
 
     res = identify(Identification(name, "lm", tier="consistent", treatment="none", budget=200))
     assert res.status == "converged" and res.n_iterations <= 16, (res.n_iterations, res.message)

@@ -9,7 +9,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.identification import Identification, identify
+from bench.experiment.identify import identify
+from bench.identification import Identification
 from problems.fe.mesh import discretisation_key
 from problems.inverse.build import Region, build_objective
 from problems.inverse.cases import get_case

@@ -268,7 +268,8 @@ def main(args) -> int:
     import warnings
     from pathlib import Path
 
-    from bench.identification import Identification, identify
+    from bench.experiment.identify import identify
+    from bench.identification import Identification
     from bench.outputs import refuse_inputs
     from problems.inverse.cases import get_case
     from problems.inverse.plausibility import PlausibilityWarning

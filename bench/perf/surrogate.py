@@ -294,7 +294,8 @@ def _suite_lm(case: str, tier: str) -> dict | None:
 
 
 def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
-    from bench.identification import Identification, identify
+    from bench.experiment.identify import identify
+    from bench.identification import Identification
 
     out.parent.mkdir(parents=True, exist_ok=True)
     done = set()

@@ -78,8 +78,9 @@ def one_row(
     ``data``: the model-error data set (default: the shipped one, or the DIC route's);
     ``hifi_mesh``:
     the correction's high-fidelity mesh (default: the next finer preset of the inverse mesh)."""
+    from bench.experiment.identify import identify
     from bench.experiment.objective import prepare
-    from bench.identification import Identification, identify
+    from bench.identification import Identification
     from problems.inverse.build import hifi_mesh_for, resolve_data
     from problems.inverse.cases import get_case
     from problems.inverse.data import get_data, tier_settings

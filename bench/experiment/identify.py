@@ -1,0 +1,122 @@
+"""Run one identification: the objective of a spec from the one assembly, the solver, the FE polish.
+
+The experiment side's entry point (``femubench identify``, the runner, the studies): the spec is a
+:class:`bench.identification.Identification`; the objective is assembled by
+:func:`bench.experiment.objective.prepare`, which checks the honesty rule once.
+"""
+
+from __future__ import annotations
+
+from bench.experiment.objective import prepare
+from bench.identification import Identification, jacobian_options
+
+#: options of the FE polish after a run on a surrogate: it starts near the optimum (often on a
+#: bound), where a step's relative cost decrease and size are tiny on ill-conditioned
+#: (model-error) problems, so only the gradient (gtol), a stalled step or the budget stop it
+POLISH_OPTIONS = {"ftol": 1e-15, "xtol": 1e-15}
+
+
+def vectorised_mapper():
+    """The mapper of objectives on a surrogate: whole batches in one vectorised call."""
+    from problems.surrogate.model import VectorisedMapper
+
+    return VectorisedMapper()
+
+
+def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
+    """Run the identification ``spec``; returns the solver's RunResult with totals and provenance.
+
+    ``dataset``: the measured data when the caller prepared it (else the tier's or ``spec.data``).
+    ``observers``: callables added to the objective's observers (progress bars). The objective is
+    assembled by :func:`bench.experiment.objective.prepare` (which checks the honesty rule).
+    """
+    from dataclasses import replace
+
+    from problems.inverse.plausibility import warn_data, warn_result
+    from solvers import solve
+    from solvers.corrected import solve_iterated
+
+    surrogate = None
+    if spec.surrogate:
+        from bench.surrogate_run import load_for
+        from problems.inverse.cases import get_case
+
+        if get_case(spec.case).is_analytic:
+            raise ValueError(f"case {spec.case} is analytic: a surrogate is for the FE cases")
+        surrogate = load_for(spec.surrogate, spec.case, spec.mesh)
+    requested = spec.treatment
+    asm = prepare(spec, mapper=mapper, dataset=dataset, forward=surrogate)
+    x0 = asm.start()
+    if asm.case.is_analytic:
+        return solve(
+            asm.objective(observers=observers),
+            spec.method,
+            budget=spec.budget,
+            seed=spec.seed,
+            x0=x0,
+            **jacobian_options(spec.method, spec.options, spec.jacobian),
+        )
+    warn_data(asm.data)  # wrong units, all zero: before any run (problems/inverse/plausibility.py)
+    spec = asm.spec
+    built = []  # the objectives on the surrogate (their logs give its evaluations' wall time)
+
+    def run_phase(method, budget, start, options, forward):
+        options = jacobian_options(method, options, spec.jacobian)
+
+        def objective_with(correction):
+            obj = asm.objective(
+                correction,
+                forward=forward,
+                mapper=None if forward is None else vectorised_mapper(),
+                observers=observers,
+            )
+            if forward is not None:
+                built.append(obj)
+            return obj
+
+        if spec.treatment == "iterated":
+            return solve_iterated(
+                objective_with,
+                asm.one_point,
+                method,
+                budget=budget,
+                seed=spec.seed,
+                x0=start,
+                **options,
+            )
+        return solve(
+            objective_with(asm.correction()),
+            method,
+            budget=budget,
+            seed=spec.seed,
+            x0=start,
+            **options,
+        )
+
+    result = run_phase(spec.method, spec.budget, x0, spec.options, surrogate)
+    if surrogate is not None:
+        from bench.surrogate_run import combine
+
+        polished = None
+        if spec.polish:
+            polished = run_phase("lm", spec.polish_budget, list(result.x), POLISH_OPTIONS, None)
+        result = combine(
+            result,
+            built,
+            surrogate,
+            spec.surrogate,
+            polished,
+            polish_charges_repeat=spec.treatment in ("one-point", "bae"),
+        )
+    provenance = {
+        **result.provenance,
+        "start": spec.start,
+        "start_index": spec.start_index,
+        "data_file": spec.data,
+        "treatment": spec.treatment,
+        "treatment_requested": requested,
+        "jacobian": spec.jacobian,
+        "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
+    }
+    warn_result(asm.case, asm.data, asm.region, result)  # a cost far above the data's size, bounds
+    return replace(result, provenance=provenance)
