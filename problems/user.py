@@ -242,9 +242,9 @@ class UserProblem:
             )
         if self.x0 is None:
             finite = np.isfinite(p.lower) & np.isfinite(p.upper)
-            self.x0 = np.where(
-                finite, 0.5 * (p.lower + p.upper), np.clip(p.reference, p.lower, p.upper)
-            )
+            with np.errstate(invalid="ignore"):  # inf - inf where a side is infinite: not used
+                mid = 0.5 * (p.lower + p.upper)
+            self.x0 = np.where(finite, mid, np.clip(p.reference, p.lower, p.upper))
         self.x0 = np.asarray(self.x0, float).ravel()
         if self.x0.size != p.n_params or not np.all(np.isfinite(self.x0)):
             raise ValueError(f"x0 must be {p.n_params} finite values, got {self.x0.tolist()}")

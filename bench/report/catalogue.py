@@ -261,6 +261,8 @@ CASES: dict[str, CaseInfo] = {
 }
 METHOD_FAMILIES: dict[str, str] = {
     "lm": "local",
+    "trf": "local",
+    "lm-minpack": "local",
     "sa": "global",
     "gauss-newton": "local",
     "ga": "global",

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Build the nine default surrogates (coarse mesh, shipped data points and sigma), one at a time
 # with 2 workers; resumable: a case whose folder already holds surrogate.json and build.json is
-# skipped. Each finished case is committed (only its own folder).
-#   cd /work/main && nohup results/surrogates/build_defaults.sh > results/surrogates/build.log 2>&1 &
+# skipped. femubench surrogate writes surrogate.npz, surrogate.json and build.json into --out as
+# one unit. The script commits nothing: review and commit the new folders yourself.
+#   cd <your checkout> && nohup results/surrogates/build_defaults.sh > /tmp/build_defaults.log 2>&1 &
 set -u
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
@@ -14,12 +15,8 @@ for c in $CASES; do
   rm -rf "$d.tmp"
   if .venv/bin/femubench surrogate "$c" --mesh coarse --samples 300 --local 40 --local-scale 0.1 \
       --holdout 50 --regression gp --gp-restarts 1 --workers 2 --quiet \
-      --out "$d.tmp" --json "$d.tmp/build.json"; then
+      --out "$d.tmp"; then
     rm -rf "$d" && mv "$d.tmp" "$d"
-    for i in 1 2 3 4 5; do
-      git add "$d" && git commit -q -m "Default surrogate of $c (coarse): 300 + 40 local training runs, 50 hold-out" -- "$d" && break
-      sleep 7
-    done
   else
     echo "FAILED $c"
   fi
