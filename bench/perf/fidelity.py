@@ -314,7 +314,7 @@ def run_all(out: Path, methods, functions, instances, seeds, budget: int) -> Non
                             method=method, side=side, function=f, instance=i, seed=s, budget=budget
                         )
                         _write(path, json.dumps(doc) + "\n")
-                print(f"{method} f{f}: done", flush=True)
+            print(f"{method} f{f}: done", flush=True)
 
 
 def summary(out: Path) -> list[dict]:
