@@ -289,3 +289,18 @@ def test_half_infinite_bounds_reject_points_below_the_finite_side():
     assert inside is None and below.startswith("outside the bounds: x0 = -0.5")
     s = ScalarProblem(lambda x: float(x[0]), [0.0], [np.inf])
     assert s.classify(np.array([[-1.0]]))[0][1].startswith("outside the bounds")
+
+
+def test_builtin_suites_parse():
+    """suites/bbob.toml and suites/nist.toml: their problems load, their runs are as documented."""
+    bbob = load_suite(ROOT / "suites" / "bbob.toml")
+    assert len(bbob.runs()) == 18 * 10 and "bbob-function21-instance3" in bbob.problems
+    nist = load_suite(ROOT / "suites" / "nist.toml")
+    assert len(nist.problems) == 54 and len(nist.runs()) == 54 * 6
+    up = load_problem(
+        **{
+            "entry": nist.problems["nist-MGH09-start1"]["entry"],
+            "args": nist.problems["nist-MGH09-start1"]["args"],
+        }
+    )
+    assert up.kind == "least-squares" and up.success.kind == "digits"
