@@ -86,15 +86,22 @@ MINPACK_OPTIONS = {
 
 
 def strictly_inside(z, lo, hi, rstep: float = 1e-10) -> np.ndarray:
-    """``z`` moved off a *finite* bound it sits on by ``rstep * max(1, |bound|)`` (what
-    least_squares' ``make_strictly_feasible`` does to its start), so that the library's first
-    call is the point the wrapper checked; infinite bounds are left alone."""
+    """``z`` moved strictly inside the box, so that least_squares (whose
+    ``make_strictly_feasible`` moves only points *on* a bound) starts at the point the wrapper
+    checked. A parameter with both bounds finite is clipped to ``[lo + d, hi - d]``,
+    ``d = rstep * (hi - lo)`` (the box-relative margin lm's shipped records were made with); one
+    with a single finite bound it sits on is moved off it by ``rstep * max(1, |bound|)`` (scipy's
+    rule); infinite bounds are left alone. All in the scaled coordinates z (dimensionless)."""
     z = np.array(z, float)
-    at_lo = np.isfinite(lo) & (z <= lo)
-    at_hi = np.isfinite(hi) & (z >= hi)
+    box = np.isfinite(lo) & np.isfinite(hi)
+    d = rstep * (hi[box] - lo[box])
+    z[box] = np.clip(z[box], lo[box] + d, hi[box] - d)
+    at_lo = ~box & np.isfinite(lo) & (z <= lo)
+    at_hi = ~box & np.isfinite(hi) & (z >= hi)
     z[at_lo] = lo[at_lo] + rstep * np.maximum(1.0, np.abs(lo[at_lo]))
     z[at_hi] = hi[at_hi] - rstep * np.maximum(1.0, np.abs(hi[at_hi]))
-    tight = (z < lo) | (z > hi)
+    # a box too narrow for the margin (or one where lo + d rounds to lo): its centre
+    tight = (z <= lo) | (z >= hi)
     z[tight] = 0.5 * (lo[tight] + hi[tight])
     return z
 
