@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Surrogate search (cma) + FE polish against FE-only LM from random starts, per case as soon as its
-# default surrogate is built; resumable (done runs are skipped); commits polish_vs_lm.jsonl.
-#   cd /work/main && nohup results/surrogates/polish_all.sh > /tmp/polish.log 2>&1 &
+# default surrogate is built; resumable (done runs are skipped); it commits nothing: review and commit polish_vs_lm.jsonl yourself.
+#   cd <your checkout> && nohup results/surrogates/polish_all.sh > /tmp/polish.log 2>&1 &
 set -u
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
@@ -12,9 +12,5 @@ for c in $CASES; do
   while [ ! -f "results/surrogates/${c}__coarse/build.json" ]; do sleep 30; done
   echo "=== $c $(date -u +%FT%TZ)"
   .venv/bin/python -m bench.perf.surrogate polish --cases "$c" --starts "$STARTS" --out "$f" || echo "FAILED $c"
-  for i in 1 2 3 4 5; do
-    git add "$f" && git commit -q -m "Surrogate + FE polish against FE-only LM from random starts: $c" -- "$f" && break
-    sleep 7
-  done
 done
 echo "=== done $(date -u +%FT%TZ)"

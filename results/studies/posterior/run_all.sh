@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Posterior study of the nine cases on the default surrogates (consistent tier), one case at a
-# time, each as soon as its surrogate is built; resumable (--skip-done); commits each case.
-#   cd /work/main && nohup results/studies/posterior/run_all.sh > /tmp/posterior.log 2>&1 &
+# time, each as soon as its surrogate is built; resumable (--skip-done); it commits nothing: review and commit the results yourself.
+#   cd <your checkout> && nohup results/studies/posterior/run_all.sh > /tmp/posterior.log 2>&1 &
 set -u
 cd "$(dirname "$0")/../../.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
@@ -12,9 +12,5 @@ for c in $CASES; do
   if [ -f "$d/summary.json" ]; then echo "skip $c"; continue; fi
   echo "=== $c $(date -u +%FT%TZ)"
   .venv/bin/femubench posterior "$c" --quiet || { echo "FAILED $c"; continue; }
-  for i in 1 2 3 4 5; do
-    git add "$d" && git commit -q -m "Posterior of $c on its default surrogate (consistent tier)" -- "$d" && break
-    sleep 7
-  done
 done
 echo "=== done $(date -u +%FT%TZ)"
