@@ -12,6 +12,20 @@ A record carries ``digest``, the sha256 of its canonical JSON without that field
 ``config`` (it must be the file name). Records written before digests existed have none and are
 read as they are (their config is still checked).
 
+Compact records: a record with a non-empty ``result.history`` is stored as two files, the JSON
+without ``result.history`` and the companion ``DIR/runs/<hash>.history.npz`` holding it as numpy
+columns (one array per history key, plus ``<key>.present`` when only some evaluations carry it;
+``x`` as an ``(n, d)`` float64 array). The JSON then names it in ``history_file``
+(``{"name", "sha256", "n"}``, the sha256 of the companion's bytes). The companion is written
+first (atomically), then the JSON; a reader checks the companion's sha256 and rebuilds exactly the
+same in-memory record as from a one-file record. ``digest`` always covers the whole in-memory
+record, history included, ``history_file`` left out: a torn or edited companion fails its sha256,
+one that decodes to other values fails the digest; either way the record counts as unreadable. A
+history that the columns cannot hold exactly (mixed types per key, ragged ``x``, ``"nan"``
+strings among floats) or whose companion would be larger than its JSON (short histories) stays in
+the one-file form. ``femubench records compact DIR`` converts
+older one-file records.
+
 A record file that cannot be read as a record (truncated, empty, not JSON, JSON of the wrong
 shape, a config that does not hash to the file name, or a content hash that does not match: a
 record changed after it was written) counts as missing: the loaders skip it and return it in
@@ -34,6 +48,8 @@ Record (JSON object)::
     started      ISO-8601 UTC time
     finished     ISO-8601 UTC time
     digest       str, sha256 of the canonical JSON of the record without this field
+                 (and without ``history_file``), with ``result.history`` in it
+    history_file {name, sha256, n}, only in a compact record (``result.history`` then absent)
 
 A record whose ``data_hash`` differs from the hash of the data set the run would use today (e.g.
 another ``FEMUBENCH_DATA_DIR``) is stale: the runner moves it into ``DIR/runs/stale/`` and runs it
@@ -48,6 +64,7 @@ import logging
 import math
 import os
 import time
+from io import BytesIO
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -62,6 +79,10 @@ CORRUPT = "corrupt"
 STALE = "stale"
 #: The record field holding its content hash (:func:`record_digest`).
 DIGEST = "digest"
+#: The field of a compact record naming its history companion.
+HISTORY_FILE = "history_file"
+#: File-name suffix of a compact record's history companion.
+HISTORY_SUFFIX = ".history.npz"
 #: Keys the ``config`` of a record must have.
 CONFIG_KEYS = ("case", "method", "seed", "start", "start_index", "budget")
 
@@ -94,21 +115,142 @@ def record_digest(record: dict[str, Any]) -> str:
     return hashlib.sha256(_canonical(record).encode()).hexdigest()
 
 
+def companion_path(path: str | Path) -> Path:
+    """The history companion ``<hash>.history.npz`` of the record file ``<hash>.json``."""
+    path = Path(path)
+    return path.with_name(path.stem + HISTORY_SUFFIX)
+
+
+def _history_columns(history: list) -> dict[str, Any] | None:
+    """The numpy columns of a JSON-decoded ``history`` (list of dicts), or None when they would
+    not give back exactly the same list (see :func:`_history_rows`)."""
+    import numpy as np
+
+    if not history or not all(isinstance(e, dict) for e in history):
+        return None
+    n = len(history)
+    cols: dict[str, Any] = {"_n": np.array(n, dtype=np.int64)}
+    for key in sorted({k for e in history for k in e}):
+        if key == "_n" or key.endswith(".present"):
+            return None
+        present = [key in e for e in history]
+        values = [e[key] for e in history if key in e]
+        kinds = {type(v) for v in values}
+        if len(kinds) != 1:
+            return None
+        kind = kinds.pop()
+        try:
+            if kind is list:
+                arr = np.array(values, dtype=np.float64)
+                if arr.ndim != 2 or any(type(a) is not float for v in values for a in v):
+                    return None
+            elif kind in (bool, int, float, str):
+                arr = np.array(values, dtype={bool: np.bool_, int: np.int64}.get(kind, None))
+                if kind is float and arr.dtype != np.float64:
+                    return None
+            else:
+                return None
+        except (OverflowError, ValueError):
+            return None
+        cols[key] = arr
+        if not all(present):
+            cols[key + ".present"] = np.array(present, dtype=np.bool_)
+    return cols if _history_rows(cols) == history else None
+
+
+def _history_rows(cols) -> list[dict[str, Any]]:
+    """The history list of dicts from its numpy columns (keys in sorted order per entry)."""
+    n = int(cols["_n"])
+    rows: list[dict[str, Any]] = [{} for _ in range(n)]
+    for key in sorted(k for k in cols if k != "_n" and not k.endswith(".present")):
+        values = cols[key].tolist()
+        where = (
+            [i for i, p in enumerate(cols[key + ".present"].tolist()) if p]
+            if key + ".present" in cols
+            else range(n)
+        )
+        for i, v in zip(where, values, strict=True):
+            rows[i][key] = v
+    return rows
+
+
+def _record_text(record: dict[str, Any]) -> str:
+    return json.dumps(record, sort_keys=True, separators=(",", ":")) + "\n"
+
+
 def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:
     """Write one record atomically to ``DIR/runs/<config_hash>.json`` with its content hash
-    (``digest``, :func:`record_digest`); return its path."""
+    (``digest``, :func:`record_digest`); return its path. A record with a history the columns
+    hold exactly is written compact (companion first, see the module doc)."""
     h = record["config_hash"]
     path = record_path(out_dir, h)
     record = {**record, DIGEST: record_digest(record)}
-    atomic_write_text(
-        path, json.dumps(jsonio.encode(record), sort_keys=True, separators=(",", ":")) + "\n"
-    )
+    write_encoded(path, jsonio.encode(record))
     return path
 
 
+def write_encoded(path: Path, encoded: dict[str, Any]) -> bool:
+    """Write the JSON-ready record ``encoded`` (with its ``digest``) to ``path``, compact when
+    its history allows; True when compact."""
+    import numpy as np
+
+    result = encoded.get("result")
+    cols = _history_columns(result.get("history")) if isinstance(result, dict) else None
+    if cols is None:
+        atomic_write_text(path, _record_text(encoded))
+        companion_path(path).unlink(missing_ok=True)  # left by an earlier compact record
+        return False
+    buf = BytesIO()
+    np.savez_compressed(buf, **cols)
+    data = buf.getvalue()
+    if len(data) >= len(json.dumps(result["history"], separators=(",", ":"))):
+        atomic_write_text(path, _record_text(encoded))  # small history: one file is smaller
+        companion_path(path).unlink(missing_ok=True)
+        return False
+    comp = companion_path(path)
+    atomic_write(comp, lambda fh: fh.write(data))
+    body = {**encoded, "result": {k: v for k, v in result.items() if k != "history"}}
+    body[HISTORY_FILE] = {
+        "name": comp.name,
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "n": len(result["history"]),
+    }
+    atomic_write_text(path, _record_text(body))
+    return True
+
+
+def _inflate(rec, path: Path):
+    """Put the companion's history back into a compact record ``rec`` read from ``path``
+    (ValueError when the companion is missing, torn or edited)."""
+    if not isinstance(rec, dict) or HISTORY_FILE not in rec:
+        return rec
+    import numpy as np
+
+    ref = rec.pop(HISTORY_FILE)
+    comp = companion_path(path)
+    if not isinstance(ref, dict) or ref.get("name") != comp.name:
+        raise ValueError(f"{HISTORY_FILE} does not name {comp.name}")
+    try:
+        data = comp.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"history companion {comp.name} cannot be read ({exc.strerror})") from None
+    if hashlib.sha256(data).hexdigest() != ref.get("sha256"):
+        raise ValueError(f"history companion {comp.name} hash mismatch (torn or edited)")
+    try:
+        with np.load(BytesIO(data), allow_pickle=False) as z:
+            history = _history_rows({k: z[k] for k in z.files})
+    except (OSError, ValueError, KeyError) as exc:
+        raise ValueError(f"history companion {comp.name} cannot be decoded ({exc})") from None
+    if not isinstance(rec.get("result"), dict):
+        raise ValueError("'result' missing or not an object")
+    rec["result"]["history"] = history
+    return rec
+
+
 def read_record(path: str | Path) -> dict[str, Any]:
+    """The record at ``path`` as stored (both forms, the history put back), unchecked."""
     with open(path, encoding="utf-8") as fh:
-        return json.load(fh)
+        return _inflate(json.load(fh), Path(path))
 
 
 def load_record(path: str | Path) -> dict[str, Any]:
@@ -126,6 +268,7 @@ def load_record(path: str | Path) -> dict[str, Any]:
         rec = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"not valid JSON (truncated?): {exc}") from None
+    rec = _inflate(rec, path)
     check_record(rec, path.stem)
     return rec
 
@@ -226,6 +369,9 @@ def set_aside(path: Path, folder: str = CORRUPT) -> Path:
     dest, n = dest_dir / stem, 1
     while dest.exists():
         dest, n = dest_dir / f"{stem}-{n}", n + 1
+    comp = companion_path(path)
+    if comp.is_file():
+        os.replace(comp, dest.with_name(dest.name + HISTORY_SUFFIX))
     os.replace(path, dest)
     return dest
 
@@ -245,7 +391,41 @@ def set_aside_files(out_dir: str | Path, folder: str = CORRUPT) -> list[Path]:
     """The record files moved aside so far: unreadable ones (``DIR/runs/corrupt/``), or with
     ``folder=STALE`` those made on other data (``DIR/runs/stale/``)."""
     d = runs_dir(out_dir) / folder
-    return sorted(p for p in d.iterdir() if p.is_file()) if d.is_dir() else []
+    if not d.is_dir():
+        return []
+    return sorted(p for p in d.iterdir() if p.is_file() and not p.name.endswith(HISTORY_SUFFIX))
+
+
+def compact_records(out_dir: str | Path, *, dry_run: bool = False) -> list[tuple[Path, int, int]]:
+    """Convert the one-file records of ``DIR/runs`` whose history the columns hold exactly to the
+    compact form; return ``(path, bytes before, bytes after)`` of each (after: JSON + companion).
+    Each is written to a temporary name, read back and compared with the original (equal, or
+    ValueError and nothing replaced), then renamed into place (companion first). ``dry_run``
+    writes into a temporary folder only. Unreadable records are left alone."""
+    import tempfile
+
+    out = []
+    for path in sorted(runs_dir(out_dir).glob("*.json")):
+        text = path.read_text(encoding="utf-8")
+        try:
+            rec = load_record(path)
+        except ValueError:
+            continue
+        if HISTORY_FILE in json.loads(text):
+            continue
+        with tempfile.TemporaryDirectory(dir=path.parent, prefix=".compact-") as tmp:
+            trial = Path(tmp) / path.name
+            if not write_encoded(trial, json.loads(text)):
+                continue
+            if load_record(trial) != rec:
+                raise ValueError(f"{path.name}: the compact form does not load back equal")
+            comp = companion_path(trial)
+            after = trial.stat().st_size + comp.stat().st_size
+            if not dry_run:
+                os.replace(comp, companion_path(path))
+                os.replace(trial, path)
+        out.append((path, len(text.encode()), after))
+    return out
 
 
 def parameter_order(names) -> list[str]:
