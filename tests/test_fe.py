@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse.linalg as spla
 
 from problems.fe.assembly import element_forces, element_matrices
-from problems.fe.element import gradients, shape_functions
+from problems.fe.element import gradients, shape_functions, shape_functions_27
 from problems.fe.front_face import front_face_operator, measurement_grid
 from problems.fe.mesh import MESH_PRESETS, box_mesh, distort, parse_mesh
 from problems.fe.newton import Loading, NewtonSettings, discretise, run
@@ -16,7 +16,10 @@ from problems.materials import LinearElastic, MaterialUpdate
 E, NU = 30_000.0, 0.2
 
 
-def test_shape_functions_partition_of_unity_and_derivatives():
+@pytest.mark.parametrize(
+    "shape_functions", [shape_functions, shape_functions_27], ids=["hex8", "hex27"]
+)
+def test_shape_functions_partition_of_unity_and_derivatives(shape_functions):
     xi = np.random.default_rng(0).uniform(-1, 1, (5, 3))
     N, dN = shape_functions(xi)
     assert np.allclose(N.sum(axis=1), 1.0, atol=1e-14)

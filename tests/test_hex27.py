@@ -28,18 +28,9 @@ BONDED_REFERENCE_KN = 461.88
 
 
 def test_shape_functions_are_lagrange_and_gauss_rule_is_exact():
+    # partition of unity and derivatives: tests/test_fe.py (both elements)
     N, _ = shape_functions_27(HEX27_OFFSETS - 1.0)
     assert np.abs(N - np.eye(27)).max() < 1e-15
-    xi = np.random.default_rng(0).uniform(-1, 1, (5, 3))
-    N, dN = shape_functions_27(xi)
-    assert np.allclose(N.sum(axis=1), 1.0, atol=1e-14)
-    assert np.allclose(dN.sum(axis=1), 0.0, atol=1e-14)
-    h = 1e-6
-    for d in range(3):
-        e = np.zeros(3)
-        e[d] = h
-        fd = (shape_functions_27(xi + e)[0] - shape_functions_27(xi - e)[0]) / (2 * h)
-        assert np.allclose(fd, dN[..., d], atol=1e-9)
     # x^4 y^2 z^5 integrates exactly over [-1, 1]^3 (0 for the odd power)
     x, y, z = GAUSS27_POINTS.T
     assert GAUSS27_WEIGHTS @ (x**4 * y**2) == pytest.approx(8.0 / 15.0, rel=1e-14)

@@ -223,6 +223,19 @@ class FusedAssembler:
 
 
 @njit(**_JIT)
+def _scatter(Ke, e, slot, data):
+    """Add element ``e``'s matrix ``Ke`` (nd, nd) to ``data[slot[nd^2 e + nd a + b]]``, skipping
+    slots of -1 (entries of constrained dofs)."""
+    nd = Ke.shape[0]
+    base = e * nd * nd
+    for a in range(nd):
+        for k in range(nd):
+            j = slot[base + a * nd + k]
+            if j >= 0:
+                data[j] += Ke[a, k]
+
+
+@njit(**_JIT)
 def _tangent_kernel(G, c, c_const, D, dV, slot, data):
     """data[:] = values of sum_e sum_g B^T D B dV with B = P Bs(G) + m c^T / 3 (module docstring),
     element entry (e, a, b) added to data[slot[nd^2 e + nd a + b]] unless that slot is -1
@@ -307,12 +320,7 @@ def _tangent_kernel(G, c, c_const, D, dV, slot, data):
                 ca = c[e, 0, a]
                 for k in range(nd):
                     Ke[a, k] += ua * c[e, 0, k] + ca * V[k]
-        base = e * nd * nd
-        for a in range(nd):
-            for k in range(nd):
-                j = slot[base + a * nd + k]
-                if j >= 0:
-                    data[j] += Ke[a, k]
+        _scatter(Ke, e, slot, data)
 
 
 @njit(**_JIT)
@@ -336,12 +344,7 @@ def _tangent_dense_kernel(B, D, dV, slot, data):
                     for k in range(nd):
                         X[r, k] += dij * B[e, g, j, k]
         Ke = np.dot(B[e].reshape(ng * 6, nd).T, X)
-        base = e * nd * nd
-        for a in range(nd):
-            for k in range(nd):
-                j = slot[base + a * nd + k]
-                if j >= 0:
-                    data[j] += Ke[a, k]
+        _scatter(Ke, e, slot, data)
 
 
 @njit(**_JIT)
