@@ -3,7 +3,9 @@
 A laboratory test is described by an *experiment file* (TOML, docs/calibrating.md): the specimen
 (any rectangular prism), the platens, the face the camera sees and its calibration, the machine
 log (plate displacement and force at each image, declared units, load-cell accuracy) and the DIC
-export (one CSV per image with named columns x, y, u, v and optional sigma, in px or mm).
+export (one CSV per image with named columns x, y, u, v and optional sigma, in px or mm) or the
+images themselves (``[images]``: a reference and one image per load step, correlated here by
+femubench's IC-GN DIC, :func:`correlate_images`, into the same per-point form).
 :func:`load_experiment` validates it and reports *all* errors at once, one line each naming the
 field (:class:`ExperimentFileError`); :func:`import_experiment` turns the files into a Dataset:
 
@@ -45,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from problems.dic.correlate import DICConfig
 from problems.fe.newton import MachineLoading
 from problems.inverse import layout
 from problems.inverse.data import EXPERIMENT_TIER, Dataset, DataSettings
@@ -99,6 +102,18 @@ SECTIONS = {
         "sigma": "standard deviation of u and v in the export's units when no sigma column",
         "images": "folder of the images (recorded, optional)",
     },
+    "images": {
+        "reference": "the reference (undeformed) image: TIFF, PNG or BMP, 8 or 16 bit",
+        "files": "glob pattern or list of the deformed images, one per image row of the log",
+        "roi": "[x0, y0, x1, y1] px region of the subsets, half-open (default: the face's "
+        "bounding box in the reference image)",
+        "subset": "subset side, odd px >= 5 (default 21)",
+        "step": "grid step of the subset centres, px (default: the subset side, so that "
+        "subsets do not overlap and the points' errors are independent)",
+        "order": "B-spline interpolation of the deformed images: 3 | 5 (default 3)",
+        "zncc_min": "points whose final ZNCC is lower are dropped, in [-1, 1] (default 0.9)",
+        "search_radius": "integer search radius of the FFT seed guess, px (default 32)",
+    },
     "calibration": {
         "mesh": "inverse mesh spec (default coarse)",
         "models": "all, or a list of variants form-hardening",
@@ -124,6 +139,9 @@ class Experiment:
     """A validated experiment file (see :data:`SECTIONS` and docs/calibrating.md).
 
     All paths are absolute. ``specimen_mm`` is the model's (x, y, z) = (depth, width, height).
+    ``dic_files`` are the measurement's files per image: the DIC export's CSVs (``route`` csv) or
+    the deformed images (``route`` images, with ``reference_image``, the DIC settings
+    ``correlation`` and the optional ``roi_px``).
     """
 
     path: Path
@@ -151,6 +169,10 @@ class Experiment:
     sigma: float | None  # export units
     images: Path | None
     mesh: str = "coarse"
+    route: str = "csv"  # csv: a DIC export; images: correlated here ([images])
+    reference_image: Path | None = None
+    correlation: DICConfig | None = None
+    roi_px: tuple[int, int, int, int] | None = None
     models: tuple[str, ...] = ()
     budget: int = 80
     use_images: tuple[int, ...] = ()
@@ -248,6 +270,94 @@ def face_affine(
     }
 
 
+def _files(sec: dict, where: str, base: Path, errors: list[str], suffixes=None) -> list[Path]:
+    """The ``files`` of table ``where``: a glob (sorted) or a list, relative to ``base``;
+    ``suffixes``: the allowed file name endings (lower case), if any."""
+    files = sec.get("files")
+    out: list[Path] = []
+    if isinstance(files, str):
+        out = sorted(Path(p).resolve() for p in glob.glob(str(base / files)))
+        if not out:
+            errors.append(f"[{where}] files = {files!r}: no file matches")
+    elif isinstance(files, list) and files and all(isinstance(f, str) for f in files):
+        out = [(base / f).resolve() for f in files]
+        missing = [str(f) for f in files if not (base / f).is_file()]
+        if missing:
+            errors.append(f"[{where}] files: no such file(s) {', '.join(missing[:3])}")
+            out = []
+    else:
+        errors.append(f"[{where}] files = {files!r}: a glob pattern or a non-empty list of files")
+    bad = [p.name for p in out if suffixes and p.suffix.lower() not in suffixes]
+    if bad:
+        errors.append(
+            f"[{where}] files: {', '.join(bad[:3])}: not an image; allowed: {', '.join(suffixes)}"
+        )
+        out = []
+    return out
+
+
+def _parse_images(im: dict, base: Path, errors: list[str]):
+    """The ``[images]`` table: (reference image, deformed images, DICConfig, roi or None)."""
+    from problems.dic.imageio import READ_SUFFIXES
+
+    ref = im.get("reference")
+    reference = None
+    if not isinstance(ref, str):
+        errors.append(f"[images] reference = {ref!r}: missing or not a file name")
+    else:
+        reference = (base / ref).resolve()
+        if not reference.is_file():
+            errors.append(f"[images] reference = {ref!r}: no such file {reference}")
+            reference = None
+        elif reference.suffix.lower() not in READ_SUFFIXES:
+            errors.append(
+                f"[images] reference = {ref!r}: not an image; allowed: {', '.join(READ_SUFFIXES)}"
+            )
+            reference = None
+    files = _files(im, "images", base, errors, READ_SUFFIXES)
+    if reference is not None and reference in files:
+        errors.append(f"[images] files: the reference {ref!r} is among the deformed images")
+
+    def whole(key, default, low):
+        v = im.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < low:
+            errors.append(f"[images] {key} = {v!r}: a whole number >= {low}")
+            return default
+        return v
+
+    subset = whole("subset", 21, 5)
+    if subset % 2 == 0:
+        errors.append(f"[images] subset = {subset!r}: the subset side must be odd")
+        subset = 21
+    step = whole("step", subset, 1)
+    search = whole("search_radius", 32, 0)
+    order = im.get("order", 3)
+    if order not in (3, 5) or isinstance(order, bool):
+        errors.append(f"[images] order = {order!r} is unknown; allowed: 3, 5")
+        order = 3
+    zmin = _number(im, "zncc_min", errors, "images", default=0.9, positive=False)
+    if zmin is not None and not -1.0 <= zmin <= 1.0:
+        errors.append(f"[images] zncc_min = {zmin!r}: must be in [-1, 1]")
+        zmin = 0.9
+    roi = im.get("roi")
+    if roi is not None:
+        if not (
+            isinstance(roi, list)
+            and len(roi) == 4
+            and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in roi)
+        ):
+            errors.append(f"[images] roi = {roi!r}: four whole numbers [x0, y0, x1, y1] px >= 0")
+            roi = None
+        elif not (roi[2] - roi[0] >= subset and roi[3] - roi[1] >= subset):
+            errors.append(
+                f"[images] roi = {roi!r}: must hold one subset of {subset} px (x1 - x0 and "
+                "y1 - y0 >= subset)"
+            )
+            roi = None
+    cfg = DICConfig(subset=subset, step=step, order=order, zncc_min=zmin, search_radius=search)
+    return reference, files, cfg, None if roi is None else tuple(roi)
+
+
 def load_experiment(path: str | Path) -> Experiment:
     """Read and validate an experiment file; :class:`ExperimentFileError` lists every problem
     (one line each, naming the field), FileNotFoundError for a missing file."""
@@ -279,9 +389,17 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
             if key not in SECTIONS[name]:
                 errors.append(f"[{name}] unknown key {key!r}; allowed: {', '.join(SECTIONS[name])}")
         sec[name] = s
-    for name in ("specimen", "camera", "loading", "dic"):
+    for name in ("specimen", "camera", "loading"):
         if name not in raw:
             errors.append(f"missing table [{name}]")
+    route = "images" if "images" in raw else "csv"
+    if "images" in raw and "dic" in raw:
+        errors.append(
+            "[dic], [images]: give the measurement once: a DIC export ([dic]) or the images "
+            "([images]), not both"
+        )
+    elif "images" not in raw and "dic" not in raw:
+        errors.append("missing table [dic] (a DIC export) or [images] (the images)")
 
     e = sec["experiment"]
     name = e.get("name", path.stem)
@@ -306,7 +424,10 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
 
     cam = sec["camera"]
     face = _choice(cam, "face", FACES, errors, "camera", default="front")
-    units = _choice(cam, "units", UNITS, errors, "camera")
+    if route == "images":
+        units = _choice(cam, "units", ("px",), errors, "camera", default="px")
+    else:
+        units = _choice(cam, "units", UNITS, errors, "camera")
     y_axis = cam.get("y_axis")
     if y_axis is not None and y_axis not in ("down", "up"):
         errors.append(f"[camera] y_axis = {y_axis!r} is unknown; allowed: down, up")
@@ -328,7 +449,7 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
             origin = None
         if units == "px":
             mm_per_px = _number(cam, "mm_per_px", errors, "camera")
-        elif "mm_per_px" in cam:
+        elif units == "mm" and "mm_per_px" in cam:
             errors.append("[camera] mm_per_px: only for px exports (units = 'px')")
     affine, calibration = None, {}
     if (
@@ -403,39 +524,32 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
         )
 
     d = sec["dic"]
-    files = d.get("files")
     dic_files: list[Path] = []
-    if isinstance(files, str):
-        dic_files = sorted(Path(p).resolve() for p in glob.glob(str(base / files)))
-        if not dic_files:
-            errors.append(f"[dic] files = {files!r}: no file matches")
-    elif isinstance(files, list) and files and all(isinstance(f, str) for f in files):
-        dic_files = [(base / f).resolve() for f in files]
-        missing = [str(f) for f in files if not (base / f).is_file()]
-        if missing:
-            errors.append(f"[dic] files: no such file(s) {', '.join(missing[:3])}")
-            dic_files = []
+    columns, sigma, images_path = dict(COLUMNS), None, None
+    reference, correlation, roi_px = None, None, None
+    if route == "csv":
+        dic_files = _files(d, "dic", base, errors)
+        cols = d.get("columns", {})
+        if not isinstance(cols, dict):
+            errors.append("[dic] columns must be a table role = header")
+            cols = {}
+        for role, header in cols.items():
+            if role not in COLUMNS:
+                errors.append(
+                    f"[dic] columns: unknown role {role!r}; allowed: {', '.join(COLUMNS)}"
+                )
+            elif not isinstance(header, str):
+                errors.append(f"[dic] columns.{role} = {header!r}: a column header (string)")
+            else:
+                columns[role] = header
+        sigma = _number(d, "sigma", errors, "dic", required=False)
+        images = d.get("images")
+        if images is not None:
+            images_path = (base / str(images)).resolve()
+            if not images_path.is_dir():
+                errors.append(f"[dic] images = {images!r}: no such folder {images_path}")
     else:
-        errors.append(f"[dic] files = {files!r}: a glob pattern or a non-empty list of files")
-    columns = dict(COLUMNS)
-    cols = d.get("columns", {})
-    if not isinstance(cols, dict):
-        errors.append("[dic] columns must be a table role = header")
-        cols = {}
-    for role, header in cols.items():
-        if role not in COLUMNS:
-            errors.append(f"[dic] columns: unknown role {role!r}; allowed: {', '.join(COLUMNS)}")
-        elif not isinstance(header, str):
-            errors.append(f"[dic] columns.{role} = {header!r}: a column header (string)")
-        else:
-            columns[role] = header
-    sigma = _number(d, "sigma", errors, "dic", required=False)
-    images = d.get("images")
-    images_path = None
-    if images is not None:
-        images_path = (base / str(images)).resolve()
-        if not images_path.is_dir():
-            errors.append(f"[dic] images = {images!r}: no such folder {images_path}")
+        reference, dic_files, correlation, roi_px = _parse_images(sec["images"], base, errors)
 
     c = sec["calibration"]
     mesh = c.get("mesh", "coarse")
@@ -502,6 +616,10 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
         budget=int(budget),
         use_images=tuple(use),
         plate_margin_mm=margin,
+        route=route,
+        reference_image=reference,
+        correlation=correlation,
+        roi_px=roi_px,
     )
 
 
@@ -584,8 +702,9 @@ def read_log(exp: Experiment) -> tuple[np.ndarray, np.ndarray]:
     d = exp.compression_sign * (data["d"][rows] - exp.zero_displacement) * exp.displacement_scale
     f = exp.compression_sign * data["f"][rows] * exp.force_scale
     if len(rows) != len(exp.dic_files):
+        table = "images" if exp.route == "images" else "dic"
         raise ValueError(
-            f"machine log {exp.log}: {len(rows)} image rows, but [dic] files lists "
+            f"machine log {exp.log}: {len(rows)} image rows, but [{table}] files lists "
             f"{len(exp.dic_files)} images"
         )
     if not (np.all(np.isfinite(d)) and np.all(np.isfinite(f))):
@@ -717,13 +836,103 @@ def read_dic(exp: Experiment):
     return out, n_nan
 
 
+def face_to_image(exp: Experiment, face_mm) -> np.ndarray:
+    """Face coordinates (m, 2) = (s, z) mm -> the image's (x, y) px: the calibration's inverse."""
+    A, c = exp.affine[:, :2], exp.affine[:, 2]
+    return (np.asarray(face_mm, float) - c) @ np.linalg.inv(A).T
+
+
+def correlate_images(exp: Experiment):
+    """The ``[images]`` route: the deformed images correlated against the reference by
+    femubench's IC-GN DIC (:class:`~problems.dic.correlate.Correlator`, each image started from
+    the previous one's solution), in the form of :func:`read_dic`.
+
+    Subset centres lie on a grid (``step`` px) in the ROI (default: the face's bounding box in
+    the image, from the calibration); subsets not entirely on the face, ``roi_margin_mm`` inside
+    its edges, are not correlated (counted). Returns ``(per_image, n_failed, info)``: per image
+    (centres (m_k, 2) px, u (m_k, 2) px, sigma (m_k, 2) px from the IC-GN covariance) of the
+    converged points, the number of (image, point) pairs that did not converge, and ``info``
+    (settings, counts, the images' grey-level noise) for the provenance. ValueError (one line
+    naming the file or field) for unreadable, blank or differently sized images.
+    """
+    from problems.dic.correlate import Correlator, as_grey, check_not_blank, grid_points
+    from problems.dic.imageio import read_image
+
+    cfg = exp.correlation
+    ref = as_grey(read_image(exp.reference_image), f"reference image {exp.reference_image}")
+    check_not_blank(ref, f"reference image {exp.reference_image}")
+    rows, cols = ref.shape
+    W, H, mrg = exp.width_mm, exp.height_mm, exp.roi_margin_mm
+    if exp.roi_px is None:
+        box = face_to_image(exp, [[0.0, 0.0], [W, 0.0], [W, H], [0.0, H]])
+        lo, hi = np.floor(box.min(axis=0)), np.ceil(box.max(axis=0)) + 1
+        roi = (max(0, int(lo[0])), max(0, int(lo[1])), min(cols, int(hi[0])), min(rows, int(hi[1])))
+        where = f"the face's bounding box {roi} px"
+    else:
+        roi, where = exp.roi_px, f"[images] roi = {list(exp.roi_px)}"
+    try:
+        pts = grid_points(ref.shape, cfg.subset, cfg.step, roi)
+    except ValueError as exc:
+        raise ValueError(f"{where} in {exp.reference_image.name}: {exc}") from None
+    # a subset (pixels c - h - 1/2 .. c + h + 1/2) must lie on the face, mrg inside its edges
+    h = cfg.half + 0.5
+    A, c = exp.affine[:, :2], exp.affine[:, 2]
+    on = np.ones(len(pts), bool)
+    for dx, dy in ((-h, -h), (h, -h), (h, h), (-h, h)):
+        f = (pts + [dx, dy]) @ A.T + c
+        on &= (f[:, 0] >= mrg) & (f[:, 0] <= W - mrg) & (f[:, 1] >= mrg) & (f[:, 1] <= H - mrg)
+    if on.sum() < 4:
+        raise ValueError(
+            f"{where}: only {int(on.sum())} subsets of {cfg.subset} px lie on the face; check "
+            "[camera] and [images]"
+        )
+    corr = Correlator(ref, pts[on], cfg)
+    per_image, failed, noise, prev = [], [], [], None
+    for path in exp.dic_files:
+        img = as_grey(read_image(path), f"image {path}")
+        if img.shape != ref.shape:
+            raise ValueError(
+                f"image {path}: {img.shape[1]} x {img.shape[0]} px, but the reference "
+                f"{exp.reference_image.name} is {cols} x {rows} px"
+            )
+        check_not_blank(img, f"image {path}")
+        res = corr.correlate(img, initial=prev)
+        ok = res.converged
+        if np.any(ok):
+            prev = res
+        P = corr.points[ok]
+        U = np.column_stack([res.u[ok], res.v[ok]])
+        S = np.column_stack([res.std_u[ok], res.std_v[ok]])
+        per_image.append((P, U, S))
+        failed.append(int((~ok).sum()))
+        noise.append(float(res.noise_sigma))
+    info = {
+        "subset_px": cfg.subset,
+        "step_px": cfg.step,
+        "order": cfg.order,
+        "zncc_min": cfg.zncc_min,
+        "search_radius_px": cfg.search_radius,
+        "roi_px": [int(v) for v in roi],
+        "image_px": [cols, rows],
+        "subsets_correlated": int(on.sum()),
+        "subsets_off_face": int((~on).sum()),
+        "not_converged_per_image": failed,
+        "grey_noise_per_image": noise,
+    }
+    return per_image, int(sum(failed)), info
+
+
 def import_experiment(exp: Experiment) -> Dataset:
     """The Dataset of an experiment (see the module docstring): folded face points (y, z) mm of
     the quarter model, rigid-motion-free displacements and their sigma (mm), the machine's plate
     displacement (mm) and force (kN) at each image with the force's sigma, provenance in
     ``meta``. Raises ValueError (one line naming the file) for unreadable data."""
     d_mm, f_kN = read_log(exp)
-    per_image, n_nan = read_dic(exp)
+    correlation = None
+    if exp.route == "images":
+        per_image, n_nan, correlation = correlate_images(exp)
+    else:
+        per_image, n_nan = read_dic(exp)
     use = np.array(exp.use_images, int) - 1 if exp.use_images else np.arange(len(per_image))
     # points in every used image, keyed by their reference position
     keys = [{tuple(np.round(p, 6)): i for i, p in enumerate(per_image[k][0])} for k in use]
@@ -794,8 +1003,12 @@ def import_experiment(exp: Experiment) -> Dataset:
     files = {
         "experiment": {rel(exp.path): sha256(exp.path)},
         "machine_log": {rel(exp.log): sha256(exp.log)},
-        "dic": {rel(p): sha256(p) for p in exp.dic_files},
     }
+    if correlation is None:
+        files["dic"] = {rel(p): sha256(p) for p in exp.dic_files}
+    else:
+        files["images"] = {rel(p): sha256(p) for p in (exp.reference_image, *exp.dic_files)}
+        n_off += correlation["subsets_off_face"]
     meta = {
         "experiment": exp.name,
         "description": exp.description,
@@ -815,6 +1028,8 @@ def import_experiment(exp: Experiment) -> Dataset:
     }
     if exp.images is not None:
         meta["images"] = os.path.relpath(exp.images, exp.path.parent)
+    if correlation is not None:
+        meta["correlation"] = correlation
     return Dataset(
         f"experiment:{exp.name}",
         settings,
