@@ -10,7 +10,10 @@ optimum takes the exact Jacobian for the Laplace covariance and the Fisher infor
 start): a calibration interrupted resumes with the variants not done. The report
 (``report.json``, ``report.md``, ``force_displacement.png``, ``residuals.png``) ranks the
 variants by AIC and BIC (``chi2 + 2 k`` and ``chi2 + k ln n``; the noise model is known, so
-``-2 ln L = chi2`` up to a constant common to all variants) with Akaike weights.
+``-2 ln L = chi2`` up to a constant common to all variants) with Akaike weights, and gives each
+variant's Laplace evidence and the posterior model probabilities
+(bench/calibration_evidence.py). A virtual experiment's data mesh is never a mesh of the
+calibration (:func:`check_meshes`).
 """
 
 from __future__ import annotations
@@ -76,6 +79,28 @@ class CalibrationSettings:
         return self.check_mesh
 
 
+def check_meshes(data_mesh: str, settings: CalibrationSettings) -> None:
+    """ValueError (one line naming the option) when the inverse mesh or the finer mesh of the
+    check or correction is the discretisation that made a virtual experiment's data
+    (``data_mesh``; "" for a real test: nothing to check): the honesty rule."""
+    if not data_mesh:
+        return
+    from problems.fe.mesh import discretisation_key
+
+    made = discretisation_key(data_mesh)
+    named = [("--mesh", settings.mesh, settings.mesh)]
+    if settings.fine_mesh:
+        shown = f"auto (= {settings.fine_mesh})" if settings.check_mesh == "auto" else None
+        named.append(("--check-mesh", shown or settings.fine_mesh, settings.fine_mesh))
+    for option, shown, mesh in named:
+        if discretisation_key(mesh) == made:
+            raise ValueError(
+                f"{option} {shown}: the discretisation {made} made this virtual experiment's data "
+                f"([virtual] data_mesh = {data_mesh!r}); no model of a calibration may use it "
+                "(the honesty rule): choose another mesh"
+            )
+
+
 def model_for(data: Dataset, case, mesh: str):
     """The FE model of the specimen of ``data`` on ``mesh`` at its points and machine loading,
     with the data's rigid-motion removal applied."""
@@ -138,6 +163,7 @@ def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
 def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dict:
     """Identify ``case`` on ``data`` (``lm`` from ``case.start``), then the Laplace covariance,
     the Fisher information and the fit at the optimum, as a JSON-ready dict."""
+    from bench.calibration_evidence import laplace_log_evidence
     from problems.analysis.identifiability import analyse_jacobian
     from solvers import solve
 
@@ -242,6 +268,7 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
         "rms_sigma_blocks": {b: math.sqrt(split[b] / counts[b]) for b in ("u_h", "u_v", "force")},
         "aic": chi2 + 2 * k,
         "bic": chi2 + k * math.log(n_data),
+        "evidence": laplace_log_evidence(chi2, ident.fisher_x, x, case.lower, case.upper),
         "model_force_kN": model_force.tolist(),
         "residual_last_sigma": {
             "u_h": layout.unstack(r, N, m)[0][-1].tolist(),
@@ -275,6 +302,7 @@ def calibrate(
             "inputs (name a new folder)"
         )
     settings = settings or CalibrationSettings(exp.mesh, exp.budget)
+    check_meshes(exp.data_mesh, settings)
     models = list(models or exp.models)
     data = import_experiment(exp)
     summary = curve_summary(data)
@@ -350,14 +378,34 @@ def discretisation_check(data, case, result, settings, out: Path, progress) -> d
     return out_d
 
 
+def laplace_evidence(result: dict) -> dict:
+    """The Laplace evidence of a variant's result (bench/calibration_evidence.py); results
+    written before it was stored get it from their stored noise-only covariance (the inverse of
+    the Fisher information, full rank) and box."""
+    if "evidence" in result:
+        return result["evidence"]
+    from bench.calibration_evidence import laplace_log_evidence
+
+    sd = np.asarray(result["std_noise_only"], float)
+    cov = np.asarray(result["correlation"], float) * np.outer(sd, sd)
+    return laplace_log_evidence(
+        result["chi2"], np.linalg.inv(cov), result["x"], result["lower"], result["upper"]
+    )
+
+
 def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict:
     """The report dict: experiment, import, heuristics, each variant, model selection."""
+    from bench.calibration_evidence import model_probabilities
+
     ok = {k: v for k, v in results.items() if v.get("ok") and math.isfinite(v["chi2"])}
     ranking = []
     if ok:
         aic_min = min(v["aic"] for v in ok.values())
         w = {k: math.exp(-0.5 * (v["aic"] - aic_min)) for k, v in ok.items()}
         total = sum(w.values())
+        log_z = {k: laplace_evidence(v)["log_evidence"] for k, v in ok.items()}
+        prob = model_probabilities(log_z)
+        z_max = max(log_z.values())
         for name in sorted(ok, key=lambda k: ok[k]["aic"]):
             v = ok[name]
             ranking.append(
@@ -367,6 +415,9 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
                     "bic": v["bic"],
                     "delta_aic": v["aic"] - aic_min,
                     "akaike_weight": w[name] / total,
+                    "log_evidence": log_z[name],
+                    "delta_log_evidence": log_z[name] - z_max,
+                    "model_probability": prob[name],
                     "chi2": v["chi2"],
                     "rms_sigma": v["rms_sigma"],
                 }
@@ -504,14 +555,21 @@ def render_markdown(report: dict) -> str:
         f"peak stress {_fmt(t['f_c_MPa'])} MPa, f_ctm {_fmt(t['f_ctm_MPa'])} MPa",
         "",
         "## Model selection",
-        "| rank | variant | chi2 | rms (sigma) | AIC | BIC | dAIC | Akaike weight |",
-        "|---|---|---|---|---|---|---|---|",
+        "",
+        "Ranked by AIC. log Z: the Laplace log evidence (uniform prior on the variant's box, up "
+        "to the noise normalisation common to all variants; docs/calibrating.md); p(M|D): the "
+        "posterior probability of the variant from it, equal prior probabilities.",
+        "",
+        "| rank | variant | chi2 | rms (sigma) | AIC | BIC | dAIC | Akaike weight | log Z | "
+        "dlog Z | p(M\\|D) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for i, r in enumerate(report["ranking"], 1):
         lines.append(
             f"| {i} | {r['variant']} | {_fmt(r['chi2'])} | {r['rms_sigma']:.3f} | "
             f"{_fmt(r['aic'])} | {_fmt(r['bic'])} | {r['delta_aic']:.3g} | "
-            f"{r['akaike_weight']:.3g} |"
+            f"{r['akaike_weight']:.3g} | {r['log_evidence']:.6g} | "
+            f"{r['delta_log_evidence']:.3g} | {r['model_probability']:.3g} |"
         )
     near = [r["variant"] for r in report["ranking"][1:] if r["delta_aic"] < 2.0]
     if near:

@@ -89,6 +89,9 @@ def test_consistent_virtual_experiment_is_recovered(tmp_path):
         seed=5,
     )
     exp = write_virtual_experiment(t, tmp_path / "ve", "consistent")
+    # data made on the inverse mesh on purpose (the optimiser alone, as the consistent tier):
+    # drop the [virtual] record that would refuse it, as a real test has none
+    exp.write_text(exp.read_text().split("[virtual]")[0])
     rep = calibrate(
         exp,
         tmp_path / "out",
@@ -120,15 +123,14 @@ def test_cli_bad_file_and_bad_out(tmp_path, capsys):
 
 
 def test_iterated_correction_removes_the_discretisation_bias(tmp_path):
-    """Data made on mesh 4,4,8, inverse mesh 3,3,6: uncorrected, the parameters are biased by the
-    inverse mesh's discretisation error; the iterated correction with the data's own mesh as the
-    finer one (a check of the mechanism: with a real test the finer mesh is never exact) takes
-    them to the truth."""
+    """Data made on mesh 6,6,12, inverse mesh 3,3,6: uncorrected, the parameters are biased by
+    the inverse mesh's discretisation error; the iterated correction with a finer mesh that is
+    not the data's (5,5,10: the honesty rule, enforced) removes most of the bias."""
     truth = np.array([31000.0, 33.0, 0.88, 11.0, 21.5, 1300.0])
     t = VirtualTest(
         "linear-compression",
         tuple(truth),
-        data_mesh="4,4,8",
+        data_mesh="6,6,12",
         levels_mm=(0.05, 0.15, 0.3, 0.5),
         noise_px=(0.002, 0.004),
         load_cell_class=0.5,
@@ -142,14 +144,15 @@ def test_iterated_correction_removes_the_discretisation_bias(tmp_path):
             exp,
             tmp_path / corr,
             models=["linear-compression"],
-            settings=CalibrationSettings("3,3,6", 30, check_mesh="4,4,8", correction=corr),
+            settings=CalibrationSettings("3,3,6", 30, check_mesh="5,5,10", correction=corr),
             progress=lambda s: None,
             figures=False,
         )
         v = rep["variants"]["linear-compression"]
         errors[corr] = np.abs(np.array(v["x"]) / truth - 1).max()
         assert v["n_evals"] > sum(r["n_evals"] for r in v["correction_rounds"])
-    assert errors["none"] > 0.1 and errors["iterated"] < 0.005, errors
+    # measured: largest relative error 0.55 uncorrected, 0.16 corrected
+    assert errors["none"] > 0.1 and errors["iterated"] < errors["none"] / 3, errors
     assert rep["discretisation"]["rms_sigma"] > 0
 
 
@@ -169,3 +172,26 @@ def test_shipped_calibration_matches_the_example():
         done = json.loads((out / "variants" / f"{name}.json").read_text())
         assert done["key"] == cal.variant_key(data, lab_case(name, data, summary), settings)
     assert report["ranking"][0]["variant"].startswith("linear-")
+
+
+def test_data_mesh_is_never_a_calibration_mesh(tmp_path, capsys):
+    """A virtual experiment records its data mesh; --mesh or --check-mesh (auto too) on it is
+    refused in one line with exit code 2, before any model run."""
+    exp = tmp_path / "ve" / "experiment.toml"
+    exp.parent.mkdir()
+    text = _short_copy(tmp_path).read_text() + '\n[virtual]\ndata_mesh = "paper"\n'
+    exp.write_text(text)
+    assert load_experiment(exp).data_mesh == "paper"
+    for argv, option in (
+        (["--mesh", "14,14,26"], "--mesh 14,14,26"),
+        (["--mesh", "coarse"], "--check-mesh auto (= paper)"),
+        (["--mesh", "3,3,6", "--check-mesh", "paper"], "--check-mesh paper"),
+    ):
+        code = main(["calibrate", str(exp), "--out", str(tmp_path / "o"), *argv])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and option in err[0], err
+        assert "made this virtual experiment's data" in err[0]
+    bad = tmp_path / "ve" / "bad.toml"
+    bad.write_text(text.replace('data_mesh = "paper"', 'data_mesh = "nope"'))
+    assert main(["calibrate", str(bad)]) == 2
+    assert "[virtual] data_mesh" in capsys.readouterr().err

@@ -121,6 +121,10 @@ SECTIONS = {
         "images": "1-based indices of the images used (default all)",
         "plate_margin_mm": "face points closer than this to a platen are left out (default 0)",
     },
+    "virtual": {
+        "data_mesh": "virtual experiments only: the FE mesh that made the data; never the "
+        "inverse or the check mesh of a calibration (the honesty rule)",
+    },
 }
 
 
@@ -177,6 +181,7 @@ class Experiment:
     budget: int = 80
     use_images: tuple[int, ...] = ()
     plate_margin_mm: float = 0.0
+    data_mesh: str = ""  # a virtual experiment's data mesh ("" for a real test)
 
     @property
     def specimen_mm(self) -> tuple[float, float, float]:
@@ -584,6 +589,12 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
     margin = _number(c, "plate_margin_mm", errors, "calibration", default=0.0, positive=False)
     if margin is not None and height and not 0 <= margin < height / 2:
         errors.append(f"[calibration] plate_margin_mm = {margin!r}: 0 <= margin < height / 2")
+    data_mesh = sec["virtual"].get("data_mesh", "")
+    if data_mesh:
+        try:
+            parse_mesh_spec(data_mesh)
+        except (ValueError, TypeError) as exc:
+            errors.append(f"[virtual] data_mesh: {exc}")
     if errors:
         raise ExperimentFileError(path, errors)
     return Experiment(
@@ -620,6 +631,7 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
         reference_image=reference,
         correlation=correlation,
         roi_px=roi_px,
+        data_mesh=str(data_mesh),
     )
 
 
@@ -1030,6 +1042,8 @@ def import_experiment(exp: Experiment) -> Dataset:
         meta["images"] = os.path.relpath(exp.images, exp.path.parent)
     if correlation is not None:
         meta["correlation"] = correlation
+    if exp.data_mesh:
+        meta["data_mesh"] = exp.data_mesh
     return Dataset(
         f"experiment:{exp.name}",
         settings,

@@ -147,6 +147,9 @@ force_resolution = {test.force_step_kN:g}
 [calibration]
 mesh = "coarse"
 models = "all"
+
+[virtual]
+data_mesh = "{test.data_mesh}"
 """
     return atomic_write_text(out / "experiment.toml", toml)
 
