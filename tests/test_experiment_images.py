@@ -121,3 +121,24 @@ def test_bad_images_fields_one_line_each_exit_2(tiny, tmp_path, capsys):
     both.write_text(base + '\n[dic]\nfiles = "dic/*.csv"\n')
     with pytest.raises(ExperimentFileError, match=r"\[dic\], \[images\]: give the measurement"):
         load_experiment(both)
+
+
+def test_shipped_images_example_imports_and_starts_the_calibration():
+    """suites/experiments/cube100-images: small (< 3 MB), every subset converges in every image,
+    and the test's own start and box hold the truth (docs/calibrating.md)."""
+    from pathlib import Path
+
+    from problems.inverse.lab import curve_summary, lab_case
+
+    folder = Path(__file__).resolve().parents[1] / "suites" / "experiments" / "cube100-images"
+    assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) < 3e6
+    ds = import_experiment(load_experiment(folder / "experiment.toml"))
+    c = ds.meta["correlation"]
+    assert len(ds.points) == c["subsets_correlated"] == 529
+    assert c["not_converged_per_image"] == [0] * 6 and ds.u_h.shape == (6, 529)
+    assert np.median(ds.std_u_mm) / 0.2 < 0.012  # px
+    s = curve_summary(ds)
+    assert s["E_MPa"] == pytest.approx(34000.0, rel=0.15)
+    case = lab_case("linear-compression", ds, s)
+    truth = np.array([34000.0, 38.0, 0.9, 12.0, 24.0, 1500.0])
+    assert np.all(case.lower <= truth) and np.all(truth <= case.upper)
