@@ -1,0 +1,375 @@
+"""Coverage study of ``femubench calibrate``: does the calibration find the truth it was given?
+
+:func:`run_coverage` makes ``n`` virtual experiments of one Drucker-Prager variant (the truth),
+each of a specimen drawn from :attr:`CoverageSettings.specimens` (by default 100 and 150 mm cubes
+and 100 x 100 x 300 mm prisms) with parameters drawn uniformly in the middle half of the
+variant's box (``lower + [0.25, 0.75] (upper - lower)``: plausible values, never the reference),
+its own camera rotation, drift and noise seeds (problems/inverse/virtual_experiment.py). The data
+are made on ``data_mesh``, a discretisation finer than the inverse model's ``inverse_mesh``
+(never the same, nor the check mesh: the honesty rule, refused up front); the experiment's
+images are at fixed strains (the displacement levels scale with the height). Each experiment is
+calibrated with :func:`bench.calibration.calibrate` over ``models`` (default: the three surfaces
+in the truth's hardening test; the linear surface's three hardening tests are one material and
+cannot be told apart), and scored:
+
+* the relative error (%) of every identified parameter of the true variant;
+* whether the true variant ranks first by AIC, and by the Laplace evidence;
+* whether each 95 % interval (Laplace, Birge-widened) covers the true value.
+
+Resumable: each experiment's record is written atomically to ``<out>/experiments/eNNN.json``
+keyed by what makes it (settings, index); a rerun reads the records whose key matches and runs
+the others (the calibration inside resumes per variant too). The bulky files (virtual
+experiments, calibration folders) go to ``work`` (default ``<out>/work``), the records and the
+summary (``summary.json``, ``summary.md``) to ``out``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bench.store import atomic_write_text
+
+FORMAT = "femubench-calibration-coverage/1"
+#: specimens drawn from (width, depth, height), mm
+SPECIMENS = ((100.0, 100.0, 100.0), (150.0, 150.0, 150.0), (100.0, 100.0, 300.0))
+#: nominal strains (plate displacement / height) of the images: the shipped example's
+STRAINS = (4e-4, 8e-4, 1.5e-3, 2.5e-3, 3.5e-3, 4.5e-3, 5.5e-3, 7e-3)
+#: the truth is drawn in lower + [DRAW_LOW, DRAW_HIGH] x (upper - lower) of the variant's box
+DRAW_LOW, DRAW_HIGH = 0.25, 0.75
+#: parameter targets of the issue: relative error (%) of every identified parameter
+TARGET_ERROR_PERCENT = 2.0
+
+
+@dataclass(frozen=True)
+class CoverageSettings:
+    """What makes a coverage study (lengths mm).
+
+    variant      : the Drucker-Prager variant that makes the data (a case name)
+    n            : number of virtual experiments
+    data_mesh    : mesh of the model that makes the data (finer than ``inverse_mesh``)
+    inverse_mesh : mesh of the calibration's inverse model
+    models       : variants calibrated and ranked (default: the three surfaces in the
+                   variant's hardening test)
+    budget       : ``lm`` evaluations per variant and experiment
+    seed         : of every draw (experiment i uses the stream (seed, i))
+    specimens    : (width, depth, height) mm drawn from, uniformly
+    strains      : nominal strains of the images (levels = strain x height)
+    spacing_mm   : DIC grid step on the face
+    correction, check_mesh : as :class:`bench.calibration.CalibrationSettings` (``""``: no
+                   discretisation check; never the data mesh)
+    """
+
+    variant: str = "linear-compression"
+    n: int = 10
+    data_mesh: str = "paper"
+    inverse_mesh: str = "coarse"
+    models: tuple[str, ...] = ()
+    budget: int = 40
+    seed: int = 0
+    specimens: tuple[tuple[float, float, float], ...] = SPECIMENS
+    strains: tuple[float, ...] = STRAINS
+    spacing_mm: float = 5.0
+    correction: str = "none"
+    check_mesh: str = ""
+
+    def __post_init__(self):
+        from problems.fe.mesh import discretisation_key, parse_mesh_spec
+        from problems.inverse.cases import CASES, get_case
+
+        if self.variant not in CASES:
+            raise ValueError(f"--variant {self.variant!r} is unknown; allowed: {', '.join(CASES)}")
+        if not self.models:
+            hardening = get_case(self.variant).hardening
+            forms = ("linear", "hyperbolic", "exponent")
+            object.__setattr__(self, "models", tuple(f"{f}-{hardening}" for f in forms))
+        if self.variant not in self.models:
+            raise ValueError(
+                f"--models {','.join(self.models)}: must include the variant {self.variant}"
+            )
+        if self.n < 1:
+            raise ValueError(f"--n {self.n}: must be a whole number >= 1")
+        data, inverse = parse_mesh_spec(self.data_mesh), parse_mesh_spec(self.inverse_mesh)
+        if data.key == inverse.key:
+            raise ValueError(
+                f"--data-mesh {self.data_mesh}: the same discretisation as --inverse-mesh "
+                f"{self.inverse_mesh} ({data.key}); the data are made on a finer mesh, never the "
+                "inverse model's"
+            )
+        if any(d < i for d, i in zip(data.shape, inverse.shape)):
+            raise ValueError(
+                f"--data-mesh {self.data_mesh} ({data.key}) is not finer than --inverse-mesh "
+                f"{self.inverse_mesh} ({inverse.key}) in every direction"
+            )
+        if self.check_mesh and discretisation_key(self.check_mesh) == data.key:
+            raise ValueError(
+                f"--check-mesh {self.check_mesh}: the data mesh's discretisation ({data.key}); "
+                "never a model of the calibration"
+            )
+        if not self.specimens or any(len(s) != 3 or min(s) <= 0 for s in self.specimens):
+            raise ValueError(
+                f"--specimens {self.specimens}: WIDTHxDEPTHxHEIGHT triples of positive mm"
+            )
+        if not self.strains or any(not 0 < s < 0.05 for s in self.strains):
+            raise ValueError(f"--strains {self.strains}: increasing values in (0, 0.05)")
+        if list(self.strains) != sorted(set(self.strains)):
+            raise ValueError(f"--strains {self.strains}: increasing values in (0, 0.05)")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["models"] = list(self.models)
+        d["specimens"] = [list(s) for s in self.specimens]
+        d["strains"] = list(self.strains)
+        return d
+
+    def key(self, i: int) -> str:
+        """Hash of what makes experiment ``i`` and its calibration (``n`` excluded: a study
+        extended to more experiments keeps the ones done)."""
+        body = {k: v for k, v in self.to_dict().items() if k != "n"} | {"index": i}
+        return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def draw_test(s: CoverageSettings, i: int):
+    """The :class:`~problems.inverse.virtual_experiment.VirtualTest` of experiment ``i``."""
+    from problems.inverse.cases import get_case
+    from problems.inverse.virtual_experiment import VirtualTest
+
+    rng = np.random.default_rng([s.seed, i])
+    case = get_case(s.variant)
+    lo, hi = np.asarray(case.lower, float), np.asarray(case.upper, float)
+    x = lo + rng.uniform(DRAW_LOW, DRAW_HIGH, lo.size) * (hi - lo)
+    w, d, h = s.specimens[int(rng.integers(len(s.specimens)))]
+    mm_per_px = 0.05
+    return VirtualTest(
+        s.variant,
+        tuple(float(v) for v in x),
+        width_mm=w,
+        depth_mm=d,
+        height_mm=h,
+        levels_mm=tuple(float(e * h) for e in s.strains),
+        data_mesh=s.data_mesh,
+        mm_per_px=mm_per_px,
+        rotation_deg=float(rng.uniform(-0.6, 0.6)),
+        corner_px=(300.0, 400.0 + h / mm_per_px),
+        spacing_mm=s.spacing_mm,
+        drift_mm=(float(rng.uniform(-0.03, 0.03)), float(rng.uniform(-0.03, 0.03))),
+        drift_rad=float(rng.uniform(-2e-4, 2e-4)),
+        seed=int(rng.integers(2**31)),
+    )
+
+
+def score(truth, variant: str, report: dict) -> dict:
+    """The scores of one calibration ``report`` against the true parameters ``truth`` of
+    ``variant``: errors (%), interval coverage, ranks by AIC and by the Laplace evidence."""
+    v = report["variants"][variant]
+    truth = np.asarray(truth, float)
+    ranking = report["ranking"]
+    by_aic = [r["variant"] for r in ranking]
+    by_z = [r["variant"] for r in sorted(ranking, key=lambda r: -r["log_evidence"])]
+    prob = {r["variant"]: r["model_probability"] for r in ranking}
+    out = {"ok": bool(v.get("ok")), "ranking_aic": by_aic, "ranking_evidence": by_z}
+    if not v.get("ok"):
+        return out | {"true_first_aic": False, "true_first_evidence": False}
+    x = np.asarray(v["x"], float)
+    lo, hi = np.asarray(v["ci95_lower"]), np.asarray(v["ci95_upper"])
+    covered = (lo <= truth) & (truth <= hi)
+    return out | {
+        "names": v["names"],
+        "x": x.tolist(),
+        "error_percent": (100.0 * (x / truth - 1.0)).tolist(),
+        "std_percent": v["std_percent"],
+        "ci95_lower": lo.tolist(),
+        "ci95_upper": hi.tolist(),
+        "covered": covered.tolist(),
+        "all_covered": bool(covered.all()),
+        "birge_ratio": v["birge_ratio"],
+        "rms_sigma": v["rms_sigma"],
+        "n_evals": v["n_evals"],
+        "true_first_aic": bool(by_aic and by_aic[0] == variant),
+        "true_first_evidence": bool(by_z and by_z[0] == variant),
+        "model_probability": prob.get(variant, math.nan),
+    }
+
+
+def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) -> dict:
+    """Experiment ``i``: its record from ``out/experiments`` when the key matches, else made,
+    calibrated, scored and written (atomically)."""
+    from bench.calibration import CalibrationSettings, calibrate
+    from problems.inverse.virtual_experiment import write_virtual_experiment
+
+    key = s.key(i)
+    path = out / "experiments" / f"e{i:03d}.json"
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError):
+            old = {}
+        if old.get("key") == key:
+            progress(f"experiment {i}: done before ({path})")
+            return old
+    t0 = time.perf_counter()
+    test = draw_test(s, i)
+    name = f"coverage-{s.variant}-{i:03d}"
+    folder = work / f"e{i:03d}-{key}"
+    exp = folder / "data" / "experiment.toml"
+    if not exp.exists():  # the writer's last file: the data are complete when it exists
+        progress(
+            f"experiment {i}: {test.width_mm:g}x{test.depth_mm:g}x{test.height_mm:g} mm, data on "
+            f"mesh {s.data_mesh} ..."
+        )
+        write_virtual_experiment(test, folder / "data", name)
+    settings = CalibrationSettings(
+        s.inverse_mesh, s.budget, s.seed, check_mesh=s.check_mesh, correction=s.correction
+    )
+    report = calibrate(
+        exp,
+        folder / "calibration",
+        models=list(s.models),
+        settings=settings,
+        progress=lambda m: progress(f"experiment {i}: {m}"),
+        figures=False,
+    )
+    rec = {
+        "key": key,
+        "index": i,
+        "variant": s.variant,
+        "truth": list(test.x),
+        "specimen_mm": [test.width_mm, test.depth_mm, test.height_mm],
+        "levels_mm": list(test.levels_mm),
+        "seed": test.seed,
+        "data_mesh": s.data_mesh,
+        "inverse_mesh": s.inverse_mesh,
+        "wall_s": time.perf_counter() - t0,
+        **score(test.x, s.variant, report),
+    }
+    atomic_write_text(path, json.dumps(rec, indent=1, allow_nan=True) + "\n")
+    return rec
+
+
+def summarise(s: CoverageSettings, records: list[dict]) -> dict:
+    """The study's summary: per parameter the mean and largest |error| (%), the share within
+    the 2 % target, the 95 % intervals' coverage; the shares of experiments whose true variant
+    ranks first (AIC, evidence) and whose intervals all cover the truth."""
+    from problems.inverse.cases import get_case
+
+    names = list(get_case(s.variant).names)
+    ok = [r for r in records if r.get("ok")]
+    E = np.array([r["error_percent"] for r in ok]).reshape(len(ok), len(names))
+    C = np.array([r["covered"] for r in ok], bool).reshape(len(ok), len(names))
+    per = {}
+    for j, n in enumerate(names):
+        e = np.abs(E[:, j])
+        per[n] = {
+            "mean_abs_error_percent": float(e.mean()) if len(e) else math.nan,
+            "max_abs_error_percent": float(e.max()) if len(e) else math.nan,
+            "within_target": int(np.sum(e <= TARGET_ERROR_PERCENT)),
+            "covered": int(C[:, j].sum()),
+        }
+    n = len(records)
+    return {
+        "format": FORMAT,
+        "settings": s.to_dict(),
+        "n_done": n,
+        "n_ok": len(ok),
+        "parameters": per,
+        "true_first_aic": sum(bool(r.get("true_first_aic")) for r in records),
+        "true_first_evidence": sum(bool(r.get("true_first_evidence")) for r in records),
+        "all_covered": sum(bool(r.get("all_covered")) for r in records),
+        "all_within_target": int(np.sum(np.all(np.abs(E) <= TARGET_ERROR_PERCENT, axis=1))),
+        "wall_s": float(sum(r["wall_s"] for r in records)),
+        "experiments": [
+            {
+                k: r.get(k)
+                for k in (
+                    "index",
+                    "specimen_mm",
+                    "truth",
+                    "error_percent",
+                    "covered",
+                    "ranking_aic",
+                    "ranking_evidence",
+                    "model_probability",
+                    "rms_sigma",
+                    "birge_ratio",
+                    "wall_s",
+                )
+            }
+            for r in records
+        ],
+    }
+
+
+def render_summary(summary: dict) -> str:
+    """The summary as Markdown."""
+    s = summary["settings"]
+    n, names = summary["n_done"], list(summary["parameters"])
+    lines = [
+        f"# Calibration coverage: {s['variant']}, {n} virtual experiments",
+        "",
+        f"Data made on mesh `{s['data_mesh']}`, calibrated on the inverse mesh "
+        f"`{s['inverse_mesh']}` (correction {s['correction']}"
+        + (f", check mesh `{s['check_mesh']}`" if s["check_mesh"] else "")
+        + f"), `lm` with {s['budget']} evaluations per variant from the test's start; models "
+        f"{', '.join(s['models'])}. Specimens (width x depth x height, mm) drawn from "
+        + ", ".join("x".join(f"{v:g}" for v in sp) for sp in s["specimens"])
+        + f"; the truth drawn in the middle half of the variant's box; seed {s['seed']}. "
+        f"Total wall time {summary['wall_s'] / 60:.1f} min.",
+        "",
+        f"- true variant ranked first: {summary['true_first_aic']} of {n} by AIC, "
+        f"{summary['true_first_evidence']} of {n} by the Laplace evidence",
+        f"- every 95 % interval covers the truth: {summary['all_covered']} of {n}",
+        f"- every parameter within {TARGET_ERROR_PERCENT:g} %: {summary['all_within_target']} "
+        f"of {summary['n_ok']}",
+        "",
+        "| parameter | mean abs error % | max abs error % | within 2 % | 95 % interval covers |",
+        "|---|---|---|---|---|",
+    ]
+    for name, p in summary["parameters"].items():
+        lines.append(
+            f"| {name} | {p['mean_abs_error_percent']:.3g} | {p['max_abs_error_percent']:.3g} | "
+            f"{p['within_target']} of {summary['n_ok']} | {p['covered']} of {summary['n_ok']} |"
+        )
+    lines += [
+        "",
+        "## Experiments",
+        "",
+        "| # | specimen mm | error % (" + ", ".join(names) + ") | covered | first (AIC) | "
+        "p(true\\|D) | rms sigma | wall s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for e in summary["experiments"]:
+        err = e.get("error_percent")
+        lines.append(
+            f"| {e['index']} | {'x'.join(f'{v:g}' for v in e['specimen_mm'])} | "
+            + (", ".join(f"{v:+.2g}" for v in err) if err else "failed")
+            + f" | {sum(e.get('covered') or [])} of {len(names)} | "
+            f"{(e.get('ranking_aic') or ['-'])[0]} | {e.get('model_probability', math.nan):.3g} |"
+            f" {e.get('rms_sigma') or math.nan:.3g} | {e['wall_s']:.0f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def run_coverage(s: CoverageSettings, out, *, work=None, progress=print) -> dict:
+    """Run (or resume) the study into ``out`` (module docstring); returns the summary."""
+    out = Path(out)
+    work = Path(work) if work else out / "work"
+    records = []
+    for i in range(s.n):
+        rec = run_one(s, i, out, work, progress)
+        records.append(rec)
+        summary = summarise(s, records)
+        atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
+        atomic_write_text(out / "summary.md", render_summary(summary))
+        progress(
+            f"experiment {i}: errors "
+            + ", ".join(f"{v:+.2g}" for v in rec.get("error_percent", []))
+            + f" %; covered {sum(rec.get('covered', []))}; first {rec['ranking_aic'][:1]}; "
+            f"{rec['wall_s']:.0f} s"
+        )
+    return summary

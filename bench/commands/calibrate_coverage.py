@@ -1,0 +1,119 @@
+"""``femubench calibrate-coverage``: the calibration's coverage over virtual experiments.
+
+Makes ``--n`` virtual experiments of one variant (specimens and parameters drawn, data on
+``--data-mesh``, finer than ``--inverse-mesh`` and never a model of the calibration), calibrates
+each with ``femubench calibrate``'s machinery and reports the parameter errors, whether the true
+variant ranks first and whether the 95 % intervals cover the truth (bench/calibration_coverage.py,
+docs/calibrating.md). Resumable: rerun the same command.
+"""
+
+from __future__ import annotations
+
+NAME = "calibrate-coverage"
+HELP = (
+    "Coverage study of the calibration: N virtual experiments of one variant (data on a finer "
+    "mesh), each calibrated; parameter errors, true variant ranked first, coverage of the 95-percent intervals."
+)
+
+
+def _specimens(text: str) -> tuple:
+    from bench.commands._args import ArgumentTypeError
+
+    out = []
+    for item in text.split(","):
+        try:
+            dims = tuple(float(v) for v in item.lower().split("x"))
+        except ValueError:
+            dims = ()
+        if len(dims) != 3 or not all(0 < v < 1e4 for v in dims):
+            raise ArgumentTypeError(
+                f"{item!r} is not WIDTHxDEPTHxHEIGHT in mm (e.g. 100x100x300), comma-separated"
+            )
+        out.append(dims)
+    return tuple(out)
+
+
+def add_arguments(p) -> None:
+    from bench.commands._args import comma_list, finite_float, output_dir, positive_int
+
+    p.add_argument("--variant", default="linear-compression", help="the variant making the data")
+    p.add_argument("--n", type=positive_int, default=10, help="virtual experiments (default 10)")
+    p.add_argument(
+        "--data-mesh", default="paper", help="mesh that makes the data (default paper; finer)"
+    )
+    p.add_argument("--inverse-mesh", default="coarse", help="inverse mesh (default coarse)")
+    p.add_argument(
+        "--models",
+        default=None,
+        help="comma-separated variants calibrated and ranked (default: the three surfaces in "
+        "the variant's hardening test)",
+    )
+    p.add_argument("--budget", type=positive_int, default=40, help="lm evaluations per variant")
+    p.add_argument("--seed", type=int, default=0, help="seed of every draw (default 0)")
+    p.add_argument(
+        "--specimens",
+        type=_specimens,
+        default=None,
+        help="WIDTHxDEPTHxHEIGHT mm, comma-separated (default 100x100x100,150x150x150,100x100x300)",
+    )
+    p.add_argument(
+        "--strains",
+        type=comma_list(finite_float, what="strain"),
+        default=None,
+        help="nominal strains of the images, comma-separated (default the example's 8)",
+    )
+    p.add_argument("--spacing", type=finite_float, default=5.0, help="DIC grid step, mm")
+    p.add_argument("--correction", choices=["none", "iterated"], default="none")
+    p.add_argument(
+        "--check-mesh",
+        default="none",
+        help="finer mesh of the discretisation check/correction (default none; never the data's)",
+    )
+    p.add_argument("--out", type=output_dir, required=True, help="records and summary folder")
+    p.add_argument(
+        "--work", type=output_dir, default=None, help="virtual experiments (default OUT/work)"
+    )
+
+
+def main(args) -> int:
+    from bench.calibration_coverage import SPECIMENS, STRAINS, CoverageSettings, run_coverage
+    from problems.fe.mesh import parse_mesh_spec
+    from problems.inverse.experiment import parse_models
+
+    for option, spec in (
+        ("--data-mesh", args.data_mesh),
+        ("--inverse-mesh", args.inverse_mesh),
+        *((("--check-mesh", args.check_mesh),) if args.check_mesh != "none" else ()),
+    ):
+        try:
+            parse_mesh_spec(spec)
+        except ValueError as exc:
+            raise ValueError(f"{option} {spec!r}: {exc}") from None
+    models = ()
+    if args.models is not None:
+        try:
+            models = tuple(parse_models(args.models))
+        except ValueError as exc:
+            raise ValueError(f"--models {args.models!r}: {exc}") from None
+    settings = CoverageSettings(
+        args.variant,
+        args.n,
+        args.data_mesh,
+        args.inverse_mesh,
+        models,
+        args.budget,
+        args.seed,
+        args.specimens or SPECIMENS,
+        tuple(args.strains) if args.strains else STRAINS,
+        args.spacing,
+        args.correction,
+        "" if args.check_mesh == "none" else args.check_mesh,
+    )
+    summary = run_coverage(settings, args.out, work=args.work)
+    n = summary["n_done"]
+    print(
+        f"coverage of {settings.variant}: true variant first {summary['true_first_aic']}/{n} "
+        f"(AIC), {summary['true_first_evidence']}/{n} (evidence); all 95 % intervals cover "
+        f"{summary['all_covered']}/{n}; summary {args.out}/summary.md"
+    )
+    return 0

@@ -1,0 +1,88 @@
+"""``femubench calibrate-coverage`` on a tiny configuration: records, scores, summary, resume,
+and the honesty rule on its meshes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import bench.calibration_coverage as cov
+from bench.calibration_coverage import CoverageSettings, draw_test, run_coverage
+from bench.cli import main
+
+TINY = [
+    "--n", "2", "--data-mesh", "4,4,8", "--inverse-mesh", "3,3,6",
+    "--models", "linear-compression,hyperbolic-compression", "--budget", "8",
+    "--strains", "0.0005,0.002,0.005", "--spacing", "10",
+    "--specimens", "100x100x100,100x100x200",
+]  # fmt: skip
+
+
+def test_tiny_study_scores_resumes_and_summarises(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "cov"
+    assert main(["calibrate-coverage", *TINY, "--out", str(out)]) == 0
+    assert "true variant first 2/2 (AIC)" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_done"] == 2 and summary["true_first_aic"] == 2
+    recs = [json.loads((out / "experiments" / f"e{i:03d}.json").read_text()) for i in range(2)]
+    for r in recs:
+        truth, x = np.array(r["truth"]), np.array(r["x"])
+        assert np.allclose(r["error_percent"], 100 * (x / truth - 1))
+        assert abs(r["error_percent"][0]) < 10  # E, even on a 3,3,6 inverse mesh
+        lo, hi = np.array(r["ci95_lower"]), np.array(r["ci95_upper"])
+        assert r["covered"] == ((lo <= truth) & (truth <= hi)).tolist()
+        # the truth is drawn in the middle half of the box; the levels scale with the height
+        assert r["levels_mm"][-1] == pytest.approx(0.005 * r["specimen_mm"][2])
+    assert {tuple(r["specimen_mm"]) for r in recs} <= {(100.0,) * 3, (100.0, 100.0, 200.0)}
+    covered = sum(c for r in recs for c in r["covered"])
+    assert sum(p["covered"] for p in summary["parameters"].values()) == covered
+    assert "| E |" in (out / "summary.md").read_text()
+
+    # resumable: nothing is recomputed when the records are there
+    def boom(*a, **k):
+        raise AssertionError("rerun")
+
+    monkeypatch.setattr("bench.calibration.calibrate", boom)
+    said = []
+    s = CoverageSettings(
+        "linear-compression", 2, "4,4,8", "3,3,6",
+        ("linear-compression", "hyperbolic-compression"), 8, 0,
+        ((100.0, 100.0, 100.0), (100.0, 100.0, 200.0)), (0.0005, 0.002, 0.005), 10.0,
+    )  # fmt: skip
+    again = run_coverage(s, out, progress=said.append)
+    assert sum("done before" in m for m in said) == 2 and again["n_done"] == 2
+
+
+def test_draws_differ_and_stay_in_the_middle_of_the_box():
+    s = CoverageSettings(n=3)
+    tests = [draw_test(s, i) for i in range(3)]
+    from problems.inverse.cases import get_case
+
+    case = get_case(s.variant)
+    lo, hi = np.asarray(case.lower), np.asarray(case.upper)
+    for t in tests:
+        u = (np.array(t.x) - lo) / (hi - lo)
+        assert np.all((u >= cov.DRAW_LOW) & (u <= cov.DRAW_HIGH))
+        assert t.data_mesh == "paper"
+    assert len({t.x for t in tests}) == 3 and len({t.seed for t in tests}) == 3
+    assert s.models == ("linear-compression", "hyperbolic-compression", "exponent-compression")
+
+
+@pytest.mark.parametrize(
+    "argv, said",
+    [
+        (["--data-mesh", "coarse", "--inverse-mesh", "6,6,12"], "--data-mesh coarse: the same"),
+        (["--data-mesh", "3,3,6", "--inverse-mesh", "4,4,8"], "is not finer than --inverse-mesh"),
+        (["--data-mesh", "paper", "--check-mesh", "14,14,26"], "--check-mesh 14,14,26: the data"),
+        (["--data-mesh", "nope"], "--data-mesh 'nope'"),
+        (["--variant", "linear-nope"], "--variant 'linear-nope' is unknown"),
+        (["--specimens", "100x100"], "WIDTHxDEPTHxHEIGHT"),
+        (["--strains", "0.002,0.001"], "--strains"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, said):
+    assert main(["calibrate-coverage", *argv, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and said in err[0], err
