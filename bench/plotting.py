@@ -136,11 +136,25 @@ _GREEK = {
 }
 
 
-def tex(name: str) -> str:
-    """The TeX symbol of a parameter, without dollars: :data:`problems.inverse.cases.LABELS`, else
-    a single letter or Greek name in math italics, else the name upright."""
-    from problems.inverse.cases import LABELS
+#: TeX label of each parameter the cases identify (math mode, with dollars): the one table of
+#: parameter symbols of every figure and table (studies and report)
+LABELS: dict[str, str] = {
+    "E": r"$E$",
+    "nu": r"$\nu$",
+    "beta": r"$\beta$",
+    "K": r"$K$",
+    "psi": r"$\psi$",
+    "sigma0": r"$\sigma_0$",
+    "H": r"$H$",
+    "pt0": r"$p_{t0}$",
+    "a": r"$a$",
+    "b": r"$b$",
+}
 
+
+def tex(name: str) -> str:
+    """The TeX symbol of a parameter, without dollars: :data:`LABELS`, else a single letter or
+    Greek name in math italics, else the name upright."""
     if name in LABELS:
         return LABELS[name].strip("$")
     if len(name) == 1 or name in _GREEK:

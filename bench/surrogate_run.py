@@ -23,10 +23,18 @@ from dataclasses import replace
 DEFAULT = "default"
 
 
+def surrogate_root():
+    """Root folder of named surrogates: ``$FEMUBENCH_SURROGATE_DIR``, else
+    ``<results root>/surrogates``; not created."""
+    from bench.paths import results_root
+    from problems.surrogate.store import default_root
+
+    return default_root() or results_root() / "surrogates"
+
+
 def load_for(name: str, case: str, mesh: str):
     """The stored surrogate ``name`` (a path, a name under the surrogate root, or ``default`` =
     ``<case>__<mesh>`` there), checked to be a surrogate of ``case``."""
-    from bench.commands.surrogate import surrogate_root
     from problems.surrogate.store import default_name, load
 
     root = surrogate_root()

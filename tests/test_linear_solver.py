@@ -264,3 +264,23 @@ def test_gmres_solves_a_non_symmetric_system_and_reports_failure():
     assert not ok and its == 4
     x, its, ok = gmres(lambda v: A @ v, lambda v: Sinv @ v, np.zeros(n), 1e-12)
     assert ok and its == 0 and not x.any()
+
+
+def test_the_linear_solve_hook_sees_every_newton_system_and_changes_nothing():
+    """``NewtonSettings.on_linear_solve`` is told of each system (one predictor per increment,
+    then the corrections) before it is solved; the answer is the one without the hook."""
+    disc = discretise(box_mesh(3, 3, 6))
+    seen = []
+
+    def hook(kind, Kff, rhs):
+        seen.append((kind, Kff.shape[0], rhs.shape[0]))
+
+    plain = run(disc, _plastic(), Loading(1.5, 3), NewtonSettings())
+    hooked = run(disc, _plastic(), Loading(1.5, 3), NewtonSettings(on_linear_solve=hook))
+    assert hooked.converged and plain.converged
+    assert [k for k, *_ in seen].count("predictor") == hooked.increments == 3
+    assert len(seen) == hooked.iterations > hooked.increments  # corrections were needed
+    n_free = len(BoundaryConditions(disc, "friction").free)
+    assert {(n, m) for _, n, m in seen} == {(n_free, n_free)}
+    assert np.array_equal(hooked.displacements, plain.displacements)
+    assert NewtonSettings(on_linear_solve=hook) == NewtonSettings()  # not a setting of the answer

@@ -47,5 +47,4 @@ def test_derived_a_is_the_cases_own_to_the_bit(name):
 def test_methods_labels_and_the_paper_range_are_those_of_the_code():
     assert C.METHOD_FAMILIES == {name: m.family for name, m in METHODS.items()}
     assert C.family("lm") == "local" and C.family("no-such-solver") == "other"
-    assert C.LABELS == cases.LABELS
     assert C.PAPER_A_ERROR == cases.PAPER_A_ERROR

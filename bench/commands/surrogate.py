@@ -11,15 +11,6 @@ HELP = (
 )
 
 
-def surrogate_root():
-    """Root folder of named surrogates: ``$FEMUBENCH_SURROGATE_DIR``, else
-    ``<results root>/surrogates``."""
-    from bench.paths import results_root
-    from problems.surrogate.store import default_root
-
-    return default_root() or results_root() / "surrogates"
-
-
 def add_arguments(p) -> None:
     p.add_argument("case", metavar="CASE", help="FE case name (see `femubench cases`)")
     p.add_argument(
@@ -205,6 +196,7 @@ def main(args) -> int:
 
     from bench.outputs import refuse_inputs, same_file
     from bench.parallel import mapper
+    from bench.surrogate_run import surrogate_root
     from problems.inverse.cases import get_case
     from problems.io.atomic import atomic_write_text
     from problems.io.jsonio import encode

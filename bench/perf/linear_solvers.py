@@ -31,9 +31,9 @@ seven right-hand sides, measured in the same run. Times in seconds, one core whe
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import re
 import time
-from contextlib import contextmanager
 
 import numpy as np
 
@@ -53,25 +53,18 @@ def split_specs(text: str) -> list[str]:
     return specs
 
 
-@contextmanager
-def last_increment_tangents():
-    """Patch the Newton solver to keep the (K_ff, rhs) of every solve of the last increment."""
-    kept: dict = {"solves": [], "bc": None}
-    solve, increment = nw._Newton._solve, nw._Newton.increment
+def last_increment_tangents(settings):
+    """``(settings with the hook, kept)``: the Newton settings whose ``on_linear_solve`` hook keeps
+    the (K_ff, rhs) of every solve of the last increment in ``kept["solves"]`` (a predictor starts
+    an increment)."""
+    kept: dict = {"solves": []}
 
-    def _increment(self, *a, **k):
-        kept["solves"], kept["bc"] = [], self.bc
-        return increment(self, *a, **k)
+    def keep(kind, Kff, rhs):
+        if kind == "predictor":
+            kept["solves"] = []
+        kept["solves"].append((Kff.copy(), rhs.copy()))
 
-    def _solve(self, Kff, rhs_free, D, rtol):
-        kept["solves"].append((Kff.copy(), rhs_free.copy()))
-        return solve(self, Kff, rhs_free, D, rtol)
-
-    nw._Newton._solve, nw._Newton.increment = _solve, _increment
-    try:
-        yield kept
-    finally:
-        nw._Newton._solve, nw._Newton.increment = solve, increment
+    return dataclasses.replace(settings, on_linear_solve=keep), kept
 
 
 def best(f, repeat):
@@ -94,11 +87,11 @@ def measure(spec: str, case: str, repeat: int) -> list[tuple]:
     ms = parse_mesh_spec(spec)
     disc = nw.discretise(ms.mesh, symmetry=ms.symmetry)
     mat = case_material(CASES[case], CASES[case].reference)
-    with last_increment_tangents() as kept:
-        r = nw.run(disc, mat, nw.Loading(), FORWARD_SETTINGS)
+    settings, kept = last_increment_tangents(FORWARD_SETTINGS)
+    r = nw.run(disc, mat, nw.Loading(), settings)
     if not r.converged:
         raise SystemExit(f"{spec}: the forward run failed: {r.message}")
-    bc = kept["bc"]
+    bc = nw.BoundaryConditions(disc, nw.Loading().plates)
     A = kept["solves"][-1][0]  # last correction: the most plastic tangent
     A_pred = kept["solves"][0][0]  # predictor: converged state of the previous snapshot
     A.sort_indices()

@@ -15,8 +15,10 @@ case or a method changed, and whoever changed it decides whether old reports sho
   plate margin in mm, high-fidelity mesh)``;
 * :data:`METHOD_FAMILIES`: every registered method in registration order with its family
   (local, global, sampling); an unknown method is of family ``other``;
-* :data:`LABELS`: TeX symbols of the parameters; :data:`PAPER_A_ERROR`: the seed paper's Table-1
-  range of the identification error of a (percent).
+* :data:`PAPER_A_ERROR`: the seed paper's Table-1 range of the identification error of a
+  (percent).
+
+The parameters' TeX symbols are presentation, not facts of a case: :data:`bench.plotting.LABELS`.
 
 Cases or methods that are not in the table (user problems, later cases) are reported as unknown:
 no box, no derived parameters, family ``other``.
@@ -284,17 +286,5 @@ METHOD_FAMILIES: dict[str, str] = {
     "cma": "global",
     "bo": "global",
     "ngopt": "global",
-}
-LABELS: dict[str, str] = {
-    "E": "$E$",
-    "nu": "$\\nu$",
-    "beta": "$\\beta$",
-    "K": "$K$",
-    "psi": "$\\psi$",
-    "sigma0": "$\\sigma_0$",
-    "H": "$H$",
-    "pt0": "$p_{t0}$",
-    "a": "$a$",
-    "b": "$b$",
 }
 PAPER_A_ERROR: tuple[float, float] = (11.0, 46.0)

@@ -33,6 +33,7 @@ import pandas as pd
 
 from bench.plotting import (
     DOUBLE,
+    LABELS,
     REFERENCE_LINE,
     integer_axis,
     line_style,
@@ -41,7 +42,7 @@ from bench.plotting import (
     pyplot,
     save,
 )
-from bench.report.catalogue import LABELS, family
+from bench.report.catalogue import family
 from bench.report.metrics import (
     COST_KS,
     ERR_TARGETS,

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.report.catalogue import CASE_ORDER, LABELS, METHOD_FAMILIES, case_info
+from bench.plotting import LABELS
+from bench.report.catalogue import CASE_ORDER, METHOD_FAMILIES, case_info
 from bench.store import PARAMETER_ORDER, parameter_order
 
 DASH = "–"  # en dash: inactive parameter

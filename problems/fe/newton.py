@@ -26,7 +26,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -149,6 +149,13 @@ class NewtonSettings:
                         (the batched numpy reference and a full CSR matrix, the old path)
     sensitivity       : how a run with sensitivities solves them
                         (:class:`problems.fe.sensitivity.SensitivitySettings`)
+    on_linear_solve   : None, or a callable ``f(kind, Kff, rhs)`` told of every linear system a
+                        Newton iteration solves, before it is solved: ``kind`` is ``"predictor"``
+                        (the first system of an increment) or ``"correction"``, ``Kff`` the free
+                        block of the tangent in elimination order (CSC, N/mm; not to be changed),
+                        ``rhs`` the right-hand side in ``BoundaryConditions.free`` order (N);
+                        for instruments (bench/perf/linear_solvers.py keeps the tangents); the
+                        run's answer does not depend on it
     """
 
     rtol_force: float = 1e-8
@@ -160,6 +167,7 @@ class NewtonSettings:
     linear_solver: str = "auto"
     assembly: str = "fused"
     sensitivity: SensitivitySettings = SensitivitySettings()
+    on_linear_solve: Callable | None = field(default=None, compare=False)
 
     def __post_init__(self):
         if self.linear_solver not in LINEAR_SOLVERS:
@@ -790,6 +798,8 @@ class _Newton:
         over the body instead of being concentrated in the boundary layer of elements. Returns
         (correction, why it failed or "")."""
         Kff, rhs = self._predictor(D_n, du)
+        if self.settings.on_linear_solve is not None:
+            self.settings.on_linear_solve("predictor", Kff, rhs)
         handed, self._predictor_factor = self._predictor_factor, None
         if handed is not None and handed[1] is D_n and handed[0].A is Kff:
             corr, why = self._solve_handed(handed[0], rhs, ETA_PREDICTOR)
@@ -859,9 +869,10 @@ class _Newton:
                 )
             if it >= 3 and rel_r > 1e3 * norms[0]:
                 return _Increment(False, f"Newton diverged (relative residual {rel_r:.3g})")
-            corr, why = self._solve(
-                self._tangent_free(upd.tangent), -r_free, upd.tangent, forcing_term(rel_r, s)
-            )
+            Kff = self._tangent_free(upd.tangent)
+            if s.on_linear_solve is not None:
+                s.on_linear_solve("correction", Kff, -r_free)
+            corr, why = self._solve(Kff, -r_free, upd.tangent, forcing_term(rel_r, s))
             self.iterations += 1
             if why or not np.all(np.isfinite(corr)):
                 return _Increment(False, why or "non-finite correction")

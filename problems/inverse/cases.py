@@ -32,19 +32,6 @@ from problems.materials.hardening import HARDENINGS, reference_test
 #: a well-posed material; a = (pt0 + p_hat sigma0) / (q_hat sigma0)^b is reported alongside)
 ACTIVE = {**FORM_PARAMETERS, "exponent": ("E", "psi", "sigma0", "H", "pt0", "b")}
 UNITS = {name: PARAMETER_RANGES[name][4] for name in PARAMETER_RANGES}
-#: TeX symbol of each parameter (figure and table labels)
-LABELS = {
-    "E": r"$E$",
-    "nu": r"$\nu$",
-    "beta": r"$\beta$",
-    "K": r"$K$",
-    "psi": r"$\psi$",
-    "sigma0": r"$\sigma_0$",
-    "H": r"$H$",
-    "pt0": r"$p_{t0}$",
-    "a": r"$a$",
-    "b": r"$b$",
-}
 FIXED = dict(OPTIONAL_PARAMETERS)
 
 # Reference concrete (compression variants).
