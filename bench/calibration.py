@@ -18,6 +18,7 @@ calibration (:func:`check_meshes`).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -285,12 +286,16 @@ def calibrate(
     settings: CalibrationSettings | None = None,
     progress=print,
     figures: bool = True,
+    mcmc: McmcSettings | None = None,
+    mcmc_models="best",
 ) -> dict:
     """Calibrate every chosen variant of the experiment at ``experiment_path`` into ``out_dir``
     (module docstring); returns the report dict. ``models``: variant names (default: the
     experiment file's ``[calibration] models``); ``settings`` default from the file too. Variants
     whose result is already in ``out_dir`` with the same key are read, not rerun. ``figures``:
-    draw the figures (else report.md and report.json only)."""
+    draw the figures (else report.md and report.json only). ``mcmc``: run
+    :func:`mcmc_variant` on ``mcmc_models`` (``best``: the first by AIC, ``all``, or a list of
+    variants), each kept in ``<out>/variants/<variant>.mcmc.json`` keyed like the variant."""
     from problems.inverse.experiment import import_experiment, load_experiment
     from problems.inverse.lab import curve_summary, lab_case
 
@@ -303,6 +308,11 @@ def calibrate(
         )
     settings = settings or CalibrationSettings(exp.mesh, exp.budget)
     check_meshes(exp.data_mesh, settings)
+    if mcmc is not None and settings.correction != "none":
+        raise ValueError(
+            f"--mcmc with --correction {settings.correction}: the posterior of corrected data "
+            "is not supported (allowed: --correction none)"
+        )
     models = list(models or exp.models)
     data = import_experiment(exp)
     summary = curve_summary(data)
@@ -329,6 +339,38 @@ def calibrate(
             f"{res['n_evals']} evaluations"
         )
     report = assemble(exp, data, summary, results, settings)
+    if mcmc is not None and report["ranking"]:
+        ranked = [r["variant"] for r in report["ranking"]]
+        chosen = (
+            ranked[:1]
+            if mcmc_models == "best"
+            else ranked
+            if mcmc_models == "all"
+            else [n for n in mcmc_models if n in ranked]
+        )
+        chains = {}
+        for name in chosen:
+            case = lab_case(name, data, summary)
+            key = (
+                variant_key(data, case, settings)
+                + "|"
+                + json.dumps(dataclasses.asdict(mcmc), sort_keys=True)
+            )
+            path = out / "variants" / f"{name}.mcmc.json"
+            old = _read_json(path)
+            if old.get("key") == key:
+                progress(f"{name}: MCMC done before ({path})")
+                chains[name] = old
+                continue
+            progress(f"{name}: MCMC ({mcmc.forward}, {mcmc.n_steps} steps) ...")
+            chains[name] = mcmc_variant(data, case, results[name], settings, mcmc) | {"key": key}
+            atomic_write_text(path, json.dumps(chains[name], indent=1, allow_nan=True) + "\n")
+            c = chains[name]
+            progress(
+                f"{name}: MCMC log Z {c['log_evidence_bridge']:.6g} (Laplace "
+                f"{c['log_evidence_laplace']:.6g}), tau multiple {c['tau_multiple']:.3g}"
+            )
+        add_mcmc(report, chains)
     if report["ranking"] and settings.check_mesh:
         best = report["ranking"][0]["variant"]
         report["discretisation"] = discretisation_check(
@@ -336,6 +378,135 @@ def calibrate(
         )
     write_report(report, data, out, figures=figures)
     return report
+
+
+@dataclass(frozen=True)
+class McmcSettings:
+    """MCMC on a calibrated variant (bench/calibration_evidence.py).
+
+    forward   : ``fe`` (the inverse mesh's FE model at every draw: for small models) or
+                ``surrogate`` (a POD + regression surrogate of it, problems/surrogate, trained by
+                ``n_train`` FE runs in the local box and validated by ``n_holdout``)
+    n_walkers, n_steps : emcee's ensemble (0 walkers: max(16, 2 k + 2)) and steps, half burnt
+    n_bridge  : proposal draws of the bridge-sampling evidence (log posterior evaluations)
+    local_sd  : the sampled box is the prior box cut to the optimum +- local_sd Laplace standard
+                deviations (Birge-widened); the prior's volume stays the whole box's
+    """
+
+    forward: str = "surrogate"
+    n_walkers: int = 0
+    n_steps: int = 2000
+    n_bridge: int = 2000
+    n_train: int = 120
+    n_holdout: int = 30
+    local_sd: float = 8.0
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.forward not in ("fe", "surrogate"):
+            raise ValueError(f"--mcmc-forward {self.forward!r} is unknown; allowed: fe, surrogate")
+
+
+def mcmc_variant(data: Dataset, case, result: dict, settings, mcmc: McmcSettings) -> dict:
+    """emcee on ``case``'s posterior (uniform prior on its box, the data's noise model; the
+    uncorrected data) around the calibrated ``result``, its 95 % intervals against Laplace's,
+    and the bridge-sampling evidence against the Laplace evidence (same convention: the
+    prior's density is 1 / volume of the whole box, the noise normalisation left out)."""
+    from bench.calibration_evidence import (
+        bridge_log_evidence,
+        posterior_summary,
+        sample_posterior,
+    )
+
+    problem = objective_for(data, case, settings.mesh).problem
+    lo_box, hi_box = np.asarray(case.lower, float), np.asarray(case.upper, float)
+    log_volume = float(np.sum(np.log(hi_box - lo_box)))
+    x = np.asarray(result["x"], float)
+    std = np.asarray(result["std"], float)
+    lo = np.maximum(lo_box, x - mcmc.local_sd * std)
+    hi = np.minimum(hi_box, x + mcmc.local_sd * std)
+    out = {"forward": mcmc.forward, "local_box": [lo.tolist(), hi.tolist()]}
+    if mcmc.forward == "surrogate":
+        from problems.surrogate.build import SurrogateSettings, build_surrogate
+
+        N, m = len(data.snapshots_mm), len(data.points)
+        sur = build_surrogate(
+            problem.model,
+            lo,
+            hi,
+            data.sigma(),
+            settings=SurrogateSettings(
+                n_train=mcmc.n_train, n_holdout=mcmc.n_holdout, seed=mcmc.seed
+            ),
+            blocks=layout.blocks(N, m),
+            description={"case": case.name, "mesh": settings.mesh, "data_hash": data.hash},
+        )
+        val = (sur.info.get("validation") or {}).get("blocks") or {}
+        out["surrogate"] = {
+            "n_train": mcmc.n_train,
+            "n_holdout": mcmc.n_holdout,
+            "holdout_rms_sigma": {b: v.get("rms_sigma") for b, v in val.items()},
+            "build_wall_s": sur.info.get("cost", {}).get("build_wall_s"),
+        }
+
+        def values(X):
+            return sur.predict(X)
+    else:
+
+        def values(X):
+            rows = []
+            for xi in X:
+                res = problem.model(xi)
+                rows.append(res.values if res.ok else np.full(problem.data.shape, np.nan))
+            return np.array(rows)
+
+    def log_post(X):
+        X = np.atleast_2d(X)
+        lp = np.full(len(X), -np.inf)
+        ok = [
+            i
+            for i, xi in enumerate(X)
+            if np.all((xi >= lo) & (xi <= hi)) and problem.check(xi) is None
+        ]
+        if ok:
+            R = problem.whiten((problem.data[None, :] - values(X[ok])).T)
+            chi2 = np.sum(R * R, axis=0)
+            lp[ok] = np.where(np.isfinite(chi2), -0.5 * chi2 - log_volume, -np.inf)
+        return lp
+
+    sd0 = np.asarray(result["std_noise_only"], float)
+    cov0 = np.asarray(result["correlation"], float) * np.outer(sd0, sd0)
+    chain = sample_posterior(
+        log_post,
+        x,
+        cov0,
+        lo,
+        hi,
+        n_walkers=mcmc.n_walkers,
+        n_steps=mcmc.n_steps,
+        seed=mcmc.seed,
+    )
+    rng = np.random.default_rng([mcmc.seed, 1])
+    bridge = bridge_log_evidence(
+        chain["log_prob"], chain["samples"], log_post, rng, n_proposal=mcmc.n_bridge
+    )
+    summary = posterior_summary(case.names, chain["samples"])
+    laplace = laplace_evidence(result)["log_evidence"]
+    return out | {
+        **{k: v for k, v in chain.items() if k not in ("samples", "log_prob")},
+        "converged": chain["tau_multiple"] >= 50.0,
+        **summary,
+        # a draw fitting better than the optimum by more than a unit of chi2: lm stopped short
+        # of the posterior's mode (or the surrogate errs there)
+        "chi2_best_draw": float(-2.0 * (np.max(chain["log_prob"]) + log_volume)),
+        "chi2_optimum": result["chi2"],
+        "laplace_sd_noise_only": sd0.tolist(),
+        "sd_ratio": (np.asarray(summary["sd"]) / sd0).tolist(),
+        "bridge": bridge,
+        "log_evidence_bridge": bridge["log_evidence"],
+        "log_evidence_laplace": laplace,
+        "evidence_difference": bridge["log_evidence"] - laplace,
+    }
 
 
 def discretisation_check(data, case, result, settings, out: Path, progress) -> dict:
@@ -391,6 +562,30 @@ def laplace_evidence(result: dict) -> dict:
     return laplace_log_evidence(
         result["chi2"], np.linalg.inv(cov), result["x"], result["lower"], result["upper"]
     )
+
+
+def _read_json(path: Path) -> dict:
+    """A stored JSON object, ``{}`` when missing or torn."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return {}
+
+
+def add_mcmc(report: dict, chains: dict) -> None:
+    """The MCMC results into the report: ``mcmc`` per variant, each ranking row's bridge log
+    evidence, and the posterior model probabilities from the bridge evidences when every ranked
+    variant has one."""
+    from bench.calibration_evidence import model_probabilities
+
+    report["mcmc"] = chains
+    for row in report["ranking"]:
+        c = chains.get(row["variant"])
+        row["log_evidence_bridge"] = c["log_evidence_bridge"] if c else None
+    if chains and all(row["log_evidence_bridge"] is not None for row in report["ranking"]):
+        p = model_probabilities({r["variant"]: r["log_evidence_bridge"] for r in report["ranking"]})
+        for row in report["ranking"]:
+            row["model_probability_bridge"] = p[row["variant"]]
 
 
 def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict:
@@ -588,6 +783,7 @@ def render_markdown(report: dict) -> str:
             f"{b['u_h']:.3g}, u_v {b['u_v']:.3g}, force {b['force']:.3g}); an rms fit above 1 "
             "sigma of that size is the model's, not the test's.",
         ]
+    lines += render_mcmc(report)
     lines += [
         "",
         "## Parameters (Laplace 95 % intervals from the exact Jacobian)",
@@ -630,3 +826,58 @@ def render_markdown(report: dict) -> str:
         " (residuals of the best variant on the face, last image, in sigma units).",
     ]
     return "\n".join(lines) + "\n"
+
+
+def render_mcmc(report: dict) -> list[str]:
+    """The report's MCMC section (Markdown lines; none without MCMC)."""
+    chains = report.get("mcmc") or {}
+    if not chains:
+        return []
+    lines = [
+        "",
+        "## MCMC (emcee) and the bridge-sampling evidence",
+        "",
+        "Uniform prior on the variant's box, the data's noise model (no Birge widening); "
+        "evidence by bridge sampling with a Gaussian proposal fitted to the chain "
+        "(docs/calibrating.md), against the Laplace evidence.",
+    ]
+    for name, c in chains.items():
+        sur = c.get("surrogate")
+        fwd = (
+            "the FE model"
+            if c["forward"] == "fe"
+            else f"a surrogate ({sur['n_train']} FE runs; hold-out rms "
+            + ", ".join(
+                f"{b} {v:.2g}" for b, v in sur["holdout_rms_sigma"].items() if v is not None
+            )
+            + " sigma)"
+        )
+        b = c["bridge"]
+        lines += [
+            "",
+            f"### {name}: on {fwd}",
+            f"- {c['n_walkers']} walkers x {c['n_steps']} steps ({c['burn']} burnt), acceptance "
+            f"{c['acceptance']:.2f}, kept steps / largest autocorrelation time "
+            f"{c['tau_multiple']:.3g} ({'converged' if c['converged'] else 'NOT converged: < 50'}),"
+            f" {c['n_evals']} + {b['n_proposal']} (bridge) evaluations, {c['wall_s']:.0f} s",
+            f"- log Z: bridge {c['log_evidence_bridge']:.6g} (relative error "
+            f"{b['relative_error']:.2g}), Laplace {c['log_evidence_laplace']:.6g}: difference "
+            f"{c['evidence_difference']:+.3g}; best draw chi2 {c['chi2_best_draw']:.6g} "
+            f"against the optimum's {c['chi2_optimum']:.6g}",
+            "",
+            "| parameter | MCMC mean | MCMC sd | sd / Laplace sd (noise only) | MCMC 95 % |",
+            "|---|---|---|---|---|",
+        ]
+        for j, n in enumerate(c["names"]):
+            lines.append(
+                f"| {n} | {_fmt(c['mean'][j])} | {_fmt(c['sd'][j])} | {c['sd_ratio'][j]:.3g} | "
+                f"[{_fmt(c['q025'][j])}, {_fmt(c['q975'][j])}] |"
+            )
+    probs = [r for r in report["ranking"] if "model_probability_bridge" in r]
+    if probs:
+        lines += [
+            "",
+            "Posterior model probabilities from the bridge evidences: "
+            + ", ".join(f"{r['variant']} {r['model_probability_bridge']:.3g}" for r in probs),
+        ]
+    return lines

@@ -18,7 +18,7 @@ HELP = (
 
 
 def add_arguments(p) -> None:
-    from bench.commands._args import input_file, output_dir
+    from bench.commands._args import input_file, output_dir, positive_int
 
     p.add_argument("experiment", type=input_file, help="the experiment file (TOML)")
     p.add_argument(
@@ -51,6 +51,26 @@ def add_arguments(p) -> None:
         "discretisation error ('auto': the next finer preset; 'none': skip)",
     )
 
+    p.add_argument(
+        "--mcmc",
+        default=None,
+        help="MCMC (emcee) with posterior intervals and a bridge-sampling evidence checked "
+        "against the Laplace one, for: best (the first by AIC), all, or comma-separated variants",
+    )
+    p.add_argument(
+        "--mcmc-forward",
+        choices=["surrogate", "fe"],
+        default="surrogate",
+        help="the model sampled: a surrogate of the inverse model trained in the local box "
+        "(default) or the FE model itself (small meshes)",
+    )
+    p.add_argument(
+        "--mcmc-steps", type=positive_int, default=2000, help="steps per walker (half burnt)"
+    )
+    p.add_argument(
+        "--mcmc-train", type=positive_int, default=120, help="FE runs training the surrogate"
+    )
+
 
 def main(args) -> int:
     from pathlib import Path
@@ -79,8 +99,22 @@ def main(args) -> int:
         check_mesh=check,
         correction=args.correction,
     )
+    mcmc, mcmc_models = None, "best"
+    if args.mcmc is not None:
+        from bench.calibration import McmcSettings
+
+        if args.mcmc not in ("best", "all"):
+            try:
+                mcmc_models = parse_models(args.mcmc)
+            except ValueError as exc:
+                raise ValueError(f"--mcmc {args.mcmc!r}: {exc}; or best, all") from None
+        else:
+            mcmc_models = args.mcmc
+        mcmc = McmcSettings(args.mcmc_forward, n_steps=args.mcmc_steps, n_train=args.mcmc_train)
     out = Path(args.out) if args.out else Path("calibration") / exp.name
-    report = calibrate(exp.path, out, models=models, settings=settings)
+    report = calibrate(
+        exp.path, out, models=models, settings=settings, mcmc=mcmc, mcmc_models=mcmc_models
+    )
     print(f"calibration report: {out / 'report.md'}")
     for i, row in enumerate(report["ranking"], 1):
         v = report["variants"][row["variant"]]

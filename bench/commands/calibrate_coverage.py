@@ -12,7 +12,8 @@ from __future__ import annotations
 NAME = "calibrate-coverage"
 HELP = (
     "Coverage study of the calibration: N virtual experiments of one variant (data on a finer "
-    "mesh), each calibrated; parameter errors, true variant ranked first, coverage of the 95-percent intervals."
+    "mesh), each calibrated; parameter errors, true variant ranked first, coverage of the "
+    "95-percent intervals."
 )
 
 
