@@ -19,8 +19,9 @@ cannot be told apart), and scored:
 Resumable: each experiment's record is written atomically to ``<out>/experiments/eNNN.json``
 keyed by what makes it (settings, index); a rerun reads the records whose key matches and runs
 the others (the calibration inside resumes per variant too). The bulky files (virtual
-experiments, calibration folders) go to ``work`` (default ``<out>/work``), the records and the
-summary (``summary.json``, ``summary.md``) to ``out``.
+experiments in ``data/``, shared by studies that differ in the calibration alone; the
+calibration folders in ``calibration/``) go to ``work`` (default ``<out>/work``), the records
+and the summary (``summary.json``, ``summary.md``) to ``out``.
 """
 
 from __future__ import annotations
@@ -128,6 +129,14 @@ class CoverageSettings:
         d["strains"] = list(self.strains)
         return d
 
+    def data_key(self, i: int) -> str:
+        """Hash of what makes experiment ``i``'s data (studies differing in the calibration
+        alone share them)."""
+        d = self.to_dict()
+        body = {k: d[k] for k in ("variant", "data_mesh", "seed", "specimens", "strains")}
+        body |= {"spacing_mm": d["spacing_mm"], "index": i}
+        return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
     def key(self, i: int) -> str:
         """Hash of what makes experiment ``i`` and its calibration (``n`` excluded: a study
         extended to more experiments keeps the ones done)."""
@@ -216,20 +225,20 @@ def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) 
     t0 = time.perf_counter()
     test = draw_test(s, i)
     name = f"coverage-{s.variant}-{i:03d}"
-    folder = work / f"e{i:03d}-{key}"
-    exp = folder / "data" / "experiment.toml"
+    data_folder = work / "data" / f"e{i:03d}-{s.data_key(i)}"
+    exp = data_folder / "experiment.toml"
     if not exp.exists():  # the writer's last file: the data are complete when it exists
         progress(
             f"experiment {i}: {test.width_mm:g}x{test.depth_mm:g}x{test.height_mm:g} mm, data on "
             f"mesh {s.data_mesh} ..."
         )
-        write_virtual_experiment(test, folder / "data", name)
+        write_virtual_experiment(test, data_folder, name)
     settings = CalibrationSettings(
         s.inverse_mesh, s.budget, s.seed, check_mesh=s.check_mesh, correction=s.correction
     )
     report = calibrate(
         exp,
-        folder / "calibration",
+        work / "calibration" / f"e{i:03d}-{key}",
         models=list(s.models),
         settings=settings,
         progress=lambda m: progress(f"experiment {i}: {m}"),

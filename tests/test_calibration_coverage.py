@@ -21,8 +21,8 @@ TINY = [
 
 
 def test_tiny_study_scores_resumes_and_summarises(tmp_path, capsys, monkeypatch):
-    out = tmp_path / "cov"
-    assert main(["calibrate-coverage", *TINY, "--out", str(out)]) == 0
+    out, work = tmp_path / "cov", tmp_path / "work"
+    assert main(["calibrate-coverage", *TINY, "--out", str(out), "--work", str(work)]) == 0
     assert "true variant first 2/2 (AIC)" in capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
     assert summary["n_done"] == 2 and summary["true_first_aic"] == 2
@@ -51,8 +51,18 @@ def test_tiny_study_scores_resumes_and_summarises(tmp_path, capsys, monkeypatch)
         ("linear-compression", "hyperbolic-compression"), 8, 0,
         ((100.0, 100.0, 100.0), (100.0, 100.0, 200.0)), (0.0005, 0.002, 0.005), 10.0,
     )  # fmt: skip
-    again = run_coverage(s, out, progress=said.append)
+    again = run_coverage(s, out, work=work, progress=said.append)
     assert sum("done before" in m for m in said) == 2 and again["n_done"] == 2
+
+    # a study differing in the calibration alone reuses the virtual experiments' data
+    monkeypatch.undo()
+    monkeypatch.setattr(
+        "problems.inverse.virtual_experiment.write_virtual_experiment",
+        lambda *a, **k: pytest.fail("data remade"),
+    )
+    argv = [*TINY, "--out", str(tmp_path / "cov2"), "--work", str(work)]
+    argv[argv.index("--budget") + 1] = "6"
+    assert main(["calibrate-coverage", *argv]) == 0
 
 
 def test_draws_differ_and_stay_in_the_middle_of_the_box():
