@@ -73,10 +73,13 @@ class CalibrationSettings:
     @property
     def fine_mesh(self) -> str:
         """The finer mesh of the discretisation check and correction ('' for none)."""
-        from problems.inverse.build import DEFAULT_HIFI
+        from problems.inverse.build import hifi_mesh_for
 
         if self.check_mesh == "auto":
-            return DEFAULT_HIFI.get(str(self.mesh).partition(":")[0], "")
+            try:
+                return hifi_mesh_for(self.mesh)
+            except ValueError:
+                return ""
         return self.check_mesh
 
 

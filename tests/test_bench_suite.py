@@ -233,6 +233,20 @@ def test_shipped_suites_are_valid(name):
     assert s.name == name and len(s.runs()) == len(s) > 0
 
 
+def test_the_table1_suite_runs_lm_on_the_model_error_default_with_three_treatments():
+    from problems.inverse.build import hifi_mesh_for
+    from problems.inverse.cases import CASES
+    from problems.inverse.data import MODEL_ERROR_INVERSE_MESH
+
+    runs = load_suite(ROOT / "suites" / "table1.toml").runs()
+    assert len(runs) == 9 * 3 and {r.case for r in runs} == set(CASES)
+    assert {(r.method, r.tier, r.mesh, r.start) for r in runs} == {
+        ("lm", "model-error", MODEL_ERROR_INVERSE_MESH, "default")
+    }
+    assert {r.treatment for r in runs} == {"none", "one-point", "iterated"}
+    assert hifi_mesh_for(MODEL_ERROR_INVERSE_MESH) == "9,9,18:g8:hex27"
+
+
 def test_default_and_paper_suites_have_the_documented_shape():
     from problems.inverse.cases import CASES
 
@@ -328,6 +342,18 @@ def test_parts_are_a_union_of_products_over_the_shared_suite_table():
     assert {r.polish_budget for r in surrogate} == {7}
     assert {r.polish_budget for r in s.runs() if r.track == "fe"} == {0}
     assert s.total_budget == 7 * 40 + 4 * 7
+
+
+def test_a_part_names_its_own_mesh_validated_like_the_suite_table():
+    raw = copy.deepcopy(PARTS)
+    raw["part"][0]["mesh"] = "6,6,12:g8:hex27"
+    s = parse_suite(raw)
+    assert {r.mesh for r in s.runs() if r.track == "fe"} == {"6,6,12:g8:hex27"}
+    assert {r.mesh for r in s.runs() if r.track == "surrogate"} == {"coarse"}  # the suite's
+    raw["part"][1]["mesh"] = "6,6,12:g0.5"
+    with pytest.raises(ValueError) as info:
+        parse_suite(raw)
+    assert "[[part]] 2: mesh '6,6,12:g0.5': grading 'g0.5' is out of range" in str(info.value)
 
 
 def test_a_bad_key_in_a_part_names_the_part():

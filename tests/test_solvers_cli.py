@@ -67,6 +67,7 @@ def test_identify_writes_run_result_plus_errors(tmp_path, capsys):
     errors = doc.pop("errors_percent")
     assert doc.pop("package_version") and doc.pop("iterations") == doc["n_iterations"]
     assert doc.pop("warnings") == []  # plausibility warnings (FE cases only)
+    assert doc.pop("derived") == {}  # derived parameters (the exponent cases' a) only
     res = RunResult.from_dict(doc)  # the rest is exactly a RunResult
     assert (
         res.n_evals <= 250

@@ -18,7 +18,11 @@ def add_arguments(p) -> None:
         "--solver", required=True, metavar="METHOD", help="method name (see `femubench solvers`)"
     )
     p.add_argument(
-        "--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)"
+        "--mesh",
+        default=None,
+        help="FE mesh of the forward model (default: the data tier's inverse model, "
+        "docs/fe_model.md: the graded 27-node default on model-error data, coarse on consistent "
+        "data and with --surrogate)",
     )
     p.add_argument(
         "--tier",
@@ -169,6 +173,18 @@ def parse_options(items: list[str], flag: str = "--option") -> dict:
     return out
 
 
+def default_mesh(args) -> str:
+    """The inverse mesh when ``--mesh`` is not given: the surrogate track's (``coarse``) with
+    ``--surrogate``, else the default of the data's tier (``--data``'s own tier, else ``--tier``;
+    :func:`problems.inverse.data.default_inverse_mesh`)."""
+    from problems.inverse.data import DEFAULT_INVERSE_MESH, default_inverse_mesh, load
+
+    if args.surrogate:
+        return DEFAULT_INVERSE_MESH
+    tier = load(args.data).settings.tier if args.data else args.tier
+    return default_inverse_mesh(tier)
+
+
 def check_finer(hifi_mesh: str, mesh: str) -> None:
     """ValueError (one line) unless ``hifi_mesh`` is finer than the inverse ``mesh``: at least as
     many elements along x, y and z and more along one (a coarser or equal "high-fidelity" model
@@ -184,9 +200,37 @@ def check_finer(hifi_mesh: str, mesh: str) -> None:
         )
 
 
+def derived_errors(case, result) -> dict[str, dict[str, float]]:
+    """The material parameters ``case`` derives from the identified ones (the exponent cases'
+    ``a``, MPa^(1-b), as Table 1 shows it): ``{name: {"reference", "start", "found",
+    "error_percent"}}`` (the error signed, 100 (found/reference - 1) %); empty for a case without
+    a derivation. A point where the derivation is undefined gives NaN."""
+    if case.derive is None:
+        return {}
+
+    def at(x) -> dict[str, float]:
+        try:
+            return case.derived(x)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            return {}
+
+    ref = at(result.reference)
+    x0, found = at(result.x0), at(result.x)
+    nan = float("nan")
+    return {
+        n: {
+            "reference": r,
+            "start": x0.get(n, nan),
+            "found": found.get(n, nan),
+            "error_percent": 100.0 * (found.get(n, nan) / r - 1.0),
+        }
+        for n, r in ref.items()
+    }
+
+
 def format_identification(case, result) -> str:
-    """Parameters (reference, start, found, signed error %), then cost, status, evaluations,
-    time."""
+    """Parameters (reference, start, found, signed error %) and the derived ones (the exponent
+    cases' ``a``), then cost, status, evaluations, time."""
     errors = result.errors_percent()
     units = {p.name: p.unit for p in case.parameters}
     lines = [
@@ -198,6 +242,11 @@ def format_identification(case, result) -> str:
         lines.append(
             f"  {name:10} {units.get(name, ''):10} {ref:12.6g} {x0:12.6g} {x:12.6g} "
             f"{errors[name]:+9.3f}"
+        )
+    for name, d in derived_errors(case, result).items():
+        lines.append(
+            f"  {name:10} {'derived':10} {d['reference']:12.6g} {d['start']:12.6g} "
+            f"{d['found']:12.6g} {d['error_percent']:+9.3f}"
         )
     lines += [
         f"  cost {result.cost:.6g}   status {result.status}: {result.message}",
@@ -248,17 +297,19 @@ def format_identification(case, result) -> str:
     return "\n".join(lines)
 
 
-def result_document(result) -> dict:
+def result_document(result, case=None) -> dict:
     """The JSON written by ``--json``: the RunResult (with its ``provenance``: case, data tier and
     hash, data and inverse meshes, treatment and its high-fidelity mesh, start), ``iterations``,
-    ``errors_percent`` and the package version (``main`` adds ``warnings``: the plausibility
-    warnings, problems.inverse.plausibility)."""
+    ``errors_percent``, ``derived`` (:func:`derived_errors` of ``case``: the exponent cases'
+    ``a`` with its error; empty without a case or a derivation) and the package version (``main``
+    adds ``warnings``: the plausibility warnings, problems.inverse.plausibility)."""
     from bench.cli import package_version
 
     return {
         **result.to_dict(),
         "iterations": result.n_iterations,
         "errors_percent": result.errors_percent(),
+        "derived": derived_errors(case, result) if case is not None else {},
         "package_version": package_version(),
     }
 
@@ -266,13 +317,13 @@ def result_document(result) -> dict:
 def main(args) -> int:
     import json
     import warnings
-    from pathlib import Path
 
     from bench.experiment.identify import identify
     from bench.identification import Identification
     from bench.outputs import refuse_inputs
     from problems.inverse.cases import get_case
     from problems.inverse.plausibility import PlausibilityWarning
+    from problems.io.atomic import atomic_write_text
 
     refuse_inputs("--json", args.json, [args.data])
     spec = problem_spec(args)
@@ -290,6 +341,8 @@ def main(args) -> int:
             "--correction default sets the plate margin and the high-fidelity mesh itself (see "
             "`femubench cases`); to change them name the treatment, e.g. --correction bae"
         )
+    if args.mesh is None:
+        args.mesh = default_mesh(args)
     if args.hifi_mesh is not None:
         check_finer(args.hifi_mesh, args.mesh)
     spec = Identification(
@@ -333,8 +386,8 @@ def main(args) -> int:
     for message in found:
         print(f"  warning: {message}")
     if args.json:
-        doc = {**result_document(result), "warnings": found}
-        Path(args.json).write_text(json.dumps(doc, indent=1))
+        doc = {**result_document(result, case), "warnings": found}
+        atomic_write_text(args.json, json.dumps(doc, indent=1))
         print(f"  written {args.json}")
     return 0
 

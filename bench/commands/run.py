@@ -68,14 +68,15 @@ def main(args) -> int:
                 f"{len(pending)} pending runs)",
                 file=sys.stderr,
             )
-    fe_evals = sum(
-        r.polish_budget if r.track == "surrogate" else r.budget
-        for r in pending
-        if not r.problem and not get_case(r.case).is_analytic
-    )
-    warn_if_long(
-        NAME, fe_evals, suite.mesh, workers=args.workers, what=f"{len(pending)} pending runs"
-    )
+    fe_by_mesh: dict[str, int] = {}  # FE evaluations per inverse mesh (parts may differ)
+    for r in pending:
+        if not r.problem and not get_case(r.case).is_analytic:
+            n = r.polish_budget if r.track == "surrogate" else r.budget
+            fe_by_mesh[r.mesh] = fe_by_mesh.get(r.mesh, 0) + n
+    fe_evals = sum(fe_by_mesh.values())
+    for mesh, n in fe_by_mesh.items():
+        on = f" on {mesh}" if len(fe_by_mesh) > 1 else ""
+        warn_if_long(NAME, n, mesh, workers=args.workers, what=f"{len(pending)} pending runs{on}")
 
     if args.dry_run:
         for i, part in enumerate(suite.parts, 1):
@@ -87,7 +88,7 @@ def main(args) -> int:
                 f"{list(part.starts)}"
                 + (f" ({part.random_starts} random per seed)" if "random" in part.starts else "")
                 + (
-                    f", tracks {list(part.tracks)}, tiers {list(part.tiers)}"
+                    f", tracks {list(part.tracks)}, tiers {list(part.tiers)}, mesh {part.mesh}"
                     if not set(part.cases) <= set(suite.problems)
                     else ""
                 )

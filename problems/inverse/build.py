@@ -23,9 +23,11 @@ from problems.inverse.evaluator import Evaluator
 from problems.inverse.model_error import Correction, check_honest
 from problems.inverse.problem import LeastSquaresProblem
 
-#: high-fidelity mesh of a model-error correction for each inverse mesh (the next finer preset;
-#: never the model-error data's own ``xfine``)
-DEFAULT_HIFI = {"coarse": "paper", "paper": "fine"}
+#: high-fidelity mesh of a model-error correction for each inverse mesh (a finer mesh of the same
+#: family; never the discretisation of the model-error data): the presets take the next finer
+#: preset; the model-error tier's default inverse model (27-node, graded) a finer graded 27-node
+#: mesh (docs/fe_model.md, "Table 1 on the reference tier")
+DEFAULT_HIFI = {"coarse": "paper", "paper": "fine", "6,6,12:g8:hex27": "9,9,18:g8:hex27"}
 
 
 @dataclass(frozen=True)
@@ -50,14 +52,16 @@ class Region:
 
 
 def hifi_mesh_for(mesh: str) -> str:
-    """The default high-fidelity mesh of a correction for inverse mesh ``mesh``."""
-    base = str(mesh).partition(":")[0]
-    if base not in DEFAULT_HIFI:
-        raise ValueError(
-            f"no default high-fidelity mesh for inverse mesh {mesh!r}; allowed inverse meshes: "
-            f"{', '.join(DEFAULT_HIFI)} (or name the high-fidelity mesh explicitly)"
-        )
-    return DEFAULT_HIFI[base]
+    """The default high-fidelity mesh of a correction for inverse mesh ``mesh``
+    (:data:`DEFAULT_HIFI`, matched by discretisation: ``coarse:quarter`` is ``coarse``)."""
+    key = discretisation_key(mesh)
+    for inverse, hifi in DEFAULT_HIFI.items():
+        if discretisation_key(inverse) == key:
+            return hifi
+    raise ValueError(
+        f"no default high-fidelity mesh for inverse mesh {mesh!r}; allowed inverse meshes: "
+        f"{', '.join(DEFAULT_HIFI)} (or name the high-fidelity mesh explicitly)"
+    )
 
 
 def resolve_data(case: Case, mesh: str, tier: str, data: Dataset | str | Path | None) -> Dataset:

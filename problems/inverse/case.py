@@ -114,6 +114,14 @@ class Case:
             values = self.derive(values)[0]
         return {**self.fixed, **values}
 
+    def derived(self, x) -> dict[str, float]:
+        """``{name: value}`` of the material parameters the case derives from the identified ones
+        at ``x`` (the exponent cases' ``a``, MPa^(1-b)); empty without a derivation."""
+        if self.derive is None:
+            return {}
+        values = self.derive(self.identified(x))[0]
+        return {k: float(v) for k, v in values.items() if k not in self.names}
+
     def material_jacobian(self, x, material_names) -> np.ndarray:
         """d (material parameters ``material_names``) / d (identified parameters), shape (P, n)."""
         values = self.identified(x)
