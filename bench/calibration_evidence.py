@@ -162,7 +162,8 @@ def sample_posterior(
 ) -> dict:
     """emcee on ``log_post`` (vectorised: (M, k) physical rows -> (M,), ``-inf`` off the
     support) with differential-evolution moves (80 % DE + 20 % DE-snooker, as
-    bench/studies/posterior.py), walkers started in N(x0, cov0) clipped into the box.
+    bench/studies/posterior.py), walkers started in N(x0, cov0) (each sd kept within
+    [1e-3, 0.25] of the box's width) clipped into the box.
 
     n_walkers : walkers (0: max(16, 2 k + 2), even); n_steps: steps of every walker, the first
     ``burn_fraction`` discarded. Returns ``samples`` (kept, flat, physical), ``log_prob``,
@@ -182,8 +183,18 @@ def sample_posterior(
     nw = max(int(n_walkers) or 16, 2 * k + 2)
     nw += nw % 2
     rng = np.random.default_rng(seed)
-    L = np.linalg.cholesky(np.asarray(cov0, float) + 1e-12 * np.diag(np.diag(cov0) + 1e-300))
     span = hi - lo
+    # the start's spread per parameter within [1e-3, 0.25] of the box: a direction the Laplace
+    # covariance leaves at zero (a pseudo-inverse) would keep the DE moves out of it for good
+    cov0 = np.asarray(cov0, float)
+    sd = np.sqrt(np.maximum(np.diag(cov0), 0.0))
+    R = np.where(np.outer(sd, sd) > 0, cov0 / np.where(sd > 0, sd, 1.0)[:, None], 0.0)
+    R = R / np.where(sd > 0, sd, 1.0)[None, :]
+    np.fill_diagonal(R, 1.0)
+    lam, V = np.linalg.eigh(0.5 * (R + R.T))
+    R = (V * np.maximum(lam, 1e-6)) @ V.T
+    sd = np.clip(sd, 1e-3 * span, 0.25 * span)
+    L = np.linalg.cholesky(R * np.outer(sd, sd))
     p0 = np.clip(x0 + rng.standard_normal((nw, k)) @ L.T, lo + 1e-9 * span, hi - 1e-9 * span)
     calls = [0]
 
