@@ -124,3 +124,20 @@ def test_mcmc_on_the_fe_model_checks_the_laplace_evidence(tmp_path, monkeypatch)
     monkeypatch.setattr(cal, "mcmc_variant", lambda *a, **k: pytest.fail("rerun"))
     again = calibrate(exp, tmp_path / "out", **kw)
     assert again["mcmc"]["linear-compression"]["log_evidence_bridge"] == c["log_evidence_bridge"]
+
+
+def test_mcmc_bad_input_is_one_line_exit_2(tmp_path, capsys):
+    from pathlib import Path
+
+    from bench.cli import main
+
+    exp = str(Path(__file__).resolve().parent.parent / "suites/experiments/cube100/experiment.toml")
+    for argv, said in (
+        (["--mcmc", "nope"], "--mcmc 'nope': nope unknown"),
+        (["--mcmc", "best", "--correction", "iterated"], "--mcmc with --correction iterated"),
+        (["--mcmc", "best", "--mcmc-forward", "x"], "--mcmc-forward"),
+    ):
+        assert main(["calibrate", exp, "--out", str(tmp_path / "o"), *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], err
+    assert not (tmp_path / "o").exists()
