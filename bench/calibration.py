@@ -642,7 +642,9 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
                 "images_used",
                 "rigid_motion_removed",
                 "force_accuracy_percent",
+                "correlation",  # the [images] route only
             )
+            if k in meta
         }
         | {"points_used": len(data.points), "images": len(data.snapshots_mm)},
         "test": summary,
@@ -715,6 +717,19 @@ def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True
         _atomic_figure(fig, out / "residuals.png")
 
 
+def _correlation_lines(c: dict | None) -> list[str]:
+    """The report's line on the DIC of the ``[images]`` route (none for a DIC export)."""
+    if not c:
+        return []
+    return [
+        f"- DIC of the images (femubench, IC-GN): subsets {c['subset_px']} px every "
+        f"{c['step_px']} px in ROI {c['roi_px']}, {c['subsets_correlated']} on the face "
+        f"({c['subsets_off_face']} off it), not converged per image "
+        f"{c['not_converged_per_image']}, grey-level noise "
+        f"{min(c['grey_noise_per_image']):.3g}-{max(c['grey_noise_per_image']):.3g}"
+    ]
+
+
 def _fmt(v: float) -> str:
     return f"{v:.4g}"
 
@@ -745,7 +760,13 @@ def render_markdown(report: dict) -> str:
             for group in ("experiment", "machine_log")
             for k, v in imp["files_sha256"][group].items()
         )
-        + f" and {len(imp['files_sha256']['dic'])} DIC exports (all in report.json)",
+        + (
+            f" and {len(imp['files_sha256']['dic'])} DIC exports (all in report.json)"
+            if "dic" in imp["files_sha256"]
+            else f" and {len(imp['files_sha256']['images'])} images, the reference included "
+            "(all in report.json)"
+        ),
+        *_correlation_lines(imp.get("correlation")),
         "",
         "## What the test says (start and bounds, never a reference)",
         f"- E {_fmt(t['E_MPa'])} MPa (DIC strain; from the force curve {_fmt(t['E_force_MPa'])}), "

@@ -142,3 +142,24 @@ def test_shipped_images_example_imports_and_starts_the_calibration():
     case = lab_case("linear-compression", ds, s)
     truth = np.array([34000.0, 38.0, 0.9, 12.0, 24.0, 1500.0])
     assert np.all(case.lower <= truth) and np.all(truth <= case.upper)
+
+
+def test_calibration_report_of_the_images_route(tiny, tmp_path):
+    """`femubench calibrate` takes an images experiment: its report names the images and the
+    correlation (a two-evaluation run on a one-element-thick mesh: the plumbing, not the fit)."""
+    from bench.calibration import CalibrationSettings, calibrate
+
+    settings = CalibrationSettings("2,2,2", 2, check_mesh="")
+    out = tmp_path / "out"
+    rep = calibrate(
+        tiny,
+        out,
+        models=["linear-compression"],
+        settings=settings,
+        progress=lambda s: None,
+        figures=False,
+    )
+    assert rep["import"]["correlation"]["subsets_correlated"] == 81
+    assert len(rep["import"]["files_sha256"]["images"]) == 3
+    md = (out / "report.md").read_text()
+    assert "3 images, the reference included" in md and "not converged per image [0, 0]" in md
