@@ -1,6 +1,6 @@
 """Running suites: one identification per task, in-process or on a Dask cluster, resumable.
 
-* :func:`run_one` runs one :class:`~bench.suite.RunConfig` and returns its record; it never
+* :func:`run_one` runs one :class:`~bench.experiment.spec.RunSpec` and returns its record; it never
   raises — any exception becomes a record with ``status == "failed"`` and the traceback in the
   message (and in ``record["error"]``), so one crash never takes a suite down.
 * :func:`run_suite` skips every run that already has a record in ``DIR/runs/`` and runs the
@@ -38,10 +38,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from bench import store
+from bench.experiment.spec import RunSpec, canonical_json, config_hash
 
 # thread pinning for every worker process
 from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper, cap_workers, sigint_ignored
-from bench.suite import RunConfig, Suite, config_hash
+from bench.suite import Suite
 
 log = logging.getLogger("femubench.runner")
 
@@ -170,38 +171,22 @@ def arch() -> str:
     return "; ".join(parts)
 
 
-def initial_point(case, config: RunConfig):
-    """The physical start point x0 of a run: the case's default start, or the
-    ``start_index``-th seeded Latin-hypercube start of ``seed``."""
-    from problems.inverse.starts import start_point
-
-    if config.start == "default":
-        return start_point(case, kind="default", seed=config.seed)
-    return start_point(case, kind="random", seed=config.seed, index=config.start_index)
-
-
 def is_analytic(case_name: str) -> bool:
     from problems.inverse.cases import get_case
 
     return get_case(case_name).is_analytic
 
 
-def dataset_for(config: RunConfig, *, progress: bool = False):
-    """The measured data set of a run (FE cases): the shipped one, or the one made with the
-    suite's ``[data]`` settings (computed on first use and cached by problems.inverse.data)."""
-    if config.problem or is_analytic(config.case):
+def dataset_for(spec: RunSpec, *, progress: bool = False):
+    """The measured data set of a run of an FE case (:meth:`DataSpec.load
+    <bench.experiment.spec.DataSpec.load>`); None for an analytic case or a user problem."""
+    if spec.problem or is_analytic(spec.case):
         return None
-    from problems.inverse.data import get_data, tier_settings
-
-    return get_data(
-        config.case,
-        tier_settings(config.tier, inverse_mesh=config.mesh, **config.data),
-        progress=progress,
-    )
+    return spec.data.load(spec.case, spec.mesh, progress=progress)
 
 
 def failed_result(
-    config: RunConfig, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0
+    config: RunSpec, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0
 ):
     """A RunResult for a run that crashed before (or while) its solver returned."""
     import math
@@ -242,7 +227,7 @@ def failed_result(
 
 
 def run_one(
-    config: RunConfig | dict,
+    config: RunSpec | dict,
     *,
     mapper: Callable | None = None,
     suite: str | None = None,
@@ -255,7 +240,7 @@ def run_one(
     it; by default it is loaded (or made) here with :func:`dataset_for`.
     """
     if isinstance(config, dict):
-        config = RunConfig.from_dict(config)
+        config = RunSpec.from_dict(config)
     started, t0 = now(), time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:  # kept in the record, not on the console
         warnings.simplefilter("always")
@@ -280,7 +265,7 @@ def run_one(
     return record
 
 
-def _run_guarded(config: RunConfig, mapper, dataset, t0):
+def _run_guarded(config: RunSpec, mapper, dataset, t0):
     case = x0 = None
     error = data_hash = None
     evaluations = [0]  # the objective's counter, kept for a crash report
@@ -292,14 +277,14 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
             return run_user(config, mapper=mapper, observers=count), None, None
         from bench.experiment.identify import identify
         from problems.inverse.cases import get_case
+        from problems.inverse.starts import start_point
 
         case = get_case(config.case)
         if dataset is None and not is_analytic(config.case):
             dataset = dataset_for(config)
-        x0 = initial_point(case, config)
-        spec = config.identification()
+        x0 = start_point(case, kind=config.start, seed=config.seed, index=config.start_index)
         result = identify(
-            spec,
+            config,
             mapper=mapper,
             dataset=dataset,
             observers=[lambda ev, _: evaluations.__setitem__(0, ev.n_evals)],
@@ -319,7 +304,7 @@ def _run_guarded(config: RunConfig, mapper, dataset, t0):
 
 
 def make_record(
-    config: RunConfig,
+    config: RunSpec,
     result,
     *,
     suite=None,
@@ -463,31 +448,29 @@ def pending_runs(
     return runs, pending
 
 
-def crashed_records(runs: list[RunConfig], pending: list[RunConfig], records) -> list[str]:
+def crashed_records(runs: list[RunSpec], pending: list[RunSpec], records) -> list[str]:
     """Labels of the runs not in ``pending`` whose record (among ``records``) is a crash."""
     crashed = {r["config_hash"] for r in records if r.get("error")}
     todo = {config_hash(r) for r in pending}
     return [r.label for r in runs if config_hash(r) in crashed - todo]
 
 
-def current_data_hash(config: RunConfig) -> str | None:
+def current_data_hash(config: RunSpec) -> str | None:
     """The hash of the data set ``config`` would use today (its file, which
     ``$FEMUBENCH_DATA_DIR`` may change), or None: no data set (analytic case, user problem) or
     none on disk yet (it will be made from the run's settings, as the record's was)."""
     if config.problem or is_analytic(config.case):
         return None
-    from problems.inverse.data import data_path, load, tier_settings
+    from problems.inverse.data import data_path, load
 
-    path = data_path(
-        config.case, tier_settings(config.tier, inverse_mesh=config.mesh, **config.data)
-    )
+    path = config.data.file or data_path(config.case, config.data.data_settings(config.mesh))
     try:
         return load(path).hash
     except (OSError, ValueError):  # missing or torn: made (or reported) when the run runs
         return None
 
 
-def stale_records(runs: list[RunConfig], done: dict[str, dict]) -> list[tuple[dict, str]]:
+def stale_records(runs: list[RunSpec], done: dict[str, dict]) -> list[tuple[dict, str]]:
     """``(record, reason)`` of every record in ``done`` (by config hash) of one of ``runs`` that
     was made on other data than the run would use today (its ``data_hash`` differs from
     :func:`current_data_hash`; a record without ``data_hash`` is accepted)."""
@@ -507,7 +490,7 @@ def stale_records(runs: list[RunConfig], done: dict[str, dict]) -> list[tuple[di
     return out
 
 
-def set_aside_stale(runs: list[RunConfig], out_dir: Path, records: list[dict]) -> list[Path]:
+def set_aside_stale(runs: list[RunSpec], out_dir: Path, records: list[dict]) -> list[Path]:
     """Move the records of ``runs`` (among ``records``, the readable records of ``out_dir``) made
     on other data than today's into ``DIR/runs/stale/`` and drop them from ``records`` (logged;
     only call while holding the directory lock); return their new paths."""
@@ -521,7 +504,7 @@ def set_aside_stale(runs: list[RunConfig], out_dir: Path, records: list[dict]) -
     return moved
 
 
-def write_plan(suite: Suite, runs: list[RunConfig], out_dir: Path) -> Path:
+def write_plan(suite: Suite, runs: list[RunSpec], out_dir: Path) -> Path:
     """Write ``DIR/<suite>.plan.json``: the config hash and label of every planned run, so that a
     report can say which runs are missing (:mod:`bench.report.completeness`)."""
     from problems.io.jsonio import dumps
@@ -672,17 +655,17 @@ def run_suite(
     return summary
 
 
-def data_key(config: RunConfig) -> tuple[str, str, str, str] | None:
+def data_key(config: RunSpec) -> tuple | None:
     """Runs with the same key share one data set (None: analytic, no data set): the case, the data
-    tier, the inverse mesh (a consistent-tier data set is made on it) and the [data] settings."""
+    tier, the inverse mesh (a consistent-tier data set is made on it), the data settings and the
+    data file."""
     if config.problem or is_analytic(config.case):
         return None  # user problems and analytic cases have no data set
-    from bench.suite import canonical_json
+    d = config.data
+    return config.case, d.tier, config.mesh, canonical_json(d.settings), d.file
 
-    return config.case, config.tier, config.mesh, canonical_json(config.data)
 
-
-def prepare_datasets(pending: list[RunConfig], *, progress: bool = False) -> dict:
+def prepare_datasets(pending: list[RunSpec], *, progress: bool = False) -> dict:
     """Load (or make, once) the data set of every FE case x data settings among ``pending``, here
     in the client, so that workers receive the data with the task (no shared file system needed)
     and a non-default data set is computed once, not by every run. Failures are returned as the
@@ -723,7 +706,7 @@ def _progress(name: str, total: int, initial: int, enabled: bool):
     )
 
 
-def _finish(summary: SuiteSummary, out_dir: Path, cfg: RunConfig, record: dict, bar) -> None:
+def _finish(summary: SuiteSummary, out_dir: Path, cfg: RunSpec, record: dict, bar) -> None:
     store.write_record(out_dir, record)
     res = record["result"]
     summary.ran += 1

@@ -1,6 +1,6 @@
 """The results store: one JSON record per run under ``DIR/runs/``, written atomically.
 
-A record is keyed by :func:`bench.suite.config_hash` of its :class:`~bench.suite.RunConfig`
+A record is keyed by the hash of its :class:`~bench.experiment.spec.RunSpec` (``RunSpec.hash``)
 and lives in ``DIR/runs/<hash>.json``. It is written to a temporary file in the same directory
 (``.<hash>.<random>.tmp``), flushed, fsync'ed and renamed over the final name with
 :func:`os.replace`, so a reader (or a rerun after ``kill -9``) sees either the whole record or
@@ -37,7 +37,7 @@ Record (JSON object)::
 
     schema       int, RECORD_SCHEMA
     config_hash  str, sha256 of the run configuration
-    config       RunConfig.to_dict()
+    config       RunSpec.to_dict()
     suite        name of the suite that produced it
     result       RunResult.to_dict()
     data_hash    str | None, hash of the measured-data file used by the objective
@@ -285,11 +285,10 @@ def check_record(rec, config_hash: str) -> None:
     missing = [k for k in CONFIG_KEYS if k not in config]
     if missing:
         raise ValueError(f"config lacks {', '.join(missing)}")
-    from bench.suite import RunConfig
-    from bench.suite import config_hash as hash_of
+    from bench.experiment.spec import RunSpec
 
     try:
-        actual = hash_of(RunConfig.from_dict(config))
+        actual = RunSpec.from_dict(config).hash
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"config cannot be read ({type(exc).__name__}: {exc})") from None
     if actual != config_hash:

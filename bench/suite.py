@@ -3,7 +3,8 @@
 A suite is loaded with :func:`load_suite` (or :func:`parse_suite` from a dict), validated
 strictly *before anything runs* — every unknown key, unknown case or method and impossible
 value is reported with the allowed values — and expanded by :meth:`Suite.runs` into a list of
-:class:`RunConfig`, one per identification. :func:`config_hash` keys a run in the results store.
+:class:`~bench.experiment.spec.RunSpec`, one per identification (its hash keys the run's record
+in the results store).
 
 The schema is documented in ``docs/suites.md``; in short::
 
@@ -34,19 +35,23 @@ The schema is documented in ``docs/suites.md``; in short::
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import itertools
-import json
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-#: Version of the run-configuration schema; part of every config hash.
-CONFIG_SCHEMA = 2
-
-START_KINDS = ("default", "random")
+from bench.experiment.spec import (
+    DEFAULT_SURROGATE,
+    JACOBIANS,
+    START_KINDS,
+    TRACKS,
+    DataSpec,
+    RunSpec,
+    Treatment,
+)
+from problems.inverse.evaluator import BUDGET_UNITS
 
 SUITE_KEYS = {
     "name": "suite name (string; default: the file name without .toml)",
@@ -88,152 +93,6 @@ PROBLEM_KEYS = {
 
 
 @dataclass(frozen=True)
-class RunConfig:
-    """The complete configuration of one identification run (what its record is keyed by).
-
-    ``start`` is ``"default"`` (the case's default start, ``start_index`` 0) or ``"random"``
-    (the ``start_index``-th random start drawn for ``seed``). ``data`` and ``options`` hold
-    only the settings written in the suite (defaults are the library's). ``problem`` is empty for
-    the FE and analytic cases; for a user problem it is ``{"entry": ..., "args": {...}}`` and
-    ``case`` is the problem's name in the suite.
-    """
-
-    case: str
-    method: str
-    seed: int
-    start: str
-    start_index: int
-    budget: int
-    mesh: str
-    data: dict = field(default_factory=dict)
-    options: dict = field(default_factory=dict)
-    tier: str = "model-error"
-    treatment: str = "none"
-    plate_margin_mm: float = 0.0
-    track: str = "fe"
-    jacobian: str = "exact"
-    budget_unit: str = "evaluations"
-    polish_budget: int = 0
-    problem: dict = field(default_factory=dict)
-    free_repeats: bool = False
-
-    def to_dict(self) -> dict[str, Any]:
-        """The configuration as a dict; the keys added after schema 2 appear only when they differ
-        from their defaults, so that the records of earlier suites keep their hashes."""
-        extra = {
-            k: getattr(self, k) for k, default in _LATER_KEYS.items() if getattr(self, k) != default
-        }
-        return extra | {
-            "case": self.case,
-            "method": self.method,
-            "seed": self.seed,
-            "start": self.start,
-            "start_index": self.start_index,
-            "budget": self.budget,
-            "mesh": self.mesh,
-            "data": dict(sorted(self.data.items())),
-            "options": dict(sorted(self.options.items())),
-            "tier": self.tier,
-            "treatment": self.treatment,
-            "plate_margin_mm": self.plate_margin_mm,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "RunConfig":
-        return cls(
-            case=d["case"],
-            method=d["method"],
-            seed=int(d["seed"]),
-            start=d["start"],
-            start_index=int(d["start_index"]),
-            budget=int(d["budget"]),
-            mesh=d["mesh"],
-            data=dict(d.get("data") or {}),
-            options=dict(d.get("options") or {}),
-            tier=d.get("tier", "model-error"),
-            treatment=d.get("treatment", "none"),
-            plate_margin_mm=float(d.get("plate_margin_mm", 0.0)),
-            **{k: type(v)(d.get(k, v)) for k, v in _LATER_KEYS.items()},
-        )
-
-    def identification(self):
-        """The :class:`~bench.identification.Identification` that runs this configuration (the
-        one translation from a suite's run to an identification; ``data`` settings are not part of
-        it: they pick the data set, which the runner passes to ``identify``). A surrogate-track
-        run identifies on the default surrogate, then polishes on the FE model with at most
-        ``polish_budget`` evaluations."""
-        from bench.identification import Identification
-
-        surrogate = (
-            {"surrogate": "default", "polish": True, "polish_budget": self.polish_budget}
-            if self.track == "surrogate"
-            else {}
-        )
-        return Identification(
-            self.case,
-            self.method,
-            mesh=self.mesh,
-            tier=self.tier,
-            treatment=self.treatment,
-            plate_margin_mm=self.plate_margin_mm,
-            budget=self.budget,
-            seed=self.seed,
-            start=self.start,
-            start_index=self.start_index,
-            options=dict(self.options),
-            jacobian=self.jacobian,
-            budget_unit=self.budget_unit,
-            free_repeats=self.free_repeats,
-            **surrogate,
-        )
-
-    @property
-    def hash(self) -> str:
-        return config_hash(self)
-
-    @property
-    def label(self) -> str:
-        """Short human-readable label, e.g.
-        ``linear-shear/lm/s0/default0/b200/model-error/none`` (a user problem has no data tier
-        and treatment: ``rosenbrock/cma/s0/default0/b3000``)."""
-        start = f"{self.start}{self.start_index}"
-        head = f"{self.case}/{self.method}/s{self.seed}/{start}/b{self.budget}"
-        if self.problem:
-            return head
-        return (
-            f"{head}/{self.tier}/{self.treatment}"
-            + (f"/{self.track}" if self.track != "fe" else "")
-            + (f"/jac-{self.jacobian}" if self.jacobian != "exact" else "")
-        )
-
-
-#: Run-configuration keys added after schema 2, with their defaults (left out of the hash when
-#: default).
-_LATER_KEYS = {
-    "track": "fe",
-    "jacobian": "exact",
-    "budget_unit": "evaluations",
-    "polish_budget": 0,
-    "problem": {},
-    "free_repeats": False,
-}
-TRACKS = ("fe", "surrogate")
-JACOBIANS = ("exact", "forward", "central")
-BUDGET_UNITS = ("evaluations", "forward-equivalents")
-
-
-def canonical_json(obj: Any) -> str:
-    """Canonical JSON (sorted keys, no whitespace) used for hashing."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=True)
-
-
-def config_hash(config: RunConfig) -> str:
-    """sha256 hex digest of the canonical JSON of the run's full configuration."""
-    payload = {"schema": CONFIG_SCHEMA, **config.to_dict()}
-    return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
-
-
-@dataclass(frozen=True)
 class Part:
     """One product of run dimensions of a suite (the [suite] table, or one [[part]] over it)."""
 
@@ -253,7 +112,7 @@ class Part:
     polish_budget: int = 100
     free_repeats: bool = False
 
-    def runs(self, data: dict, options: dict, problems: dict | None = None) -> list[RunConfig]:
+    def runs(self, data: dict, options: dict, problems: dict | None = None) -> list[RunSpec]:
         """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
         start index. The consistent tier is never corrected (it runs once, untreated, whatever
         the treatments); the Jacobian choice only multiplies
@@ -282,7 +141,7 @@ class Part:
             n = 1 if start == "default" else self.random_starts
             for i in range(n):
                 out.append(
-                    RunConfig(
+                    RunSpec(
                         case,
                         method,
                         seed,
@@ -290,17 +149,15 @@ class Part:
                         i,
                         budget,
                         self.mesh,
-                        dict(data),
                         dict(options.get(method, {})),
-                        tier,
-                        treatment,
-                        self.plate_margin_mm,
-                        track=track,
+                        DataSpec(tier, dict(data)),
+                        Treatment(treatment, self.plate_margin_mm),
+                        surrogate=DEFAULT_SURROGATE if track == "surrogate" else None,
+                        polish_budget=self.polish_budget if track == "surrogate" else 0,
                         jacobian=jac,
                         budget_unit=self.budget_unit,
-                        polish_budget=self.polish_budget if track == "surrogate" else 0,
-                        problem=dict((problems or {}).get(case, {})),
                         free_repeats=self.free_repeats,
+                        problem=dict((problems or {}).get(case, {})),
                     )
                 )
         return out
@@ -318,7 +175,7 @@ class Suite:
     source: str | None = None  # the TOML text it was read from, if any
     problems: dict = field(default_factory=dict)  # name -> {"entry": ..., "args": {...}}
 
-    def runs(self) -> list[RunConfig]:
+    def runs(self) -> list[RunSpec]:
         """All runs of all parts, each once (in part order)."""
         seen, out = set(), []
         for part in self.parts:

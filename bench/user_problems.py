@@ -28,7 +28,7 @@ def _cached(entry: str, args_json: str, name: str):
 def problem_of(config):
     """The :class:`~problems.user.UserProblem` of a run configuration with a ``problem`` field
     (loaded once per process and entry point + arguments)."""
-    from bench.suite import canonical_json
+    from bench.experiment.spec import canonical_json
 
     spec = config.problem
     return _cached(spec["entry"], canonical_json(spec.get("args") or {}), config.case)

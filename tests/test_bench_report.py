@@ -8,10 +8,11 @@ import pandas as pd
 import pytest
 
 from bench import store
+from bench.experiment.spec import RunSpec
 from bench.report import write_report
 from bench.report.tables import DASH, comparison, table1
 from bench.runner import make_record, run_suite
-from bench.suite import RunConfig, parse_suite
+from bench.suite import parse_suite
 
 SMOOTH = ["E", "sigma0", "H", "psi"]
 SMOOTH_REF = [30_000.0, 20.0, 1_500.0, 15.0]
@@ -67,7 +68,7 @@ def fake_record(
         wall_s=0.5,
         history=hist,
     )
-    cfg = RunConfig(case, method, seed, start, index, 100, "coarse")
+    cfg = RunSpec(case, method, seed, start, index, 100, "coarse")
     return make_record(cfg, res, suite="fake", data_hash="d" * 64, started="t0", finished="t1")
 
 

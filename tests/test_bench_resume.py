@@ -11,9 +11,10 @@ import time
 from pathlib import Path
 
 from bench import store
+from bench.experiment.spec import config_hash
 from bench.report import write_report
 from bench.runner import run_suite
-from bench.suite import config_hash, load_suite
+from bench.suite import load_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -179,9 +180,9 @@ def test_torn_records_are_rerun_kept_aside_and_reported_by_the_cli(tmp_path, cap
 
 
 def config_hash_of(record) -> str:
-    from bench.suite import RunConfig
+    from bench.experiment.spec import RunSpec
 
-    return config_hash(RunConfig.from_dict(record["config"]))
+    return config_hash(RunSpec.from_dict(record["config"]))
 
 
 def test_dask_local_cluster_gives_the_same_records_as_in_process(tmp_path):

@@ -8,8 +8,9 @@ import os
 import pytest
 
 from bench import store
+from bench.experiment.spec import RunSpec, config_hash
 from bench.runner import run_one, run_suite
-from bench.suite import RunConfig, config_hash, parse_suite
+from bench.suite import parse_suite
 
 SUITE = {
     "suite": {
@@ -38,7 +39,7 @@ def test_atomic_write_leaves_no_partial_file_when_the_writer_dies(tmp_path, monk
 
 
 def test_loaders_ignore_stray_tmp_files_and_report_them(tmp_path, caplog):
-    cfg = RunConfig("analytic-linear", "lm", 0, "default", 0, 50, "coarse")
+    cfg = RunSpec("analytic-linear", "lm", 0, "default", 0, 50, "coarse")
     store.write_record(tmp_path, run_one(cfg, suite="t"))
     (tmp_path / "runs" / ".deadbeef.x1.tmp").write_text('{"config_hash": "deadb')  # a killed writer
     with caplog.at_level("WARNING", logger="femubench.store"):
@@ -49,7 +50,7 @@ def test_loaders_ignore_stray_tmp_files_and_report_them(tmp_path, caplog):
 
 
 def test_record_content(tmp_path):
-    cfg = RunConfig("analytic-smooth", "lm", 0, "random", 1, 60, "coarse")
+    cfg = RunSpec("analytic-smooth", "lm", 0, "random", 1, 60, "coarse")
     rec = run_one(cfg, suite="t")
     assert rec["config_hash"] == config_hash(cfg) and rec["config"] == cfg.to_dict()
     assert rec["error"] is None and rec["suite"] == "t"
@@ -62,8 +63,8 @@ def test_record_content(tmp_path):
     assert "data_hash" in rec
     # random start 1 of seed 0 differs from the default start and from random start 0
     x0_r1 = res["x0"]
-    x0_r0 = run_one(RunConfig("analytic-smooth", "lm", 0, "random", 0, 5, "coarse"))["result"]["x0"]
-    x0_d = run_one(RunConfig("analytic-smooth", "lm", 0, "default", 0, 5, "coarse"))["result"]["x0"]
+    x0_r0 = run_one(RunSpec("analytic-smooth", "lm", 0, "random", 0, 5, "coarse"))["result"]["x0"]
+    x0_d = run_one(RunSpec("analytic-smooth", "lm", 0, "default", 0, 5, "coarse"))["result"]["x0"]
     assert x0_r1 != x0_r0 and x0_r1 != x0_d
     path = store.write_record(tmp_path, rec)
     assert path.name == f"{rec['config_hash']}.json"
@@ -104,7 +105,7 @@ def test_a_crash_becomes_a_failed_record_and_never_stops_the_suite(tmp_path, mon
 
 
 def test_unknown_case_at_run_time_is_a_failed_record_not_an_exception():
-    rec = run_one(RunConfig("no-such-case", "lm", 0, "default", 0, 10, "coarse"))
+    rec = run_one(RunSpec("no-such-case", "lm", 0, "default", 0, 10, "coarse"))
     assert rec["result"]["status"] == "failed" and "no-such-case" in rec["result"]["message"]
     assert rec["error"]
 

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.suite import RunConfig, config_hash, load_suite, parse_suite
+from bench.experiment.spec import DataSpec, RunSpec, Treatment, config_hash
+from bench.suite import load_suite, parse_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -49,7 +50,7 @@ def test_expansion_counts_and_order():
     # deterministic, so the default start runs under the first seed only)
     assert len(runs) == len(s) == 2 * 2 * 2 * (2 * 2 + 1)
     assert len({config_hash(r) for r in runs}) == len(runs)
-    assert runs[0] == RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", {}, {})
+    assert runs[0] == RunSpec("analytic-smooth", "lm", 0, "default", 0, 50, "coarse")
     assert [(r.start, r.start_index) for r in runs[:3]] == [
         ("default", 0),
         ("random", 0),
@@ -85,7 +86,7 @@ def test_options_are_attached_to_their_method_only():
 
 
 def test_config_hash_is_canonical_and_stable():
-    a = RunConfig(
+    a = RunSpec(
         "analytic-smooth",
         "lm",
         0,
@@ -93,10 +94,10 @@ def test_config_hash_is_canonical_and_stable():
         0,
         100,
         "coarse",
-        {"b": 1, "a": 2.0},
         {"y": 1, "x": "s"},
+        DataSpec(settings={"b": 1, "a": 2.0}),
     )
-    b = RunConfig(
+    b = RunSpec(
         "analytic-smooth",
         "lm",
         0,
@@ -104,15 +105,15 @@ def test_config_hash_is_canonical_and_stable():
         0,
         100,
         "coarse",
-        {"a": 2.0, "b": 1},
         {"x": "s", "y": 1},
+        DataSpec(settings={"a": 2.0, "b": 1}),
     )
     assert config_hash(a) == config_hash(b)
-    assert config_hash(a) != config_hash(RunConfig.from_dict({**a.to_dict(), "seed": 1}))
-    assert RunConfig.from_dict(a.to_dict()) == a
+    assert config_hash(a) != config_hash(RunSpec.from_dict({**a.to_dict(), "seed": 1}))
+    assert RunSpec.from_dict(a.to_dict()) == a
     # changing this value orphans every stored record: bump CONFIG_SCHEMA deliberately if needed
     assert (
-        config_hash(RunConfig("linear-compression", "lm", 0, "default", 0, 200, "coarse"))
+        config_hash(RunSpec("linear-compression", "lm", 0, "default", 0, 200, "coarse"))
         == "eed14cf8837e99bd0b695de64ff8df2cc2e0df32c4069d7586a377ab23af057b"
     )
 
@@ -177,8 +178,9 @@ def test_invalid_suites_are_rejected_with_the_key_and_what_is_allowed(raw, needl
 
 def test_data_settings_are_attached_to_every_run():
     s = parse_suite(with_("data.noise_um", 2, with_("data.seed", 3)))
-    assert all(r.data == {"noise_um": 2.0, "seed": 3} for r in s.runs())
-    assert isinstance(s.runs()[0].data["noise_um"], float)  # an int where a float is expected
+    assert all(r.data.settings == {"noise_um": 2.0, "seed": 3} for r in s.runs())
+    # an int where a float is expected
+    assert isinstance(s.runs()[0].data.settings["noise_um"], float)
 
 
 def test_all_errors_are_reported_at_once():
@@ -257,13 +259,14 @@ def test_default_and_paper_suites_have_the_documented_shape():
     runs = d.runs()
     # the local methods on FE, both tiers (model-error with the default treatment): 9 x 2 x 2
     local = [r for r in runs if r.method in ("lm", "gauss-newton")]
-    assert len(local) == 36 and {(r.tier, r.treatment, r.track) for r in local} == {
+    assert len(local) == 36 and {(r.data.tier, r.treatment.name, r.track) for r in local} == {
         ("consistent", "none", "fe"),
         ("model-error", "default", "fe"),
     }
     # the global and sampling methods on the surrogate, consistent tier, with an FE polish: 9 x 5
     rest = [r for r in runs if r not in local]
-    assert len(rest) == 45 and {(r.tier, r.track) for r in rest} == {("consistent", "surrogate")}
+    assert len(rest) == 45
+    assert {(r.data.tier, r.track) for r in rest} == {("consistent", "surrogate")}
     assert all(r.polish_budget > 0 for r in rest)
     p = load_suite(ROOT / "suites" / "paper.toml")
     assert (
@@ -289,9 +292,9 @@ def test_tiers_and_treatments_span_the_suite_without_correcting_consistent_data(
         }
     }
     s = parse_suite(raw)
-    combos = sorted((r.tier, r.treatment) for r in s.runs())
+    combos = sorted((r.data.tier, r.treatment.name) for r in s.runs())
     assert combos == [("consistent", "none"), ("model-error", "iterated"), ("model-error", "none")]
-    assert all(r.plate_margin_mm == 15.0 for r in s.runs()) and len(s) == 3
+    assert all(r.treatment.plate_margin_mm == 15.0 for r in s.runs()) and len(s) == 3
     with pytest.raises(ValueError, match="treatments: 'twice' unknown"):
         parse_suite({"suite": {**raw["suite"], "treatments": ["twice"]}})
     with pytest.raises(ValueError, match="plate_margin_mm = 80"):
@@ -368,20 +371,34 @@ def test_a_bad_key_in_a_part_names_the_part():
 
 
 def test_later_keys_keep_the_hash_of_earlier_records_when_default():
-    fe = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse")
+    fe = RunSpec("analytic-smooth", "lm", 0, "default", 0, 50, "coarse")
     assert "track" not in fe.to_dict() and "jacobian" not in fe.to_dict()
-    sur = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", track="surrogate")
-    assert sur.to_dict()["track"] == "surrogate" and sur.hash != fe.hash
-    assert RunConfig.from_dict(sur.to_dict()) == sur
+    sur = RunSpec("linear-shear", "cma", surrogate="default", polish_budget=9)
+    assert sur.to_dict()["track"] == "surrogate" and "surrogate" not in sur.to_dict()
+    assert sur.hash != RunSpec("linear-shear", "cma").hash
+    assert RunSpec.from_dict(sur.to_dict()) == sur
+    # the keys only ``identify`` sets: in the record (and the hash) only when not default
+    named = RunSpec(
+        "linear-shear",
+        "lm",
+        data=DataSpec(file="d.json"),
+        treatment=Treatment("bae", 5.0, hifi_mesh="fine", bae_samples=8, bae_seed=1),
+        surrogate="mine",
+    )
+    d = named.to_dict()
+    assert (d["data_file"], d["hifi_mesh"], d["bae_samples"], d["bae_seed"]) == (
+        "d.json",
+        "fine",
+        8,
+        1,
+    )
+    assert d["surrogate"] == "mine" and RunSpec.from_dict(d) == named
 
 
-def test_the_runner_passes_the_later_dimensions_to_the_identification():
-    fe = RunConfig("analytic-smooth", "lm", 3, "random", 2, 50, "coarse").identification()
-    assert (fe.seed, fe.start, fe.start_index, fe.budget, fe.mesh) == (3, "random", 2, 50, "coarse")
-    assert (fe.jacobian, fe.surrogate, fe.polish, fe.free_repeats) == ("exact", None, False, False)
-    fd = RunConfig("analytic-smooth", "lm", 0, "default", 0, 50, "coarse", jacobian="central")
-    assert fd.identification().jacobian == "central"
-    sur = RunConfig(
-        "analytic-smooth", "cma", 0, "default", 0, 50, "coarse", track="surrogate", polish_budget=9
-    ).identification()
-    assert (sur.surrogate, sur.polish, sur.polish_budget) == ("default", True, 9)
+def test_a_spec_refuses_what_cannot_run():
+    with pytest.raises(ValueError, match="polish_budget > 0"):
+        RunSpec("linear-shear", "lm", polish_budget=5)
+    with pytest.raises(ValueError, match="start = 'middle' is unknown"):
+        RunSpec("linear-shear", "lm", start="middle")
+    with pytest.raises(ValueError, match="treatment = 'twice' is unknown"):
+        Treatment("twice")

@@ -2,11 +2,12 @@
 tier and treatment (``--tier``, ``--correction``)."""
 
 import json
+from dataclasses import replace
 
 import pytest
 
-from bench.experiment.objective import assemble
-from bench.identification import Identification, bae_path, with_default_treatment
+from bench.experiment.objective import assemble, bae_path
+from bench.experiment.spec import RunSpec, Treatment
 from problems.inverse.cases import CASES, default_treatment
 
 
@@ -24,25 +25,20 @@ def test_default_treatment_is_bae_with_a_plate_margin_on_every_case():
 
 
 def test_default_resolves_to_the_case_settings_and_explicit_treatments_stay():
-    spec = Identification("linear-shear", "lm", treatment="default", plate_margin_mm=5.0)
-    got = with_default_treatment(spec)
-    assert (got.treatment, got.plate_margin_mm, got.hifi_mesh, got.bae_samples) == (
+    default = Treatment("default", 5.0)
+    got = default.resolved("linear-shear", "coarse", "model-error")
+    assert (got.name, got.plate_margin_mm, got.hifi_mesh, got.bae_samples) == (
         "bae",
         30.0,
         "paper",
         32,
     )
     # another inverse mesh takes its own next finer preset (never the coarse default's paper)
-    assert (
-        with_default_treatment(
-            Identification("linear-shear", "lm", mesh="paper", treatment="default")
-        ).hifi_mesh
-        is None
-    )
+    assert default.resolved("linear-shear", "paper", "model-error").hifi_mesh is None
     # consistent data have no model error: nothing to treat
-    assert with_default_treatment(spec, "consistent").treatment == "none"
-    explicit = Identification("linear-shear", "lm", treatment="one-point", plate_margin_mm=5.0)
-    assert with_default_treatment(explicit) is explicit
+    assert default.resolved("linear-shear", "coarse", "consistent").name == "none"
+    explicit = Treatment("one-point", 5.0)
+    assert explicit.resolved("linear-shear", "coarse", "model-error") is explicit
 
 
 def test_cases_lists_the_default_treatment(capsys):
@@ -83,9 +79,10 @@ def test_the_default_bae_statistics_are_shipped(name):
     from problems.inverse.cases import get_case
     from problems.inverse.model_error import Correction
 
-    spec = with_default_treatment(Identification(name, "lm", treatment="default"))
-    data = resolve_data(get_case(name), spec.mesh, spec.tier, None)
-    path = bae_path(spec, spec.hifi_mesh, data)
+    spec = RunSpec(name, "lm")
+    spec = replace(spec, treatment=Treatment("default").resolved(name, spec.mesh, "model-error"))
+    data = resolve_data(get_case(name), spec.mesh, spec.data.tier, None)
+    path = bae_path(spec, spec.treatment.hifi_mesh, data)
     assert path.exists(), f"{path.name} missing: run `femubench model-error {name}`"
     corr = Correction.load(path)  # hash-checked
     assert corr.treatment == "bae" and corr.provenance["samples"] == 32 and corr.n_hifi >= 28
@@ -93,7 +90,7 @@ def test_the_default_bae_statistics_are_shipped(name):
 
 
 def test_default_objective_uses_the_shipped_statistics_without_a_run():
-    obj = assemble(Identification("linear-compression", "lm", treatment="default"))
+    obj = assemble(RunSpec("linear-compression", "lm", treatment=Treatment("default")))
     prov = obj.provenance
     assert (prov["treatment"], prov["hifi_mesh"], prov["region_plate_margin_mm"]) == (
         "bae",

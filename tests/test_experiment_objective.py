@@ -6,7 +6,7 @@ import pytest
 
 from bench.experiment.identify import identify
 from bench.experiment.objective import Assembly, assemble, prepare
-from bench.identification import Identification
+from bench.experiment.spec import RunSpec, Treatment
 from problems.inverse.model_error import HonestyError
 
 
@@ -17,7 +17,7 @@ def test_a_dishonest_high_fidelity_mesh_is_refused_before_any_high_fidelity_run(
         raise AssertionError("a high-fidelity model was made before the honesty check")
 
     monkeypatch.setattr(Assembly, "models", no_runs)
-    spec = Identification("linear-shear", "lm", treatment="one-point", hifi_mesh="xfine")
+    spec = RunSpec("linear-shear", "lm", treatment=Treatment("one-point", hifi_mesh="xfine"))
     with pytest.raises(HonestyError, match="hifi model uses discretisation"):
         prepare(spec)
     with pytest.raises(HonestyError, match="hifi model uses discretisation"):
@@ -25,11 +25,11 @@ def test_a_dishonest_high_fidelity_mesh_is_refused_before_any_high_fidelity_run(
 
 
 def test_the_assembly_resolves_the_default_treatment_once_and_carries_the_run_flags():
-    spec = Identification(
-        "linear-shear", "lm", treatment="default", jacobian="central", free_repeats=True
+    spec = RunSpec(
+        "linear-shear", "lm", treatment=Treatment("default"), jacobian="central", free_repeats=True
     )
     asm = prepare(spec)
-    assert asm.spec.treatment == "bae" and asm.spec.plate_margin_mm == 30.0
+    assert asm.spec.treatment.name == "bae" and asm.spec.treatment.plate_margin_mm == 30.0
     assert asm.hifi_mesh == "paper" and asm.region.plate_margin_mm == 30.0
     obj = asm.objective()  # uncorrected, on the FE model: no high-fidelity run
     assert obj.provenance["treatment"] == "none" and obj.provenance["region_plate_margin_mm"] == 30
@@ -38,4 +38,4 @@ def test_the_assembly_resolves_the_default_treatment_once_and_carries_the_run_fl
 
 def test_iterated_has_no_fixed_correction():
     with pytest.raises(ValueError, match="identifications only"):
-        assemble(Identification("linear-shear", "lm", treatment="iterated"))
+        assemble(RunSpec("linear-shear", "lm", treatment=Treatment("iterated")))

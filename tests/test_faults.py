@@ -12,8 +12,8 @@ import pytest
 
 from bench import store
 from bench.cli import main as cli
+from bench.experiment.spec import RunSpec
 from bench.runner import run_one
-from bench.suite import RunConfig
 from problems.io import atomic
 
 
@@ -80,7 +80,7 @@ def _correction():
 
 
 def test_torn_bae_statistics_are_named_set_aside_and_recomputed(tmp_path, monkeypatch):
-    import bench.identification as ident
+    import bench.experiment.objective as ident
     import problems.inverse.model_error as me
 
     path = tmp_path / "model_error" / "stats.npz"
@@ -94,7 +94,9 @@ def test_torn_bae_statistics_are_named_set_aside_and_recomputed(tmp_path, monkey
     calls = []
     monkeypatch.setattr(ident, "bae_path", lambda *a: path)
     monkeypatch.setattr(me, "bae_statistics", lambda *a, **k: calls.append(1) or _correction())
-    spec = SimpleNamespace(case="linear-shear", mesh="coarse", bae_samples=3, bae_seed=0)
+    spec = SimpleNamespace(
+        case="linear-shear", mesh="coarse", treatment=SimpleNamespace(bae_samples=3, bae_seed=0)
+    )
     with pytest.warns(UserWarning, match="torn.*moved to .*stats.npz.torn"):
         corr = ident.bae_correction(spec, None, None, "fine", None)
     assert calls == [1] and corr.hash == _correction().hash
@@ -145,7 +147,7 @@ def test_identify_json_naming_the_data_file_is_refused(tmp_path, capsys):
 def results(tmp_path_factory):
     out = tmp_path_factory.mktemp("res") / "suite"
     for seed in (0, 1):
-        cfg = RunConfig("analytic-linear", "lm", seed, "default", 0, 50, "coarse")
+        cfg = RunSpec("analytic-linear", "lm", seed, "default", 0, 50, "coarse")
         store.write_record(out, run_one(cfg, suite="t"))
     return out
 

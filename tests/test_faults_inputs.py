@@ -300,12 +300,14 @@ def test_identify_prints_and_writes_the_plausibility_warnings(capsys, tmp_path, 
 
 
 def test_a_suite_run_keeps_the_warnings_in_its_record_and_the_report_lists_them(force_in_newton):
+    from bench.experiment.spec import DataSpec, RunSpec
     from bench.report.warnings import warnings_section
     from bench.runner import run_one
-    from bench.suite import RunConfig
 
     ds, _ = force_in_newton
-    config = RunConfig("linear-compression", "lm", 0, "default", 0, 4, "2,2,4", tier="consistent")
+    config = RunSpec(
+        "linear-compression", "lm", 0, "default", 0, 4, "2,2,4", data=DataSpec("consistent")
+    )
     record = run_one(config, dataset=ds)
     plaus = [w for w in record["warnings"] if w.startswith("PlausibilityWarning: ")]
     assert any("N instead of kN" in w for w in plaus) and any("final cost" in w for w in plaus)

@@ -16,6 +16,7 @@ import pytest
 
 from bench import store
 from bench.cli import main as cli
+from bench.experiment.spec import DataSpec, RunSpec, config_hash
 from bench.runner import (
     current_data_hash,
     default_workers,
@@ -24,7 +25,7 @@ from bench.runner import (
     pending_runs,
     worker_count,
 )
-from bench.suite import RunConfig, config_hash, load_suite
+from bench.suite import load_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -97,7 +98,7 @@ def test_an_edited_record_is_torn_set_aside_rerun_and_reported(tmp_path, capsys)
 
 
 def _fe_record(data_hash):
-    cfg = RunConfig("linear-shear", "lm", 0, "default", 0, 10, "coarse", tier="consistent")
+    cfg = RunSpec("linear-shear", "lm", 0, "default", 0, 10, "coarse", data=DataSpec("consistent"))
     rec = make_record(cfg, failed_result(cfg, "fake"), suite="fe", data_hash=data_hash)
     rec["error"] = None
     return cfg, rec
@@ -154,7 +155,7 @@ def test_report_names_missing_and_crashed_runs_and_run_exits_1_on_crashes(tmp_pa
     assert [p["label"] for p in plan["runs"]] == labels
     first, second, _ = sorted(plan["runs"], key=lambda p: p["label"])
     store.record_path(out, first["hash"]).unlink()  # lost (a kill before it was written)
-    cfg = RunConfig.from_dict(
+    cfg = RunSpec.from_dict(
         json.loads(store.record_path(out, second["hash"]).read_text())["config"]
     )
     crash = make_record(cfg, failed_result(cfg, "KilledWorker"), suite="tiny", error="KilledWorker")

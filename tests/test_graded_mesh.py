@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.suite import RunConfig, config_hash
+from bench.experiment.spec import RunSpec, config_hash
 from problems.fe.front_face import measurement_grid
 from problems.fe.mesh import (
     MESH_PRESETS,
@@ -55,7 +55,7 @@ def test_shipped_records_keep_their_hashes():
     meshes = set()
     for path in runs:
         record = json.loads(path.read_text())
-        config = RunConfig.from_dict(record["config"])
+        config = RunSpec.from_dict(record["config"])
         assert config_hash(config) == record["config_hash"] == path.stem
         meshes.add(config.mesh)
     for mesh in meshes:  # the names stay the bare uniform 8-node discretisations

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.experiment.identify import identify
-from bench.identification import Identification, jacobian_options
+from bench.experiment.identify import identify, jacobian_options
+from bench.experiment.spec import RunSpec
 from problems.inverse.evaluator import Evaluator
 from problems.inverse.problem import LeastSquaresProblem
 from problems.inverse.protocol import ForwardResult
@@ -50,13 +50,13 @@ def objective(**kw):
     return Evaluator(problem, **kw)
 
 
-def test_identification_validates_jacobian_and_budget_unit():
+def test_the_run_spec_validates_jacobian_and_budget_unit():
     with pytest.raises(ValueError) as exc:
-        Identification("analytic-smooth", "lm", jacobian="numeric")
+        RunSpec("analytic-smooth", "lm", jacobian="numeric")
     assert str(exc.value) == "jacobian = 'numeric' is unknown; allowed: exact, forward, central"
     with pytest.raises(ValueError, match="budget_unit = 'runs' is unknown; allowed: evaluations"):
-        Identification("analytic-smooth", "lm", budget_unit="runs")
-    assert Identification("analytic-smooth", "lm").jacobian == "exact"
+        RunSpec("analytic-smooth", "lm", budget_unit="runs")
+    assert RunSpec("analytic-smooth", "lm").jacobian == "exact"
 
 
 def test_jacobian_option_sets_the_scheme_of_methods_that_have_one():
@@ -111,14 +111,14 @@ def test_identify_passes_jacobian_and_budget_unit_on_an_analytic_case():
     """Analytic models offer no exact Jacobian: ``central`` still sets the scheme (2 n + 1 runs
     per iteration, n = 3), ``forward`` n + 1."""
     runs = {
-        j: identify(Identification("analytic-smooth", "gauss-newton", budget=300, jacobian=j))
+        j: identify(RunSpec("analytic-smooth", "gauss-newton", budget=300, jacobian=j))
         for j in ("forward", "central")
     }
     assert runs["central"].options["scheme"] == "central"
     assert runs["forward"].options["scheme"] == "forward"
     assert runs["central"].n_evals > runs["forward"].n_evals
     unit = identify(
-        Identification(
+        RunSpec(
             "analytic-smooth", "lm", budget=40, budget_unit="forward-equivalents", jacobian="exact"
         )
     )

@@ -9,9 +9,9 @@ import pandas as pd
 import pytest
 
 from bench import store
+from bench.experiment.spec import DataSpec, RunSpec
 from bench.report import write_report
 from bench.runner import make_record
-from bench.suite import RunConfig
 from problems.inverse.cases import get_case
 
 EXP = "exponent-tension"
@@ -51,7 +51,9 @@ def record(case, errors, *, method="lm", seed=0, fe=20.0, n_evals=10, extra=None
         history=hist,
         extra=extra or {},
     )
-    conf = RunConfig(case, method, seed, "default", 0, 100, "coarse", tier="consistent", **cfg)
+    conf = RunSpec(
+        case, method, seed, "default", 0, 100, "coarse", data=DataSpec("consistent"), **cfg
+    )
     return make_record(conf, res, suite="e2e", data_hash="d" * 64, started="t0", finished="t1")
 
 
@@ -82,7 +84,7 @@ def e2e_dir(tmp_path):
         record(LIN, {"E": 0.5}, fe=50.0, jacobian="forward", n_evals=40),
         record(EXP, {"pt0": 1.0}, fe=30.0),  # a +1 %: success
         record(EXP, {"pt0": 1.5, "b": 1.5, "E": 5.0}, fe=30.0, seed=1),  # E 5 % off: failure
-        record(EXP, {}, method="ga", fe=400.0, n_evals=400, track="surrogate"),
+        record(EXP, {}, method="ga", fe=400.0, n_evals=400, surrogate="default"),
         record(EXP, {"E": 0.2}, method="mcmc", fe=600.0, extra=mcmc_extra(EXP, rng)),
     ]
     for r in recs:

@@ -6,12 +6,12 @@ from __future__ import annotations
 import json
 
 from bench import store
+from bench.experiment.spec import RunSpec, Treatment
 from bench.report import metrics as M
 from bench.report import model_error_note as N
 from bench.report import tables as T
 from bench.report import write_report
 from bench.runner import make_record
-from bench.suite import RunConfig
 from problems.inverse.cases import get_case
 from tests.test_report_metrics import frame, run_row
 
@@ -118,7 +118,7 @@ def _record(case, errors):
         history=[],
         provenance={"treatment": "bae", "region_plate_margin_mm": 30.0, "hifi_mesh": "paper"},
     )
-    conf = RunConfig(case, "lm", 0, "default", 0, 200, "coarse", treatment="default")
+    conf = RunSpec(case, "lm", 0, "default", 0, 200, "coarse", treatment=Treatment("default"))
     return make_record(conf, res, suite="me", data_hash="d" * 64, started="t0", finished="t1")
 
 

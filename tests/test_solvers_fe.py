@@ -39,9 +39,9 @@ def test_lm_with_exact_jacobians_converges_in_at_most_16_iterations(name):
     evaluations; every evaluation is one run with sensitivities, cheaper in forward-equivalents
     than the n + 1 = 7 runs of one forward-difference Jacobian per iteration."""
     from bench.experiment.identify import identify
-    from bench.identification import Identification
+    from bench.experiment.spec import DataSpec, RunSpec
 
-    res = identify(Identification(name, "lm", tier="consistent", treatment="none", budget=200))
+    res = identify(RunSpec(name, "lm", budget=200, data=DataSpec("consistent")))
     assert res.status == "converged" and res.n_iterations <= 16, (res.n_iterations, res.message)
     assert res.extra["n_jacobian_runs"] == res.n_evals and res.provenance["jacobian"] == "exact"
     assert res.forward_equivalents_nominal == pytest.approx(1.7 * res.n_evals)

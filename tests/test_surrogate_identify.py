@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.experiment.identify import identify
-from bench.identification import Identification
+from bench.experiment.spec import DataSpec, RunSpec
 from problems.fe.mesh import discretisation_key
 from problems.inverse.build import Region, build_objective
 from problems.inverse.cases import get_case
@@ -157,8 +157,13 @@ def test_honesty_rule_refuses_a_surrogate_of_the_data_discretisation():
 
 
 def test_identify_on_surrogate_counts_and_charges_honestly(stored):
-    spec = Identification(
-        CASE, "cma", tier="consistent", budget=120, surrogate=str(stored), options={"sigma0": 0.2}
+    spec = RunSpec(
+        CASE,
+        "cma",
+        budget=120,
+        options={"sigma0": 0.2},
+        data=DataSpec("consistent"),
+        surrogate=str(stored),
     )
     res = identify(spec)
     assert res.n_evals == 120 or res.n_evals < 120
@@ -174,14 +179,8 @@ def test_identify_on_surrogate_counts_and_charges_honestly(stored):
 
 
 def test_identify_with_fe_polish_counts_the_fe_runs(stored):
-    spec = Identification(
-        CASE,
-        "cma",
-        tier="consistent",
-        budget=60,
-        surrogate=str(stored),
-        polish=True,
-        polish_budget=2,
+    spec = RunSpec(
+        CASE, "cma", budget=60, data=DataSpec("consistent"), surrogate=str(stored), polish_budget=2
     )
     res = identify(spec)
     pol = res.extra["polish"]
@@ -197,7 +196,7 @@ def test_identify_with_fe_polish_counts_the_fe_runs(stored):
 
 def test_polish_without_surrogate_is_refused():
     with pytest.raises(ValueError, match="surrogate"):
-        Identification(CASE, "lm", polish=True)
+        RunSpec(CASE, "lm", polish_budget=60)
 
 
 def test_enrichment_search_finds_the_surrogate_optimum_of_the_data():

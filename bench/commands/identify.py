@@ -319,7 +319,7 @@ def main(args) -> int:
     import warnings
 
     from bench.experiment.identify import identify
-    from bench.identification import Identification
+    from bench.experiment.spec import DataSpec, RunSpec, Treatment
     from bench.outputs import refuse_inputs
     from problems.inverse.cases import get_case
     from problems.inverse.plausibility import PlausibilityWarning
@@ -345,22 +345,24 @@ def main(args) -> int:
         args.mesh = default_mesh(args)
     if args.hifi_mesh is not None:
         check_finer(args.hifi_mesh, args.mesh)
-    spec = Identification(
+    if args.polish_budget < 1:
+        raise ValueError(
+            f"--polish-budget {args.polish_budget} is out of range: a whole number >= 1"
+        )
+    if args.polish and not args.surrogate:
+        raise ValueError("--polish follows a run on a surrogate: give --surrogate")
+    spec = RunSpec(
         case.name,
         args.solver,
-        mesh=args.mesh,
-        tier=args.tier,
-        data=args.data,
-        treatment=args.correction,
-        hifi_mesh=args.hifi_mesh,
-        plate_margin_mm=args.plate_margin_mm or 0.0,
-        budget=args.budget,
         seed=args.seed,
         start=args.start,
+        budget=args.budget,
+        mesh=args.mesh,
         options=parse_options(args.option),
+        data=DataSpec(args.tier, file=args.data),
+        treatment=Treatment(args.correction, args.plate_margin_mm or 0.0, hifi_mesh=args.hifi_mesh),
         surrogate=args.surrogate,
-        polish=args.polish,
-        polish_budget=args.polish_budget,
+        polish_budget=args.polish_budget if args.polish else 0,
         jacobian=args.jacobian,
         budget_unit=args.budget_unit,
     )
@@ -397,19 +399,17 @@ def identify_problem(args, spec: dict) -> int:
     success rule (evaluations, f − f_min, correct digits)."""
     import json
 
-    from bench.suite import RunConfig
+    from bench.experiment.spec import RunSpec
     from bench.user_problems import run_user
     from problems.io.atomic import atomic_write_text
 
     entry = spec["entry"]
-    config = RunConfig(
+    config = RunSpec(
         entry.rpartition(":")[2],
         args.solver,
-        args.seed,
-        args.start,
-        0,
-        args.budget,
-        "coarse",
+        seed=args.seed,
+        start=args.start,
+        budget=args.budget,
         options=parse_options(args.option),
         budget_unit=args.budget_unit,
         problem=spec,

@@ -83,12 +83,12 @@ def main(args) -> int:
     import math
 
     from bench.experiment.objective import assemble
-    from bench.identification import Identification
+    from bench.experiment.spec import DataSpec, RunSpec
     from problems.inverse.cases import get_case
 
     case = get_case(args.case)
     x = point(case, args.x)
-    objective = assemble(Identification(case.name, "none", mesh=args.mesh, data=args.data))
+    objective = assemble(RunSpec(case.name, "none", mesh=args.mesh, data=DataSpec(file=args.data)))
     doc = evaluate(objective, x)
     if args.json:
         doc["split"] = {

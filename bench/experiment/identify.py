@@ -1,19 +1,39 @@
 """Run one identification: the objective of a spec from the one assembly, the solver, the FE polish.
 
 The experiment side's entry point (``femubench identify``, the runner, the studies): the spec is a
-:class:`bench.identification.Identification`; the objective is assembled by
-:func:`bench.experiment.objective.prepare`, which checks the honesty rule once.
+:class:`bench.experiment.spec.RunSpec`; the objective is assembled by
+:func:`bench.experiment.objective.prepare`, which checks the honesty rule once. Every run it
+triggers is counted in the returned :class:`~solvers.result.RunResult`: the solver's evaluations
+(``n_evals``, ``forward_equivalents``) and the runs made on its behalf (``charges``: the
+high-fidelity runs of a correction, the BAE statistics, a surrogate's training), and
+``provenance`` says where the data and the models came from.
 """
 
 from __future__ import annotations
 
 from bench.experiment.objective import prepare
-from bench.identification import Identification, jacobian_options
+from bench.experiment.spec import RunSpec
 
 #: options of the FE polish after a run on a surrogate: it starts near the optimum (often on a
 #: bound), where a step's relative cost decrease and size are tiny on ill-conditioned
 #: (model-error) problems, so only the gradient (gtol), a stalled step or the budget stop it
 POLISH_OPTIONS = {"ftol": 1e-15, "xtol": 1e-15}
+
+
+def jacobian_options(method: str, options: dict, jacobian: str) -> dict:
+    """``options`` of ``method`` with the finite-difference ``scheme`` that ``jacobian`` asks
+    (methods without a ``scheme`` option, and ``exact``, get them unchanged). A ``scheme`` given
+    in the options that contradicts ``jacobian`` raises ValueError."""
+    from solvers.base import get_method
+
+    if jacobian == "exact" or "scheme" not in get_method(method).options:
+        return dict(options)
+    given = options.get("scheme", jacobian)
+    if given != jacobian:
+        raise ValueError(
+            f"option scheme = {given!r} contradicts jacobian = {jacobian!r}; give one of them"
+        )
+    return {**options, "scheme": jacobian}
 
 
 def vectorised_mapper():
@@ -23,10 +43,10 @@ def vectorised_mapper():
     return VectorisedMapper()
 
 
-def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
+def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
     """Run the identification ``spec``; returns the solver's RunResult with totals and provenance.
 
-    ``dataset``: the measured data when the caller prepared it (else the tier's or ``spec.data``).
+    ``dataset``: the measured data when the caller prepared it (else ``spec.data``'s).
     ``observers``: callables added to the objective's observers (progress bars). The objective is
     assembled by :func:`bench.experiment.objective.prepare` (which checks the honesty rule).
     """
@@ -44,7 +64,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         if get_case(spec.case).is_analytic:
             raise ValueError(f"case {spec.case} is analytic: a surrogate is for the FE cases")
         surrogate = load_for(spec.surrogate, spec.case, spec.mesh)
-    requested = spec.treatment
+    requested = spec.treatment.name
     asm = prepare(spec, mapper=mapper, dataset=dataset, forward=surrogate)
     x0 = asm.start()
     if asm.case.is_analytic:
@@ -74,7 +94,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
                 built.append(obj)
             return obj
 
-        if spec.treatment == "iterated":
+        if spec.treatment.name == "iterated":
             return solve_iterated(
                 objective_with,
                 asm.one_point,
@@ -98,7 +118,7 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
         from bench.surrogate_run import combine
 
         polished = None
-        if spec.polish:
+        if spec.polish_budget:
             polished = run_phase("lm", spec.polish_budget, list(result.x), POLISH_OPTIONS, None)
         result = combine(
             result,
@@ -106,17 +126,17 @@ def identify(spec: Identification, *, mapper=None, dataset=None, observers=()):
             surrogate,
             spec.surrogate,
             polished,
-            polish_charges_repeat=spec.treatment in ("one-point", "bae"),
+            polish_charges_repeat=spec.treatment.name in ("one-point", "bae"),
         )
     provenance = {
         **result.provenance,
         "start": spec.start,
         "start_index": spec.start_index,
-        "data_file": spec.data,
-        "treatment": spec.treatment,
+        "data_file": spec.data.file,
+        "treatment": spec.treatment.name,
         "treatment_requested": requested,
         "jacobian": spec.jacobian,
-        "bae_samples": spec.bae_samples if spec.treatment == "bae" else None,
+        "bae_samples": spec.treatment.bae_samples if spec.treatment.name == "bae" else None,
     }
     warn_result(asm.case, asm.data, asm.region, result)  # a cost far above the data's size, bounds
     return replace(result, provenance=provenance)

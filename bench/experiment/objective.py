@@ -11,17 +11,19 @@ run, for the inverse mesh, the correction's high-fidelity mesh and the surrogate
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
-from bench.identification import Identification, bae_correction, with_default_treatment
+from bench.experiment.spec import RunSpec
 
 
 @dataclass
 class Assembly:
     """A spec joined to its data, region and models; makes its objectives.
 
-    spec      : the resolved spec (``treatment = "default"`` replaced)
+    spec      : the resolved spec (treatment ``default`` replaced: :meth:`Treatment.resolved
+                <bench.experiment.spec.Treatment.resolved>`)
     case      : the problems.inverse Case
     data      : the measured Dataset (None for an analytic case)
     region    : the measurement region (problems.inverse.build.Region; None for analytic)
@@ -29,7 +31,7 @@ class Assembly:
     mapper    : the objectives' mapper (FE runs of a batch)
     """
 
-    spec: Identification
+    spec: RunSpec
     case: Any
     data: Any = None
     region: Any = None
@@ -85,15 +87,15 @@ class Assembly:
         """The spec's fixed correction (made once): None for ``none``, the one-point correction at
         the spec's start, or the BAE statistics; ``iterated`` has none (it follows a solver)."""
         s = self.spec
-        if s.treatment == "none" or self.case.is_analytic:
+        if s.treatment.name == "none" or self.case.is_analytic:
             return None
-        if s.treatment == "iterated":
+        if s.treatment.name == "iterated":
             raise ValueError(
                 "treatment 'iterated' re-evaluates the correction at a solver's solutions: it "
                 "exists for identifications only; allowed here: none, one-point, bae, default"
             )
         if self._fixed is None:
-            if s.treatment == "one-point":
+            if s.treatment.name == "one-point":
                 self._fixed = self.one_point(self.start())
             else:
                 hifi, inverse = self.models()
@@ -116,27 +118,91 @@ class Assembly:
         )
 
 
-def prepare(spec: Identification, *, mapper=None, dataset=None, forward=None) -> Assembly:
-    """The :class:`Assembly` of ``spec``: its data (``dataset`` when the caller prepared it,
-    else ``spec.data`` or the tier's), the default treatment resolved, the region and the
-    high-fidelity mesh; the honesty rule checked once (with ``forward``, the surrogate of the
-    run, when given). No model is run."""
-    from problems.inverse.build import Region, check_discretisations, hifi_mesh_for, resolve_data
+def prepare(spec: RunSpec, *, mapper=None, dataset=None, forward=None) -> Assembly:
+    """The :class:`Assembly` of ``spec``: its data (``dataset`` when the caller prepared it: a
+    Dataset or a data file; else :meth:`spec.data.load <bench.experiment.spec.DataSpec.load>`),
+    the default treatment resolved, the region and the high-fidelity mesh; the honesty rule
+    checked once (with ``forward``, the surrogate of the run, when given). No model is run."""
+    from problems.inverse.build import Region, check_discretisations, hifi_mesh_for
     from problems.inverse.cases import get_case
+    from problems.inverse.data import Dataset, load
 
     case = get_case(spec.case)
     if case.is_analytic:
         if forward is not None:
             raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
         return Assembly(spec, case, mapper=mapper)
-    data = resolve_data(case, spec.mesh, spec.tier, dataset if dataset is not None else spec.data)
-    spec = with_default_treatment(spec, data.settings.tier)
-    hifi_mesh = None if spec.treatment == "none" else spec.hifi_mesh or hifi_mesh_for(spec.mesh)
+    if dataset is None:
+        data = spec.data.load(case.name, spec.mesh)
+    else:
+        data = dataset if isinstance(dataset, Dataset) else load(dataset)
+    t = spec.treatment.resolved(case.name, spec.mesh, data.settings.tier)
+    spec = replace(spec, treatment=t)
+    hifi_mesh = None if t.name == "none" else t.hifi_mesh or hifi_mesh_for(spec.mesh)
     check_discretisations(case, data, spec.mesh, hifi_mesh=hifi_mesh, forward=forward)
-    return Assembly(spec, case, data, Region(spec.plate_margin_mm), hifi_mesh, mapper)
+    return Assembly(spec, case, data, Region(t.plate_margin_mm), hifi_mesh, mapper)
 
 
-def assemble(spec: Identification, *, mapper=None, dataset=None, forward=None):
+def assemble(spec: RunSpec, *, mapper=None, dataset=None, forward=None):
     """The objective of ``spec`` with its data, region and fixed model-error correction (the
     studies' objective; see :func:`prepare` and :meth:`Assembly.correction`)."""
     return prepare(spec, mapper=mapper, dataset=dataset, forward=forward).treated(forward=forward)
+
+
+def bae_path(spec: RunSpec, hifi_mesh: str, data) -> Path:
+    """Where the BAE statistics of ``spec`` are kept (results/model_error/, keyed by what makes
+    them: case, meshes, region, samples, seed, loading and measurement points)."""
+    import hashlib
+    import json
+
+    from bench.paths import results_root
+
+    t = spec.treatment
+    key = {
+        "case": spec.case,
+        "mesh": spec.mesh,
+        "hifi": hifi_mesh,
+        "margin": t.plate_margin_mm,
+        "samples": t.bae_samples,
+        "seed": t.bae_seed,
+        "loading": asdict(data.settings.loading),
+        "points": data.points.tolist(),
+    }
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:12]
+    return (
+        results_root()
+        / "model_error"
+        / f"{spec.case}__{spec.mesh}__{hifi_mesh}__bae{t.bae_samples}__{digest}.npz"
+    )
+
+
+def bae_correction(spec: RunSpec, hifi, inverse, hifi_mesh: str, data, mapper=None):
+    """The BAE statistics of ``spec``: loaded when stored (hash-checked), else computed and
+    stored."""
+    from problems.inverse.cases import get_case
+    from problems.inverse.model_error import Correction, bae_statistics
+
+    path = bae_path(spec, hifi_mesh, data)
+    if path.exists():
+        try:
+            return Correction.load(path)
+        except ValueError as exc:  # a torn cache: set it aside and compute it again
+            import warnings
+
+            from problems.io.atomic import set_aside_torn
+
+            moved = set_aside_torn(path)
+            warnings.warn(f"{exc}; moved to {moved} and computed again", stacklevel=2)
+    case = get_case(spec.case)
+    corr = bae_statistics(
+        hifi,
+        inverse,
+        case.lower,
+        case.upper,
+        samples=spec.treatment.bae_samples,
+        seed=spec.treatment.bae_seed,
+        mapper=mapper,
+        provenance={"case": spec.case, "inverse_mesh": spec.mesh, "hifi_mesh": hifi_mesh},
+    )
+    corr.save(path)
+    return corr

@@ -295,7 +295,7 @@ def _suite_lm(case: str, tier: str) -> dict | None:
 
 def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
     from bench.experiment.identify import identify
-    from bench.identification import Identification
+    from bench.experiment.spec import DataSpec, RunSpec
 
     out.parent.mkdir(parents=True, exist_ok=True)
     done = set()
@@ -324,7 +324,7 @@ def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
                 )
             )
         else:
-            r = identify(Identification(name, "lm", tier=tier, budget=200))
+            r = identify(RunSpec(name, "lm", budget=200, data=DataSpec(tier)))
             x_lm = r.x
             record(
                 {
@@ -346,19 +346,18 @@ def polish(cases, starts: int, tier: str, out: Path, tol: float) -> None:
                 if (name, tier, kind, k) in done:
                     continue
                 if kind == "lm":
-                    spec = Identification(
-                        name, "lm", tier=tier, budget=100, start="random", start_index=k
+                    spec = RunSpec(
+                        name, "lm", start="random", start_index=k, budget=100, data=DataSpec(tier)
                     )
                 else:
-                    spec = Identification(
+                    spec = RunSpec(
                         name,
                         "cma",
-                        tier=tier,
-                        budget=3000,
                         start="random",
                         start_index=k,
+                        budget=3000,
+                        data=DataSpec(tier),
                         surrogate="default",
-                        polish=True,
                         polish_budget=40,
                     )
                 t0 = time.perf_counter()

@@ -98,13 +98,13 @@ def study_objective(
     plate_margin_mm : leave out front-face points within this distance of the plates
     """
     from bench.experiment.objective import assemble
-    from bench.identification import Identification
+    from bench.experiment.spec import DataSpec, RunSpec, Treatment
     from problems.inverse.cases import get_case
 
     case = get_case(case_name)
     if case.is_analytic:
         text = "analytic synthetic data (noise-free, at the reference)"
-        return assemble(Identification(case.name, "none"), mapper=mapper), text
+        return assemble(RunSpec(case.name, "none"), mapper=mapper), text
     from problems.inverse.data import default_path, get_data, make_data
 
     if correction == "default" and plate_margin_mm:
@@ -140,13 +140,12 @@ def study_objective(
                 raise ValueError(f"--data {data!r}: no such file; allowed: {DATA_CHOICES}")
             ds = data
             text = f"data file {path}"
-    spec = Identification(
+    spec = RunSpec(
         case.name,
         "none",
         mesh=mesh,
-        tier=tier or "model-error",
-        treatment=correction,
-        plate_margin_mm=plate_margin_mm,
+        data=DataSpec(tier or "model-error"),
+        treatment=Treatment(correction, plate_margin_mm),
     )
     obj = assemble(spec, mapper=mapper, dataset=ds)
     prov = obj.provenance

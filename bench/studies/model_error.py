@@ -80,7 +80,7 @@ def one_row(
     the correction's high-fidelity mesh (default: the next finer preset of the inverse mesh)."""
     from bench.experiment.identify import identify
     from bench.experiment.objective import prepare
-    from bench.identification import Identification
+    from bench.experiment.spec import RunSpec, Treatment
     from problems.inverse.build import hifi_mesh_for, resolve_data
     from problems.inverse.cases import get_case
     from problems.inverse.data import get_data, tier_settings
@@ -97,15 +97,16 @@ def one_row(
     hifi_mesh = hifi_mesh or (hifi_mesh_for(cfg.mesh) if cfg.treatment != "none" else None)
     if cfg.treatment == HIFI_LIMIT and not cfg.bias_only:
         raise ValueError(f"treatment {HIFI_LIMIT!r} is a diagnostic of the bias alone: --bias-only")
-    spec = Identification(
+    spec = RunSpec(
         case,
         "lm",
-        mesh=cfg.mesh,
-        tier="model-error",
-        treatment="one-point" if cfg.treatment == HIFI_LIMIT else cfg.treatment,
-        hifi_mesh=hifi_mesh,
-        plate_margin_mm=cfg.plate_margin_mm,
         budget=budget,
+        mesh=cfg.mesh,
+        treatment=Treatment(
+            "one-point" if cfg.treatment == HIFI_LIMIT else cfg.treatment,
+            cfg.plate_margin_mm,
+            hifi_mesh=hifi_mesh,
+        ),
     )
     asm = prepare(spec, mapper=mapper, dataset=data)
     if cfg.bias_only:

@@ -89,13 +89,14 @@ def _objective(case, tier, treatment, surrogate, mapper=None):
     """``(evaluator, spec)``: the objective on ``surrogate`` (None: the FE model) with the
     treatment's region and correction."""
     from bench.experiment.objective import prepare
-    from bench.identification import Identification
+    from bench.experiment.spec import DataSpec, RunSpec, Treatment
 
-    spec = Identification(case.name, "lm", tier=tier, treatment=treatment)
+    spec = RunSpec(case.name, "lm", data=DataSpec(tier), treatment=Treatment(treatment))
     asm = prepare(spec, mapper=mapper, forward=surrogate)
-    if asm.spec.treatment not in ("none", "bae"):  # the default treatment resolved to either
+    if asm.spec.treatment.name not in ("none", "bae"):  # the default treatment resolved to either
         raise ValueError(
-            f"posterior: treatment {asm.spec.treatment!r} is not supported (none, bae, default)"
+            f"posterior: treatment {asm.spec.treatment.name!r} is not supported (none, bae, "
+            "default)"
         )
     return asm.treated(forward=surrogate), asm.spec
 
@@ -295,8 +296,8 @@ def run_posterior(
     summary = {
         "case": case.name,
         "tier": obj.provenance.get("data_tier"),
-        "treatment": spec.treatment,
-        "plate_margin_mm": spec.plate_margin_mm,
+        "treatment": spec.treatment.name,
+        "plate_margin_mm": spec.treatment.plate_margin_mm,
         "names": names,
         "n_walkers": nw,
         "n_steps": int(steps),
@@ -331,7 +332,7 @@ def run_posterior(
             "jacobian_wall_s": jr.wall_s,
         },
         "likelihood": "C = diag(sigma^2 + surrogate hold-out variance)"
-        + (" + V V^T (BAE)" if spec.treatment == "bae" else ""),
+        + (" + V V^T (BAE)" if spec.treatment.name == "bae" else ""),
     }
     summary["agreement"] = agreement(summary)
     if a is not None:
