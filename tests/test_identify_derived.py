@@ -55,3 +55,23 @@ def test_a_case_without_a_derivation_has_none():
     res = SimpleNamespace(reference=exp.reference, x0=exp.start, x=x)
     d = derived_errors(exp, res)["a"]
     assert d["error_percent"] == pytest.approx(100 * (_a(exp, x) / _a(exp, exp.reference) - 1))
+
+
+def test_the_inverse_mesh_defaults_to_the_data_tier_s_model(tmp_path):
+    from argparse import Namespace
+
+    from bench.commands.identify import default_mesh
+    from problems.inverse.data import MODEL_ERROR_INVERSE_MESH, make_data, save
+
+    def args(**kw):
+        base = dict(case="linear-shear", tier="model-error", data=None, surrogate=None)
+        return Namespace(**(base | {"correction": "none"} | kw))
+
+    assert default_mesh(args()) == MODEL_ERROR_INVERSE_MESH != "coarse"
+    assert default_mesh(args(correction="iterated")) == MODEL_ERROR_INVERSE_MESH
+    assert default_mesh(args(tier="consistent")) == "coarse"
+    assert default_mesh(args(surrogate="default")) == "coarse"  # the surrogates' mesh
+    assert default_mesh(args(correction="default")) == "coarse"  # the default BAE's mesh
+    consistent = save(make_data("linear-shear", tier="consistent", mesh="1,1,2", snapshots=2),
+                      tmp_path / "c.json")  # fmt: skip
+    assert default_mesh(args(data=str(consistent))) == "coarse"  # the file's tier decides

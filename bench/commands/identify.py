@@ -22,7 +22,7 @@ def add_arguments(p) -> None:
         default=None,
         help="FE mesh of the forward model (default: the data tier's inverse model, "
         "docs/fe_model.md: the graded 27-node default on model-error data, coarse on consistent "
-        "data and with --surrogate)",
+        "data, with --surrogate and with --correction default, whose treatment is made for it)",
     )
     p.add_argument(
         "--tier",
@@ -175,12 +175,16 @@ def parse_options(items: list[str], flag: str = "--option") -> dict:
 
 def default_mesh(args) -> str:
     """The inverse mesh when ``--mesh`` is not given: the surrogate track's (``coarse``) with
-    ``--surrogate``, else the default of the data's tier (``--data``'s own tier, else ``--tier``;
-    :func:`problems.inverse.data.default_inverse_mesh`)."""
+    ``--surrogate``; with ``--correction default`` the mesh the case's default treatment is made
+    for (``femubench cases``); else the default of the data's tier (``--data``'s own tier, else
+    ``--tier``; :func:`problems.inverse.data.default_inverse_mesh`)."""
+    from problems.inverse.cases import default_treatment
     from problems.inverse.data import DEFAULT_INVERSE_MESH, default_inverse_mesh, load
 
     if args.surrogate:
         return DEFAULT_INVERSE_MESH
+    if args.correction == "default" and default_treatment(args.case).inverse_mesh:
+        return default_treatment(args.case).inverse_mesh
     tier = load(args.data).settings.tier if args.data else args.tier
     return default_inverse_mesh(tier)
 
