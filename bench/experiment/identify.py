@@ -56,28 +56,11 @@ def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
     from solvers import solve
     from solvers.corrected import solve_iterated
 
-    surrogate = None
-    if spec.surrogate:
-        from bench.surrogate_run import load_for
-        from problems.inverse.cases import get_case
-
-        if get_case(spec.case).is_analytic:
-            raise ValueError(f"case {spec.case} is analytic: a surrogate is for the FE cases")
-        surrogate = load_for(spec.surrogate, spec.case, spec.mesh)
     requested = spec.treatment.name
-    asm = prepare(spec, mapper=mapper, dataset=dataset, forward=surrogate)
-    x0 = asm.start()
-    if asm.case.is_analytic:
-        return solve(
-            asm.objective(observers=observers),
-            spec.method,
-            budget=spec.budget,
-            seed=spec.seed,
-            x0=x0,
-            **jacobian_options(spec.method, spec.options, spec.jacobian),
-        )
-    warn_data(asm.data)  # wrong units, all zero: before any run (problems/inverse/plausibility.py)
-    spec = asm.spec
+    asm = prepare(spec, mapper=mapper, dataset=dataset)
+    if asm.data is not None:  # wrong units, all zero: before any run (plausibility.py)
+        warn_data(asm.data)
+    spec, surrogate = asm.spec, asm.surrogate
     built = []  # the objectives on the surrogate (their logs give its evaluations' wall time)
 
     def run_phase(method, budget, start, options, forward):
@@ -113,7 +96,7 @@ def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
             **options,
         )
 
-    result = run_phase(spec.method, spec.budget, x0, spec.options, surrogate)
+    result = run_phase(spec.method, spec.budget, asm.start(), spec.options, surrogate)
     if surrogate is not None:
         from bench.surrogate_run import combine
 
@@ -128,6 +111,8 @@ def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
             polished,
             polish_charges_repeat=spec.treatment.name in ("one-point", "bae"),
         )
+    if asm.case.is_analytic:
+        return result
     provenance = {
         **result.provenance,
         "start": spec.start,

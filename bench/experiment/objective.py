@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from bench.experiment.spec import RunSpec
+from bench.experiment.spec import RunSpec, Treatment
 
 
 @dataclass
@@ -29,6 +29,8 @@ class Assembly:
     region    : the measurement region (problems.inverse.build.Region; None for analytic)
     hifi_mesh : the correction's high-fidelity mesh (None without a correction)
     mapper    : the objectives' mapper (FE runs of a batch)
+    surrogate : the spec's stored surrogate (problems.surrogate; None: the solver runs on the FE
+                model)
     """
 
     spec: RunSpec
@@ -37,6 +39,7 @@ class Assembly:
     region: Any = None
     hifi_mesh: str | None = None
     mapper: Any = None
+    surrogate: Any = None
     _pair: tuple | None = field(default=None, repr=False)
     _fixed: Any = field(default=None, repr=False)
 
@@ -121,17 +124,22 @@ class Assembly:
 def prepare(spec: RunSpec, *, mapper=None, dataset=None, forward=None) -> Assembly:
     """The :class:`Assembly` of ``spec``: its data (``dataset`` when the caller prepared it: a
     Dataset or a data file; else :meth:`spec.data.load <bench.experiment.spec.DataSpec.load>`),
-    the default treatment resolved, the region and the high-fidelity mesh; the honesty rule
-    checked once (with ``forward``, the surrogate of the run, when given). No model is run."""
+    the default treatment resolved (an analytic case has none), the region, the high-fidelity
+    mesh and the surrogate (``forward`` when the caller loaded it, else ``spec.surrogate``'s);
+    the honesty rule checked once, for all of them. No model is run."""
     from problems.inverse.build import Region, check_discretisations, hifi_mesh_for
     from problems.inverse.cases import get_case
     from problems.inverse.data import Dataset, load
 
     case = get_case(spec.case)
     if case.is_analytic:
-        if forward is not None:
+        if forward is not None or spec.surrogate:
             raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
-        return Assembly(spec, case, mapper=mapper)
+        return Assembly(replace(spec, treatment=Treatment()), case, mapper=mapper)
+    if forward is None and spec.surrogate:
+        from bench.surrogate_run import load_for
+
+        forward = load_for(spec.surrogate, case.name, spec.mesh)
     if dataset is None:
         data = spec.data.load(case.name, spec.mesh)
     else:
@@ -140,7 +148,7 @@ def prepare(spec: RunSpec, *, mapper=None, dataset=None, forward=None) -> Assemb
     spec = replace(spec, treatment=t)
     hifi_mesh = None if t.name == "none" else t.hifi_mesh or hifi_mesh_for(spec.mesh)
     check_discretisations(case, data, spec.mesh, hifi_mesh=hifi_mesh, forward=forward)
-    return Assembly(spec, case, data, Region(t.plate_margin_mm), hifi_mesh, mapper)
+    return Assembly(spec, case, data, Region(t.plate_margin_mm), hifi_mesh, mapper, forward)
 
 
 def assemble(spec: RunSpec, *, mapper=None, dataset=None, forward=None):
