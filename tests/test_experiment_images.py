@@ -97,7 +97,7 @@ def test_bad_images_fields_one_line_each_exit_2(tiny, tmp_path, capsys):
     bad = bad.replace(
         "subset = 21\nstep = 21", "subset = 20\nstep = 0\norder = 4\nzncc_min = 2\nroi = [1, 2]"
     )
-    bad = bad.replace('units = "px"', 'units = "mm"')
+    bad = bad.replace('units = "px"', 'units = "mm"\ny_axis = "up"')
     f = tmp_path / "bad.toml"
     f.write_text(bad)
     with pytest.raises(ExperimentFileError) as exc:
@@ -112,11 +112,12 @@ def test_bad_images_fields_one_line_each_exit_2(tiny, tmp_path, capsys):
         "[images] zncc_min = 2.0: must be in [-1, 1]",
         "[images] roi = [1, 2]: four whole numbers",
         "[camera] units = 'mm' is unknown; allowed: px",
+        "[camera] y_axis = 'up': an image's y points down; allowed: down",
     ):
         assert needle in text, needle
     assert main(["calibrate", str(f)]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 + len(exc.value.errors) and "8 errors" in err[0]
+    assert len(err) == 1 + len(exc.value.errors) and "9 errors" in err[0]
     both = tmp_path / "both.toml"
     both.write_text(base + '\n[dic]\nfiles = "dic/*.csv"\n')
     with pytest.raises(ExperimentFileError, match=r"\[dic\], \[images\]: give the measurement"):

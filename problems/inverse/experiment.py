@@ -434,7 +434,10 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
     else:
         units = _choice(cam, "units", UNITS, errors, "camera")
     y_axis = cam.get("y_axis")
-    if y_axis is not None and y_axis not in ("down", "up"):
+    if route == "images" and y_axis is not None and y_axis != "down":
+        errors.append(f"[camera] y_axis = {y_axis!r}: an image's y points down; allowed: down")
+        y_axis = None
+    elif y_axis is not None and y_axis not in ("down", "up"):
         errors.append(f"[camera] y_axis = {y_axis!r} is unknown; allowed: down, up")
     roi = _number(cam, "roi_margin_mm", errors, "camera", default=2.0, positive=False)
     if roi is not None and roi < 0:
