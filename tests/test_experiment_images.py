@@ -143,6 +143,16 @@ def test_shipped_images_example_imports_and_starts_the_calibration():
     case = lab_case("linear-compression", ds, s)
     truth = np.array([34000.0, 38.0, 0.9, 12.0, 24.0, 1500.0])
     assert np.all(case.lower <= truth) and np.all(truth <= case.upper)
+    # results/calibration/cube100-images is keyed by the example as it imports today
+    import json
+
+    from bench import calibration as cal
+
+    out = folder.parents[2] / "results" / "calibration" / "cube100-images"
+    assert json.loads((out / "report.json").read_text())["data_hash"] == ds.hash
+    done = json.loads((out / "variants" / "linear-compression.json").read_text())
+    exp = load_experiment(folder / "experiment.toml")
+    assert done["key"] == cal.variant_key(ds, case, cal.CalibrationSettings(exp.mesh, exp.budget))
 
 
 def test_calibration_report_of_the_images_route(tiny, tmp_path):
