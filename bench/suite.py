@@ -51,6 +51,7 @@ from bench.experiment.spec import (
     RunSpec,
     Treatment,
 )
+from problems.inverse.build import PLATE_MARGIN_TEXT, Region
 from problems.inverse.evaluator import BUDGET_UNITS
 
 SUITE_KEYS = {
@@ -67,7 +68,7 @@ SUITE_KEYS = {
     "treatments": (
         'list of model-error treatments: "none", "one-point", "iterated", "bae" (default ["none"])'
     ),
-    "plate_margin_mm": "leave out front-face points closer than this to the plates, mm (default 0)",
+    "plate_margin_mm": f"{PLATE_MARGIN_TEXT} (default 0)",
     "tracks": (
         'list of "fe" (the solver on the FE model) and/or "surrogate" (the solver on the stored '
         'default surrogate, then an FE polish) (default ["fe"])'
@@ -687,12 +688,9 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
     tiers = _choice_list(s, "tiers", ["model-error"], TIERS, err)
     treatments = _choice_list(s, "treatments", ["none"], TREATMENTS, err)
     plate_margin = s.get("plate_margin_mm", 0.0)
-    if (
-        isinstance(plate_margin, bool)
-        or not isinstance(plate_margin, (int, float))
-        or not (math.isfinite(plate_margin) and 0 <= plate_margin < 75)
-    ):
-        err(f"[suite] plate_margin_mm = {plate_margin!r} is out of range: 0 <= margin < 75 mm")
+    why = Region.range_error(plate_margin)
+    if why:
+        err(f"[suite] {why}")
         plate_margin = 0.0
 
     tracks = _choice_list(s, "tracks", ["fe"], TRACKS, err)

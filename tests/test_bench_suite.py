@@ -242,10 +242,10 @@ def test_the_table1_suite_runs_lm_on_the_model_error_default_with_three_treatmen
 
     runs = load_suite(ROOT / "suites" / "table1.toml").runs()
     assert len(runs) == 9 * 3 and {r.case for r in runs} == set(CASES)
-    assert {(r.method, r.tier, r.mesh, r.start) for r in runs} == {
+    assert {(r.method, r.data.tier, r.mesh, r.start) for r in runs} == {
         ("lm", "model-error", MODEL_ERROR_INVERSE_MESH, "default")
     }
-    assert {r.treatment for r in runs} == {"none", "one-point", "iterated"}
+    assert {r.treatment.name for r in runs} == {"none", "one-point", "iterated"}
     assert hifi_mesh_for(MODEL_ERROR_INVERSE_MESH) == "9,9,18:g8:hex27"
 
 

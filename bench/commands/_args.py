@@ -258,12 +258,21 @@ def add_tier_arguments(parser) -> None:
         "start; default = the case's default treatment with its plate margin, see `femubench "
         "cases`)",
     )
+    add_plate_margin_argument(parser)
+
+
+def add_plate_margin_argument(parser, default: float | None = 0.0, note: str = "") -> None:
+    """``--plate-margin-mm MM`` (:class:`problems.inverse.build.Region`), in args.plate_margin_mm;
+    ``note`` ends the help text (after the default)."""
+    from problems.fe.mesh import SIZE_MM
+    from problems.inverse.build import PLATE_MARGIN_TEXT
+
     parser.add_argument(
         "--plate-margin-mm",
-        type=float_in(0.0, 75.0, high_open=True),
-        default=0.0,
+        type=float_in(0.0, SIZE_MM[2] / 2, high_open=True, unit="mm"),
+        default=default,
         metavar="MM",
-        help="leave out front-face points closer than MM to the plates (default 0)",
+        help=f"{PLATE_MARGIN_TEXT.replace('this', 'MM').removesuffix(', mm')} (default 0{note})",
     )
 
 

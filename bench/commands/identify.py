@@ -10,6 +10,8 @@ HELP = (
 
 
 def add_arguments(p) -> None:
+    from bench.commands._args import add_plate_margin_argument
+
     p.add_argument(
         "case", nargs="?", help="case name (see `femubench cases --analytic`); or --problem"
     )
@@ -47,14 +49,7 @@ def add_arguments(p) -> None:
         metavar="MESH",
         help="high-fidelity mesh of the correction (default: paper for coarse, fine for paper)",
     )
-    p.add_argument(
-        "--plate-margin-mm",
-        type=float,
-        default=None,
-        metavar="MM",
-        help="leave out front-face points closer than MM to the plates (default 0; with "
-        "--correction default the case's margin)",
-    )
+    add_plate_margin_argument(p, None, "; with --correction default the case's margin")
     p.add_argument(
         "--budget",
         type=int,

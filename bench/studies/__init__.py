@@ -95,7 +95,7 @@ def study_objective(
     correction      : model-error treatment of the objective: ``none``, ``one-point`` (at the
                       default start), ``bae`` or ``default`` (the case's default treatment, with its
                       plate margin); see :func:`bench.experiment.objective.assemble`
-    plate_margin_mm : leave out front-face points within this distance of the plates
+    plate_margin_mm : the measurement region's plate margin (problems.inverse.build.Region)
     """
     from bench.experiment.objective import assemble
     from bench.experiment.spec import DataSpec, RunSpec, Treatment

@@ -30,25 +30,52 @@ from problems.inverse.problem import LeastSquaresProblem
 DEFAULT_HIFI = {"coarse": "paper", "paper": "fine", "6,6,12:g8:hex27": "9,9,18:g8:hex27"}
 
 
+#: what the plate margin is, in one line (help texts of the CLI, suites and experiment files)
+PLATE_MARGIN_TEXT = "front-face points closer than this to either plate are left out, mm"
+
+
 @dataclass(frozen=True)
 class Region:
-    """Which front-face points the objective uses: those at least ``plate_margin_mm`` from both
-    plates (z in [margin, height - margin] mm). The force is always used."""
+    """The measurement region: which front-face points the objective uses. The force is always
+    used.
+
+    plate_margin_mm : the plate margin, mm: the front-face points closer than this to either plate
+                      (z < margin or z > height - margin) are left out, where the plates'
+                      friction and the mesh's corners make the model least faithful. The one
+                      definition of the concept: every ``plate_margin_mm`` (a treatment, a case's
+                      default treatment, a suite, a study, an experiment file) is this value,
+                      checked by :meth:`range_error` (0 <= margin < 75 mm, half the standard
+                      specimen, unless a specimen's own height is given there).
+    """
 
     plate_margin_mm: float = 0.0
 
     def __post_init__(self):
-        if not (np.isfinite(self.plate_margin_mm) and 0.0 <= self.plate_margin_mm < SIZE_MM[2] / 2):
-            raise ValueError(
-                f"plate_margin_mm = {self.plate_margin_mm!r} is out of range: "
-                f"0 <= margin < {SIZE_MM[2] / 2:g} mm"
-            )
+        why = self.range_error(self.plate_margin_mm)
+        if why:
+            raise ValueError(why)
+
+    @staticmethod
+    def range_error(margin, height_mm: float = SIZE_MM[2]) -> str | None:
+        """Why ``margin`` is no plate margin of a specimen ``height_mm`` tall, or None."""
+        if isinstance(margin, bool) or not isinstance(margin, (int, float)):
+            return f"plate_margin_mm = {margin!r} is not a number of mm"
+        if not (np.isfinite(margin) and 0.0 <= margin < height_mm / 2):
+            limit = f"0 <= margin < {height_mm / 2:g} mm"
+            return f"plate_margin_mm = {margin!r} is out of range: {limit}"
+        return None
 
     def mask(self, points, height_mm: float = SIZE_MM[2]) -> np.ndarray:
         """Boolean mask over front-face points (m, 2) = (y, z) mm of a specimen ``height_mm``
         tall."""
-        z = np.asarray(points, float)[:, 1]
-        return (z >= self.plate_margin_mm - 1e-9) & (z <= height_mm - self.plate_margin_mm + 1e-9)
+        return plate_margin_mask(points, self.plate_margin_mm, height_mm)
+
+
+def plate_margin_mask(points, margin_mm: float, height_mm: float) -> np.ndarray:
+    """The front-face points (m, 2) = (y, z) mm at least ``margin_mm`` from both plates of a
+    specimen ``height_mm`` tall (:class:`Region`)."""
+    z = np.asarray(points, float)[:, 1]
+    return (z >= margin_mm - 1e-9) & (z <= height_mm - margin_mm + 1e-9)
 
 
 def hifi_mesh_for(mesh: str) -> str:

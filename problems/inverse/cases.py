@@ -170,9 +170,10 @@ class DefaultTreatment:
     """The model-error treatment a case uses when ``default`` is asked for (``--correction
     default``, suite ``treatments = ["default"]``), chosen from the model-error study
     (docs/objective.md, "The default treatment"): BAE statistics of the discretisation error
-    ``U_paper - U_coarse`` over ``bae_samples`` prior samples, front-face points within
-    ``plate_margin_mm`` of the plates left out. ``hifi_mesh`` is the high-fidelity mesh for the
-    inverse mesh ``inverse_mesh``; another inverse mesh takes its next finer preset."""
+    ``U_paper - U_coarse`` over ``bae_samples`` prior samples, with the plate margin
+    ``plate_margin_mm`` (:class:`problems.inverse.build.Region`). ``hifi_mesh`` is the
+    high-fidelity mesh for the inverse mesh ``inverse_mesh``; another inverse mesh takes its next
+    finer preset."""
 
     treatment: str = "bae"
     plate_margin_mm: float = 30.0

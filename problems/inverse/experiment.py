@@ -50,6 +50,7 @@ import numpy as np
 from problems.dic.correlate import DICConfig
 from problems.fe.newton import MachineLoading
 from problems.inverse import layout
+from problems.inverse.build import PLATE_MARGIN_TEXT, Region, plate_margin_mask
 from problems.inverse.data import EXPERIMENT_TIER, Dataset, DataSettings
 
 #: platen conditions an experiment may declare -> the FE model's plate condition
@@ -119,7 +120,7 @@ SECTIONS = {
         "models": "all, or a list of variants form-hardening",
         "budget": "evaluations of the local method per variant (default 80)",
         "images": "1-based indices of the images used (default all)",
-        "plate_margin_mm": "face points closer than this to a platen are left out (default 0)",
+        "plate_margin_mm": f"{PLATE_MARGIN_TEXT} (default 0)",
     },
     "virtual": {
         "data_mesh": "virtual experiments only: the FE mesh that made the data; never the "
@@ -590,8 +591,9 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
         errors.append(f"[calibration] images = {use!r}: increasing, without repeats")
         use = []
     margin = _number(c, "plate_margin_mm", errors, "calibration", default=0.0, positive=False)
-    if margin is not None and height and not 0 <= margin < height / 2:
-        errors.append(f"[calibration] plate_margin_mm = {margin!r}: 0 <= margin < height / 2")
+    why = margin is not None and height and Region.range_error(margin, height)
+    if why:
+        errors.append(f"[calibration] {why}")
     data_mesh = sec["virtual"].get("data_mesh", "")
     if data_mesh:
         try:
@@ -971,7 +973,7 @@ def import_experiment(exp: Experiment) -> Dataset:
         & (face[:, 1] <= H - mrg)
     )
     if exp.plate_margin_mm:
-        on &= (face[:, 1] >= exp.plate_margin_mm) & (face[:, 1] <= H - exp.plate_margin_mm)
+        on &= plate_margin_mask(face, exp.plate_margin_mm, H)
     n_off = int((~on).sum())
     ref, face = ref[on], face[on]
     common = [key for key, keep in zip(common, on) if keep]
