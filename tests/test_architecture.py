@@ -6,6 +6,8 @@
 * the report (bench/report/, and bench/plotting.py it draws with) imports nothing from problems/
   or solvers/, at module level or inside functions: it reads records (and its frozen table,
   bench/report/catalogue.py), so the report of a results folder does not change with the code;
+* every floor imports only the floors below it (problems -> nothing above; solvers -> problems;
+  the experiment side of bench -> neither the report nor the commands; :data:`FLOOR_RULES`);
 * no import circles among the modules of problems/, solvers/ and bench/ (module-level imports);
   imports deferred into functions hide a circle from Python but not from the reader, so their
   circles may only shrink (:data:`DEFERRED_CIRCLES`).
@@ -253,6 +255,37 @@ def test_the_report_imports_nothing_from_problems_or_solvers():
     assert sorted(found) == []
 
 
+#: the floors, top to bottom, and what a floor may not import (module prefixes)
+FLOOR_RULES = {
+    "problems": ("solvers", "bench"),
+    "solvers": ("bench",),
+    # the experiment side, studies, perf scripts: neither the commands nor the report
+    "bench": ("bench.commands", "bench.cli", "bench.report"),
+}
+#: the modules above the experiment side (they may import everything below)
+TOP = ("bench.commands", "bench.cli", "bench.__main__", "bench.report")
+
+
+def floor_breaches(sources: dict[str, str]) -> list[str]:
+    """``"module imports name"`` for every import (module level or in a function) that reaches
+    up a floor (:data:`FLOOR_RULES`)."""
+    out = []
+    for mod, src in sources.items():
+        if mod.startswith(TOP):
+            continue
+        banned = FLOOR_RULES[mod.split(".")[0]]
+        out += [
+            f"{mod} imports {name}"
+            for name in sorted(imports_of(src))
+            if any(name == b or name.startswith(b + ".") for b in banned)
+        ]
+    return out
+
+
+def test_every_floor_imports_only_the_floors_below():
+    assert floor_breaches(_sources()) == []
+
+
 # --- the checks themselves --------------------------------------------------------------------
 
 _KERNELS = """
@@ -297,6 +330,19 @@ def test_cross_file_calls_found_through_names_and_module_aliases():
     assert found == [
         "pkg.caller.bad_attribute -> pkg.kernels.inlined",
         "pkg.caller.bad_name -> pkg.kernels.leaf",
+    ]
+
+
+def test_floor_breaches_are_found():
+    sources = {
+        "problems.a": "def f():\n    from bench.store import x\n",
+        "bench.runner": "import bench.report.tables\n",
+        "bench.commands.run": "import bench.report\n",  # the top may
+        "bench.store": "from bench.reporting import y\n",  # only a prefix of a name
+    }
+    assert floor_breaches(sources) == [
+        "problems.a imports bench.store",
+        "bench.runner imports bench.report.tables",
     ]
 
 
