@@ -185,26 +185,23 @@ def dataset_for(spec: RunSpec, *, progress: bool = False):
     return spec.data.load(spec.case, spec.mesh, progress=progress)
 
 
-def failed_result(
-    config: RunSpec, message: str, *, case=None, x0=None, n_evals: int = 0, wall_s: float = 0.0
-):
-    """A RunResult for a run that crashed before (or while) its solver returned."""
+def failed_result(config: RunSpec, message: str, *, n_evals: int = 0, wall_s: float = 0.0):
+    """A RunResult for a run that crashed before (or while) its solver returned: no answer, its
+    start point ``x0`` (the spec's, when the case is known)."""
     import math
 
     from solvers.result import RunResult
 
-    names, ref = [], []
-    if case is None:
-        try:
-            from problems.inverse.cases import get_case
+    names, ref, x0 = [], [], None
+    try:  # best effort: an unknown case or start has none
+        from problems.inverse.cases import get_case
+        from problems.inverse.starts import start_point
 
-            case = get_case(config.case)
-        except Exception:  # noqa: BLE001 - best effort only
-            case = None
-    if case is not None:
+        case = get_case(config.case)
         names, ref = list(case.names), [float(v) for v in case.reference]
-        if x0 is None:
-            x0 = case.start
+        x0 = start_point(case, kind=config.start, seed=config.seed, index=config.start_index)
+    except Exception:  # noqa: BLE001
+        pass
     x0 = [float(v) for v in x0] if x0 is not None else []
     xn = [a / b if b else math.nan for a, b in zip(x0, ref)] if len(x0) == len(ref) else []
     return RunResult(
@@ -237,7 +234,8 @@ def run_one(
     (except KeyboardInterrupt/SystemExit).
 
     ``dataset``: the run's measured data (a problems.inverse.data.Dataset) when the caller prepared
-    it; by default it is loaded (or made) here with :func:`dataset_for`.
+    it; by default the objective assembly loads (or makes) it (:meth:`DataSpec.load
+    <bench.experiment.spec.DataSpec.load>`).
     """
     if isinstance(config, dict):
         config = RunSpec.from_dict(config)
@@ -266,7 +264,6 @@ def run_one(
 
 
 def _run_guarded(config: RunSpec, mapper, dataset, t0):
-    case = x0 = None
     error = data_hash = None
     evaluations = [0]  # the objective's counter, kept for a crash report
     try:
@@ -276,13 +273,7 @@ def _run_guarded(config: RunSpec, mapper, dataset, t0):
             count = [lambda ev, _: evaluations.__setitem__(0, ev.n_evals)]
             return run_user(config, mapper=mapper, observers=count), None, None
         from bench.experiment.identify import identify
-        from problems.inverse.cases import get_case
-        from problems.inverse.starts import start_point
 
-        case = get_case(config.case)
-        if dataset is None and not is_analytic(config.case):
-            dataset = dataset_for(config)
-        x0 = start_point(case, kind=config.start, seed=config.seed, index=config.start_index)
         result = identify(
             config,
             mapper=mapper,
@@ -295,8 +286,6 @@ def _run_guarded(config: RunSpec, mapper, dataset, t0):
         result = failed_result(
             config,
             f"{type(exc).__name__}: {exc}\n{error}",
-            case=case,
-            x0=x0,
             n_evals=evaluations[0],
             wall_s=time.perf_counter() - t0,
         )

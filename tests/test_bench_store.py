@@ -110,6 +110,17 @@ def test_unknown_case_at_run_time_is_a_failed_record_not_an_exception():
     assert rec["error"]
 
 
+def test_a_crashed_run_records_the_start_it_was_given():
+    from problems.inverse.cases import get_case
+    from problems.inverse.starts import start_point
+
+    rec = run_one(RunSpec("analytic-smooth", "no-such-method", 2, "random", 1, 10))
+    res = rec["result"]
+    assert res["status"] == "failed" and "no-such-method" in res["message"]
+    x0 = start_point(get_case("analytic-smooth"), kind="random", seed=2, index=1)
+    assert res["x0"] == res["x"] == [float(v) for v in x0]
+
+
 def test_resume_and_force(tmp_path):
     suite = parse_suite(SUITE)
     first = run_suite(suite, tmp_path, workers=1, progress=False)
