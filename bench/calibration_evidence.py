@@ -103,19 +103,30 @@ def bridge_log_evidence(log_post_samples, samples, log_post, rng, *, n_proposal=
     the draws' autocorrelation), ``n_proposal`` evaluations and ``iterations``.
     """
     from scipy.special import logsumexp
-    from scipy.stats import multivariate_normal
 
     lp = np.asarray(log_post_samples, float)
     X = np.asarray(samples, float)
     half = len(X) // 2
     fit, X1, l1 = X[:half], X[half:], lp[half:]
+    # the Gaussian proposal in standardised coordinates (parameters differ by orders of
+    # magnitude: E in MPa, K near 1), its correlation's eigenvalues floored
+    k = X.shape[1]
     mean = fit.mean(axis=0)
-    cov = np.cov(fit, rowvar=False) + 1e-12 * np.diag(np.var(fit, axis=0) + 1e-300)
-    q = multivariate_normal(mean, cov, allow_singular=False)
+    sd = fit.std(axis=0, ddof=1)
+    sd = np.where(sd > 0, sd, 1e-9 * np.maximum(np.abs(mean), 1e-300))
+    lam, V = np.linalg.eigh(np.atleast_2d(np.cov((fit - mean) / sd, rowvar=False)))
+    lam = np.maximum(lam, 1e-10 * max(float(lam.max()), 1e-300))
+    log_norm = -0.5 * k * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(lam)))
+    log_norm -= float(np.sum(np.log(sd)))
+
+    def log_q(Y):
+        W = ((Y - mean) / sd) @ V / np.sqrt(lam)
+        return log_norm - 0.5 * np.sum(W * W, axis=1)
+
     n2 = int(n_proposal or len(X1))
-    X2 = q.rvs(size=n2, random_state=rng).reshape(n2, -1)
+    X2 = mean + sd * ((rng.standard_normal((n2, k)) * np.sqrt(lam)) @ V.T)
     l2 = np.asarray(log_post(X2), float)
-    q1, q2 = q.logpdf(X1), q.logpdf(X2)
+    q1, q2 = log_q(X1), log_q(X2)
     n1 = len(X1)
     s1, s2 = n1 / (n1 + n2), n2 / (n1 + n2)
     # log ratios posterior/proposal, shifted for stability

@@ -55,9 +55,14 @@ def test_unseen_direction_counts_the_prior_width():
     assert lap["log_evidence"] == pytest.approx(seen, abs=1e-3)
 
 
-def test_bridge_estimate_agrees_with_the_exact_evidence():
-    chi2, x, F = _linear(1)
-    lo, hi = x - np.array([0.05, 3.0]), x + 3.0  # one bound cuts the posterior
+@pytest.mark.parametrize("scale", [1.0, 1e7])
+def test_bridge_estimate_agrees_with_the_exact_evidence(scale):
+    """Also with parameters of very different magnitudes (E in MPa next to K near 1)."""
+    chi2_u, x, F = _linear(1)
+    S = np.array([scale, 1.0])
+    chi2 = lambda X: chi2_u(np.atleast_2d(X) / S)  # noqa: E731
+    x, F = x * S, F / np.outer(S, S)
+    lo, hi = x - np.array([0.05, 3.0]) * S, x + 3.0 * S  # one bound cuts the posterior
     exact = laplace_log_evidence(float(chi2(x)[0]), F, x, lo, hi)["log_evidence"]
     rng = np.random.default_rng(2)
     cov = np.linalg.inv(F)
