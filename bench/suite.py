@@ -388,8 +388,8 @@ def load_suite(path: str | Path) -> Suite:
 
 def missing_surrogates(suite: Suite) -> list[tuple[str, str, Path]]:
     """``(case, mesh, folder)`` of every default surrogate the suite's surrogate-track runs need
-    and the surrogate root (bench.surrogate_run.surrogate_root) does not hold."""
-    from bench.surrogate_run import surrogate_root
+    and the surrogate root (bench.experiment.surrogate_track.surrogate_root) does not hold."""
+    from bench.experiment.surrogate_track import surrogate_root
     from problems.surrogate.store import JSON_NAME, NPZ_NAME, default_name
 
     needed = dict.fromkeys((r.case, r.mesh) for r in suite.runs() if r.track == "surrogate")

@@ -196,7 +196,7 @@ def test_misfit_in_coefficient_space_is_the_whitened_misfit(whitening):
 
 @pytest.fixture(scope="module")
 def shipped():
-    from bench.surrogate_run import load_for
+    from bench.experiment.surrogate_track import load_for
 
     return {n: load_for("default", n, "coarse") for n in ("hyperbolic-tension", "linear-shear")}
 
@@ -266,7 +266,7 @@ def test_surrogate_command_times_a_stored_surrogate_without_changing_it(tmp_path
     import json
 
     from bench.cli import main
-    from bench.surrogate_run import load_for
+    from bench.experiment.surrogate_track import load_for
 
     before = load_for("default", "linear-shear", "coarse").hash
     out = tmp_path / "t.json"

@@ -121,7 +121,7 @@ def time_stored(args) -> int:
 
     import numpy as np
 
-    from bench.surrogate_run import load_for
+    from bench.experiment.surrogate_track import load_for
     from problems.inverse.data import get_data, load
     from problems.inverse.forward import FEForwardModel
     from problems.io.atomic import atomic_write_text
@@ -194,9 +194,9 @@ def main(args) -> int:
     import json
     from pathlib import Path
 
+    from bench.experiment.surrogate_track import surrogate_root
     from bench.outputs import refuse_inputs, same_file
     from bench.parallel import mapper
-    from bench.surrogate_run import surrogate_root
     from problems.inverse.cases import get_case
     from problems.io.atomic import atomic_write_text
     from problems.io.jsonio import encode

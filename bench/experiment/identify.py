@@ -98,7 +98,7 @@ def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
 
     result = run_phase(spec.method, spec.budget, asm.start(), spec.options, surrogate)
     if surrogate is not None:
-        from bench.surrogate_run import combine
+        from bench.experiment.surrogate_track import combine
 
         polished = None
         if spec.polish_budget:

@@ -137,7 +137,7 @@ def prepare(spec: RunSpec, *, mapper=None, dataset=None, forward=None) -> Assemb
             raise ValueError(f"case {case.name} is analytic: a surrogate is for the FE cases")
         return Assembly(replace(spec, treatment=Treatment()), case, mapper=mapper)
     if forward is None and spec.surrogate:
-        from bench.surrogate_run import load_for
+        from bench.experiment.surrogate_track import load_for
 
         forward = load_for(spec.surrogate, case.name, spec.mesh)
     if dataset is None:

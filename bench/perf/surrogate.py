@@ -87,7 +87,7 @@ def _cpu_batch(fn, X, size: int, repeats: int = 5) -> float:
 def speed(cases, repeat: int, rounds: int = 3) -> list[dict]:
     """Per case, CPU times in one process (see the module docstring): medians over ``rounds``
     alternating rounds, and the ratios to one coarse FE run."""
-    from bench.surrogate_run import load_for
+    from bench.experiment.surrogate_track import load_for
     from problems.inverse.build import build_objective
     from problems.inverse.evaluator import Evaluator
     from problems.inverse.forward import FEForwardModel
@@ -187,7 +187,7 @@ def _cpu_per_call(fn, X, repeat: int) -> float:
 def tradeoff(cases, repeat: int) -> list[dict]:
     import dataclasses
 
-    from bench.surrogate_run import load_for
+    from bench.experiment.surrogate_track import load_for
     from problems.inverse import layout
     from problems.inverse.data import get_data
     from problems.inverse.forward import FEForwardModel

@@ -16,7 +16,7 @@ import numpy as np
 
 
 def local_holdout(case: str, n: int) -> dict:
-    from bench.surrogate_run import load_for
+    from bench.experiment.surrogate_track import load_for
     from problems.inverse.data import get_data
     from problems.inverse.forward import FEForwardModel
     from problems.surrogate.design import make_design

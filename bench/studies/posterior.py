@@ -216,8 +216,8 @@ def run_posterior(
     import emcee
     from emcee.autocorr import integrated_time
 
+    from bench.experiment.surrogate_track import load_for
     from bench.studies import write_json
-    from bench.surrogate_run import load_for
     from problems.inverse.cases import get_case
     from solvers import solve
 
