@@ -251,17 +251,24 @@ def test_the_table1_suite_runs_lm_on_the_model_error_default_with_three_treatmen
 
 def test_default_and_paper_suites_have_the_documented_shape():
     from problems.inverse.cases import CASES
+    from problems.inverse.data import MODEL_ERROR_INVERSE_MESH
 
     d = load_suite(ROOT / "suites" / "default.toml")
     mission = {"lm", "gauss-newton", "ga", "pso", "sa", "mcmc", "cma"}
     assert set(d.cases) == set(CASES) and set(d.methods) == mission
     assert d.starts == ("default",) and d.mesh == "coarse"
     runs = d.runs()
-    # the local methods on FE, both tiers (model-error with the default treatment): 9 x 2 x 2
+    # the local methods on FE: consistent data on coarse (9 x 2); model-error data on the tier's
+    # default inverse model, untreated (9 x 2) and LM with the one-point correction (9)
     local = [r for r in runs if r.method in ("lm", "gauss-newton")]
-    assert len(local) == 36 and {(r.data.tier, r.treatment.name, r.track) for r in local} == {
-        ("consistent", "none", "fe"),
-        ("model-error", "default", "fe"),
+    assert len(local) == 45 and {
+        (r.data.tier, r.treatment.name, r.track, r.mesh, r.method) for r in local
+    } == {
+        ("consistent", "none", "fe", "coarse", "lm"),
+        ("consistent", "none", "fe", "coarse", "gauss-newton"),
+        ("model-error", "none", "fe", MODEL_ERROR_INVERSE_MESH, "lm"),
+        ("model-error", "none", "fe", MODEL_ERROR_INVERSE_MESH, "gauss-newton"),
+        ("model-error", "one-point", "fe", MODEL_ERROR_INVERSE_MESH, "lm"),
     }
     # the global and sampling methods on the surrogate, consistent tier, with an FE polish: 9 x 5
     rest = [r for r in runs if r not in local]
