@@ -124,6 +124,9 @@ def test_mcmc_on_the_fe_model_checks_the_laplace_evidence(tmp_path, monkeypatch)
     inside &= np.array(v["x"]) <= np.array(c["q975"])
     assert v["x"][1] == v["lower"][1] and inside[[0, 2, 3, 4, 5]].all()  # beta sits on its bound
     assert c["chi2_best_draw"] > c["chi2_optimum"] - 1.0  # lm found the mode
+    assert c["chi2_optimum_fe"] == pytest.approx(c["chi2_optimum"], rel=1e-9)
+    assert c["chi2_optimum_sampled"] == pytest.approx(c["chi2_optimum"], rel=1e-9)  # FE chain
+    assert c["chi2_best_draw_fe"] == pytest.approx(c["chi2_best_draw"], rel=1e-9)
     assert "model_probability_bridge" in rep["ranking"][0]
     assert "bridge-sampling evidence" in (tmp_path / "out" / "report.md").read_text()
     monkeypatch.setattr(cal, "mcmc_variant", lambda *a, **k: pytest.fail("rerun"))
