@@ -149,3 +149,35 @@ def test_mcmc_bad_input_is_one_line_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_mcmc_on_a_surrogate(tmp_path):
+    """The surrogate route on the tiny test of the FE chain above: a surrogate trained in the
+    local box, a longer chain on it; E's sd is Laplace's, and the evidence difference with the
+    surrogate's offset taken out is of the FE chain's size."""
+    from bench.calibration import CalibrationSettings, McmcSettings, calibrate
+    from problems.inverse.virtual_experiment import VirtualTest, write_virtual_experiment
+
+    t = VirtualTest(
+        "linear-compression",
+        (31000.0, 33.0, 0.88, 11.0, 21.5, 1300.0),
+        data_mesh="3,3,6",
+        levels_mm=(0.05, 0.2, 0.5),
+        spacing_mm=20.0,
+        seed=3,
+    )
+    exp = write_virtual_experiment(t, tmp_path / "ve", "mc")
+    rep = calibrate(
+        exp,
+        tmp_path / "out",
+        models=["linear-compression"],
+        settings=CalibrationSettings("2,2,4", 20, check_mesh=""),
+        figures=False,
+        mcmc=McmcSettings("surrogate", n_steps=400, n_bridge=1000, n_train=40, n_holdout=10),
+        progress=lambda s: None,
+    )
+    c = rep["mcmc"]["linear-compression"]
+    assert c["surrogate"]["holdout_rms_sigma"]["u_h"] < 0.5
+    assert 0.7 < c["sd_ratio"][0] < 1.4
+    assert -8.0 < c["evidence_difference_offset_removed"] < 2.0, c
