@@ -330,8 +330,12 @@ def render_summary(summary: dict) -> str:
         + f"; the truth drawn in the middle half of the variant's box; seed {s['seed']}. "
         f"Total wall time {summary['wall_s'] / 60:.1f} min.",
         "",
-        f"- true variant ranked first: {summary['true_first_aic']} of {n} by AIC, "
-        f"{summary['true_first_evidence']} of {n} by the Laplace evidence",
+        (
+            f"- true variant ranked first: {summary['true_first_aic']} of {n} by AIC, "
+            f"{summary['true_first_evidence']} of {n} by the Laplace evidence"
+            if len(s["models"]) > 1
+            else "- model selection not assessed: the true variant alone was calibrated"
+        ),
         f"- every 95 % interval covers the truth: {summary['all_covered']} of {n}",
         f"- every parameter within {TARGET_ERROR_PERCENT:g} %: {summary['all_within_target']} "
         f"of {summary['n_ok']}",

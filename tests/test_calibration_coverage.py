@@ -96,3 +96,20 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, said):
     assert main(["calibrate-coverage", *argv, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said in err[0], err
+
+
+def test_summary_of_one_model_does_not_claim_a_ranking():
+    s = CoverageSettings(models=("linear-compression",), n=1)
+    rec = {
+        "index": 0, "ok": True, "specimen_mm": [100.0] * 3, "truth": [1.0] * 6,
+        "error_percent": [1.0, -3.0, 0.5, 0.1, 2.5, -1.0], "covered": [True] * 5 + [False],
+        "all_covered": False, "true_first_aic": True, "true_first_evidence": True,
+        "ranking_aic": ["linear-compression"], "model_probability": 1.0, "rms_sigma": 1.1,
+        "birge_ratio": 1.1, "wall_s": 3.0,
+    }  # fmt: skip
+    summary = cov.summarise(s, [rec])
+    assert summary["parameters"]["beta"]["within_target"] == 0
+    assert summary["parameters"]["E"]["within_target"] == 1 and summary["all_within_target"] == 0
+    assert summary["parameters"]["H"]["covered"] == 0 and summary["all_covered"] == 0
+    text = cov.render_summary(summary)
+    assert "model selection not assessed" in text and "ranked first" not in text
