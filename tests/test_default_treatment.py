@@ -100,7 +100,9 @@ def test_default_objective_uses_the_shipped_statistics_without_a_run():
     assert obj.n_evals == 0 and obj.charges["hifi"]["n"] == 32
 
 
-@pytest.mark.parametrize("tier, mesh", [("consistent", "coarse"), ("model-error", "xfine")])
+@pytest.mark.parametrize(
+    "tier, mesh", [("consistent", "coarse"), ("model-error", "12,12,24:g8:hex27")]
+)
 def test_study_objective_takes_the_tier_data(tier, mesh):
     from bench.studies import study_objective
 

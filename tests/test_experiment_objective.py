@@ -11,13 +11,18 @@ from problems.inverse.model_error import HonestyError
 
 
 def test_a_dishonest_high_fidelity_mesh_is_refused_before_any_high_fidelity_run(monkeypatch):
-    # linear-shear's model-error data were made on xfine: a correction on xfine is refused by the
-    # one check up front (before: only after the correction's runs had been made)
+    # linear-compression's model-error data were made on converged = 12,12,24:g8:hex27: a
+    # correction on it (any spelling) is refused by the one check up front (before: only after
+    # the correction's runs had been made)
     def no_runs(self):
         raise AssertionError("a high-fidelity model was made before the honesty check")
 
     monkeypatch.setattr(Assembly, "models", no_runs)
-    spec = RunSpec("linear-shear", "lm", treatment=Treatment("one-point", hifi_mesh="xfine"))
+    spec = RunSpec(
+        "linear-compression",
+        "lm",
+        treatment=Treatment("one-point", hifi_mesh="12,12,24:hex27:g8:quarter"),
+    )
     with pytest.raises(HonestyError, match="hifi model uses discretisation"):
         prepare(spec)
     with pytest.raises(HonestyError, match="hifi model uses discretisation"):

@@ -145,9 +145,9 @@ def test_surrogate_replaces_the_fe_model_and_honours_the_region(stored):
 
 
 def test_honesty_rule_refuses_a_surrogate_of_the_data_discretisation():
-    xfine = fake_surrogate(discretisation=discretisation_key("xfine"))
+    reference = fake_surrogate(discretisation=discretisation_key("converged"))
     with pytest.raises(HonestyError, match="surrogate"):
-        build_objective(CASE, tier="model-error", forward=xfine)
+        build_objective(CASE, tier="model-error", forward=reference)
     paper = fake_surrogate(mesh="paper")
     with pytest.raises(ValueError, match="inverse mesh"):
         build_objective(CASE, tier="model-error", forward=paper)

@@ -248,7 +248,8 @@ def add_tier_arguments(parser) -> None:
         choices=["consistent", "model-error"],
         default=None,
         help="fit the tier's shipped data set for the inverse mesh: consistent (made with the "
-        "inverse mesh itself) or model-error (made on xfine); in place of --data",
+        "inverse mesh itself) or model-error (made on the converged 12,12,24:g8:hex27); in place "
+        "of --data",
     )
     parser.add_argument(
         "--correction",

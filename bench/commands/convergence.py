@@ -151,7 +151,15 @@ def main(args) -> int:
         else:
             folder = run_convergence(name, families, compare, outs[name], report)
         print(f"wrote {render_from(render_convergence, folder)}")
+    default_root = default_output_dir(STUDY, cases[0]).parent
+    roots = []
     if args.out is None or len(cases) > 1:
-        root = Path(args.out) if args.out else default_output_dir(STUDY, cases[0]).parent
+        roots.append(Path(args.out) if args.out else default_root)
+    # a further study in a folder of the default root (e.g. results/studies/convergence/hex27-g8,
+    # or one of its case folders) appears in the default root's overview too
+    out = Path(args.out).resolve() if args.out else None
+    if out is not None and default_root.resolve() in out.parents and default_root not in roots:
+        roots.append(default_root)
+    for root in roots:
         print(f"wrote {render_overview(root)}")
     return 0

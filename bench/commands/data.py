@@ -12,8 +12,8 @@ from __future__ import annotations
 NAME = "data"
 HELP = (
     "Compute a pseudo-experimental data set of a case: the reference response, rounded (and "
-    "noised), in the model-error tier (xfine mesh) or the consistent tier (the inverse model's "
-    "mesh)."
+    "noised), in the model-error tier (the converged mesh 12,12,24:g8:hex27) or the consistent "
+    "tier (the inverse model's mesh)."
 )
 
 
@@ -32,8 +32,8 @@ def add_arguments(p) -> None:
         "--mesh",
         default=None,
         type=mesh_spec,
-        help="data mesh (default: xfine for the model-error tier; for the consistent tier the "
-        "inverse model's mesh, default coarse)",
+        help="data mesh (default: 12,12,24:g8:hex27, the preset converged, for the model-error "
+        "tier; for the consistent tier the inverse model's mesh, default coarse)",
     )
     p.add_argument(
         "--resolution-um",
@@ -73,7 +73,8 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--check",
         action="store_true",
-        help="recompute and compare byte for byte with the existing file (exit 1 on a difference)",
+        help="recompute and compare byte for byte with the existing file (exit 1 on a "
+        "difference); solves afresh, not from the response cache",
     )
     add_quiet_argument(p)
 
@@ -154,7 +155,9 @@ def main(args) -> int:
     for name in tqdm(names, desc="data sets", disable=len(names) == 1 or not show):
         path = paths[name]
         images = None if args.check else dic_image_dir(path)
-        ds = make_data(name, replace(settings), progress=show, image_dir=images)
+        ds = make_data(
+            name, replace(settings), progress=show, image_dir=images, reuse=not args.check
+        )
         text = ds.to_json()
         if args.check:
             same = path.exists() and path.read_text() == text

@@ -100,17 +100,37 @@ def read_record(path: Path, case: str, spec: str) -> dict | None:
 def solve_mesh(case_name: str, spec: str) -> dict:
     """One mesh at the case's reference: measurement vector, exact Jacobian (columns the case's
     parameters, physical units), element size (mm), elements, solved dofs, CPU and wall time (s)
-    of the response + Jacobian run (the discretisation is built first, not timed)."""
+    of the response + Jacobian run (the discretisation is built first, not timed).
+
+    The model-error tier's data mesh is taken from :mod:`problems.inverse.response_cache`: the
+    run ``femubench data`` makes that tier from (solved once for both; computed here, without a
+    Jacobian, if missing). Without a Jacobian its record has ``jacobian`` None: its errors are
+    measured, its own bias is not."""
     from bench.progress import solved_dofs
+    from problems.inverse import response_cache
     from problems.inverse.cases import get_case
+    from problems.inverse.data import shares_reference_solve
     from problems.inverse.forward import FEForwardModel, discretisation
+    from problems.inverse.protocol import ForwardResult
 
     case = get_case(case_name)
     model = FEForwardModel(case, mesh=spec)
-    discretisation(spec)  # built once per process, outside the timing
-    cpu, wall = time.process_time(), time.perf_counter()
-    res = model(case.reference, jacobian=True)
-    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    if shares_reference_solve(spec):
+        run = response_cache.solve(model, case.reference, jacobian=False)
+        res = ForwardResult(
+            run["ok"],
+            run["values"],
+            run["message"],
+            run["wall_s"],
+            run["jacobian"],
+            run["plain_wall_s"],
+        )
+        cpu, wall = run["cpu_s"], run["wall_s"]
+    else:
+        discretisation(spec)  # built once per process, outside the timing
+        cpu, wall = time.process_time(), time.perf_counter()
+        res = model(case.reference, jacobian=True)
+        cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     ms = parse_mesh_spec(spec)
     n_elements = int(np.prod(ms.shape))
     return {
@@ -124,8 +144,9 @@ def solve_mesh(case_name: str, spec: str) -> dict:
         "elements": n_elements,
         "dofs": solved_dofs(spec),
         "h_mm": conv.element_size_mm(np.prod(SIZE_MM), n_elements),
-        "ok": bool(res.ok and res.jacobian is not None),
-        "message": res.message,
+        "ok": bool(res.ok and (res.jacobian is not None or shares_reference_solve(spec))),
+        "message": res.message
+        or ("" if res.jacobian is not None else "no Jacobian (the data run has none)"),
         "cpu_s": cpu,
         "wall_s": wall,
         "plain_wall_s": res.plain_wall_s,
@@ -213,6 +234,7 @@ def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[di
     ref = usable[ref_label]["_values"]
     for v in fam_out.values():
         v.pop("_values", None)
+    data_mesh = _data_mesh([*records], records)
     rows = []
     for label, specs in [*families.items(), ("compare", compare)]:
         for spec in specs:
@@ -232,12 +254,21 @@ def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[di
             }
             if r["ok"]:
                 row.update(conv.errors(r["values"], ref, N, m))
+            if r["ok"] and r["jacobian"] is not None:
                 bias = conv.linearised_bias(
                     np.asarray(r["jacobian"]), np.asarray(r["values"]) - ref, sd, r["reference"]
                 )
                 row["bias_pct"] = {n: 100.0 * b for n, b in zip(r["names"], bias)}
-                worst = int(np.argmax(np.abs(bias)))
-                row["worst_bias"] = {"parameter": r["names"][worst], "pct": 100.0 * bias[worst]}
+                row["worst_bias"] = _worst(r["names"], bias)
+                if data_mesh is not None:
+                    data_bias = conv.linearised_bias(
+                        np.asarray(r["jacobian"]),
+                        np.asarray(r["values"]) - np.asarray(records[data_mesh]["values"]),
+                        sd,
+                        r["reference"],
+                    )
+                    row["data_bias_pct"] = {n: 100.0 * b for n, b in zip(r["names"], data_bias)}
+                    row["worst_data_bias"] = _worst(r["names"], data_bias)
             rows.append(row)
     summary = {
         "schema": SCHEMA,
@@ -248,10 +279,31 @@ def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[di
         "n_points": m,
         "parameters": first["names"],
         "reference_family": ref_label,
+        "data_mesh": data_mesh,
         "families": fam_out,
         "meshes": rows,
     }
     return summary, ref
+
+
+def _data_mesh(specs, records: dict) -> str | None:
+    """The spec among ``specs`` whose record is of the model-error tier's data mesh
+    (:data:`problems.inverse.data.MODEL_ERROR_MESH`, any spelling: by its ``key``) and solved,
+    else None."""
+    from problems.inverse.data import MODEL_ERROR_MESH
+
+    key = discretisation_key(MODEL_ERROR_MESH)
+    return next((s for s in specs if records[s].get("key") == key and records[s]["ok"]), None)
+
+
+def _worst(names, bias) -> dict:
+    """``{"parameter", "pct"}`` of the largest |bias| (bias as fractions)."""
+    worst = int(np.argmax(np.abs(bias)))
+    return {"parameter": names[worst], "pct": 100.0 * float(bias[worst])}
+
+
+def _bias_text(worst: dict | None) -> str:
+    return "n/a" if worst is None else f"{worst['parameter']} {worst['pct']:+.2f} %"
 
 
 def _fmt(value, spec: str) -> str:
@@ -308,6 +360,8 @@ def markdown(summary: dict) -> str:
             "CPU s": r["cpu_s"],
             "wall s": r["wall_s"],
         }
+        if summary.get("data_mesh"):
+            row["worst bias vs the data mesh"] = _bias_text(r.get("worst_data_bias"))
         rows.append(row)
     table = markdown_table(
         rows,
@@ -324,6 +378,13 @@ def markdown(summary: dict) -> str:
         if "bias_pct" in r
     ]
     bias = markdown_table(bias_rows, {p: "+.2f" for p in summary["parameters"]})
+    if summary.get("data_mesh"):
+        lines += [
+            "",
+            f"The model-error tier's data mesh {summary['data_mesh']} is in the study: 'worst bias "
+            "vs the data mesh' is each mesh's linearised bias against its response (what an "
+            "inverse model on that mesh meets in the model-error data, rounding aside).",
+        ]
     return "\n".join(
         lines + ["", "## Meshes", "", table, "", "## Linearised parameter bias (%)", "", bias, ""]
     )
@@ -350,10 +411,11 @@ def render_convergence(folder: str | Path) -> Path:
             groups.setdefault(r["family"], []).append(r)
     for ax, (key, title) in zip(axes, panels):
         for label, rs in groups.items():
+            rs = [r for r in rs if key in r]  # a mesh without a Jacobian has no bias
             x = [r["dofs"] for r in rs]
             y = [abs(r["worst_bias"]["pct"] if key == "worst_bias" else r[key]) for r in rs]
             if label == "compare":
-                ax.plot(x, y, "s", color="0.4", label="uniform (compare)")
+                ax.plot(x, y, "s", color="0.4", label="compare")
                 for r, xi, yi in zip(rs, x, y):
                     ax.annotate(
                         r["mesh"], (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points"
@@ -381,17 +443,28 @@ def render_convergence(folder: str | Path) -> Path:
 
 
 def render_overview(root: str | Path) -> Path:
-    """``overview.md`` of every case folder under ``root`` that holds a ``convergence.json``:
-    per case and mesh the RMS error (sigma), force error (%), worst bias and CPU s."""
+    """``overview.md`` of every study under ``root``: each case folder ``root/<case>/`` and each
+    folder of a further study ``root/<study>/<case>/`` (e.g. ``hex27-g8``) holding a
+    ``convergence.json``. Per family the observed orders; the model-error tier's data mesh, where
+    a study has it, with its error against that study's extrapolation and the other studies'
+    extrapolations of the case; every other mesh's worst linearised bias against the data mesh
+    (the candidates for the inverse model); per mesh the RMS error (sigma), force error (%),
+    worst bias and CPU s."""
     root = Path(root)
-    rows, orders = [], []
-    for path in sorted(root.glob("*/convergence.json")):
-        s = read_json(path)
-        for label, fam in s["families"].items():
+    studies = []  # (study label, folder, summary)
+    for path in sorted(root.glob("*/convergence.json")) + sorted(root.glob("*/*/convergence.json")):
+        label = root.name if path.parent.parent == root else path.parent.parent.name
+        studies.append((label, path.parent, read_json(path)))
+    rows, orders, references, candidates = [], [], [], {}
+    for label, folder, s in studies:
+        for fam_label, fam in s["families"].items():
             orders.append(
                 {
                     "case": s["case"],
-                    "family": label + (" (reference)" if label == s["reference_family"] else ""),
+                    "study": label,
+                    "family": fam_label
+                    + (" (reference)" if fam_label == s["reference_family"] else ""),
+                    "meshes": ", ".join(fam["meshes"]),
                     "orders (field)": _orders(fam.get("orders_field_all")),
                     "orders (force)": _orders(fam.get("orders_force_all")),
                     "asymptotic": "yes" if fam.get("asymptotic") else "no",
@@ -402,36 +475,110 @@ def render_overview(root: str | Path) -> Path:
             rows.append(
                 {
                     "case": s["case"],
+                    "study": label,
                     "mesh": r["mesh"],
                     "dofs": r["dofs"],
                     "RMS (sigma)": r.get("rms_sigma", math.nan),
                     "force (%)": r.get("force_last_pct", math.nan),
-                    "worst bias": (
-                        f"{r['worst_bias']['parameter']} {r['worst_bias']['pct']:+.2f} %"
-                        if "worst_bias" in r
-                        else "failed"
-                    ),
+                    "worst bias": _bias_text(r.get("worst_bias")) if r.get("ok") else "failed",
                     "CPU s": r["cpu_s"],
                 }
             )
-    text = "\n".join(
-        [
-            "# Mesh convergence of every case",
+            if s.get("data_mesh") and r["mesh"] != s["data_mesh"]:
+                candidates.setdefault(r["mesh"], {})[s["case"]] = r
+        if s.get("data_mesh"):
+            references.append(_reference_row(label, folder, s, studies))
+    cases = sorted({s["case"] for _, _, s in studies if s.get("data_mesh")})
+    cand_rows = [
+        {
+            "mesh": mesh,
+            "dofs": next(iter(by_case.values()))["dofs"],
+            **{
+                c: _bias_text(by_case[c].get("worst_data_bias")) if c in by_case else "-"
+                for c in cases
+            },
+            "worst |bias| (%)": max(
+                (
+                    abs(r["worst_data_bias"]["pct"])
+                    for r in by_case.values()
+                    if "worst_data_bias" in r
+                ),
+                default=math.nan,
+            ),
+            "CPU s (max)": max(r["cpu_s"] for r in by_case.values()),
+        }
+        for mesh, by_case in candidates.items()
+    ]
+    cand_rows.sort(key=lambda r: r["dofs"])
+    parts = [
+        "# Mesh convergence of every case",
+        "",
+        "Per case: `convergence.md` and `convergence.png` in its folder (`<case>/`, and "
+        "`<study>/<case>/` for a further study). Errors against the Richardson extrapolation of "
+        "each study's reference family; sigma = 1 um / sqrt(12) per displacement, 1 kN for the "
+        "force. CPU s: one response + exact Jacobian at the case's reference (on a shared "
+        "2-core machine: contention inflates them).",
+        "",
+        "## Observed orders",
+        "",
+        markdown_table(orders, {"finest's error (sigma)": ".2f"}),
+    ]
+    if references:
+        parts += [
+            "## The model-error tier's data mesh",
             "",
-            "Per case: `convergence.md` and `convergence.png` in its folder. Errors against the "
-            "Richardson extrapolation of each case's reference family.",
-            "",
-            "## Observed orders",
+            "Its error against the extrapolation of its study's reference family (the criterion: "
+            "<= 0.3 sigma RMS, <= 0.05 % in force) and, as an independent check, against the "
+            "other studies' extrapolations of the case; worst linearised bias against the "
+            "extrapolation (n/a when its run has no Jacobian); CPU and wall s of its run (shared "
+            "with `femubench data`, which needs no Jacobian).",
             "",
             markdown_table(
-                orders,
-                {"finest's error (sigma)": ".2f"},
+                references,
+                {"RMS (sigma)": ".2f", "force (%)": "+.3f", "CPU s": ".0f", "wall s": ".0f"},
             ),
+            "## Candidate inverse models: worst linearised bias against the data mesh",
             "",
-            "## Meshes",
+            "Per case the parameter with the largest linearised bias (%) of a mesh against the "
+            "data mesh's response at the reference: what the inverse model meets in the "
+            "model-error data, rounding aside (no correction).",
             "",
-            markdown_table(rows, {"RMS (sigma)": ".2f", "force (%)": "+.3f", "CPU s": ".1f"}),
-            "",
+            markdown_table(cand_rows, {"worst |bias| (%)": ".2f", "CPU s (max)": ".1f"}),
         ]
-    )
-    return atomic_write_text(root / "overview.md", text)
+    parts += [
+        "## Meshes",
+        "",
+        markdown_table(rows, {"RMS (sigma)": ".2f", "force (%)": "+.3f", "CPU s": ".1f"}),
+    ]
+    return atomic_write_text(root / "overview.md", "\n".join(parts))
+
+
+def _reference_row(label: str, folder: Path, summary: dict, studies) -> dict:
+    """The overview's row of a study's data mesh: its errors against the study's extrapolation,
+    and the RMS / force difference between that extrapolation and every other study's of the
+    case (``extrapolated.json``)."""
+    r = next(r for r in summary["meshes"] if r["mesh"] == summary["data_mesh"])
+    own = np.asarray(read_json(folder / "extrapolated.json")["values"], float)
+    N, m = summary["n_snapshots"], summary["n_points"]
+    others = []
+    for other_label, other_folder, other in studies:
+        if other["case"] != summary["case"] or other_folder == folder:
+            continue
+        values = np.asarray(read_json(other_folder / "extrapolated.json")["values"], float)
+        e = conv.errors(values, own, N, m)
+        others.append(
+            f"{other_label} {other['reference_family']}: "
+            f"{e['rms_sigma']:.2f} sigma, {e['force_last_pct']:+.3f} %"
+        )
+    return {
+        "case": summary["case"],
+        "study": label,
+        "mesh": r["mesh"],
+        "dofs": r["dofs"],
+        "RMS (sigma)": r.get("rms_sigma", math.nan),
+        "force (%)": r.get("force_last_pct", math.nan),
+        "worst bias": _bias_text(r.get("worst_bias")),
+        "CPU s": r["cpu_s"],
+        "wall s": r["wall_s"],
+        "other extrapolations vs this one": "; ".join(others) or "-",
+    }

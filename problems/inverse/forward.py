@@ -158,6 +158,11 @@ class FEForwardModel:
         return tuple(material.parameter_names[i] for i in keep), chain[keep]
 
     def __call__(self, x, jacobian: bool = False):
+        return self.run_with_response(x, jacobian)[0]
+
+    def run_with_response(self, x, jacobian: bool = False):
+        """``(self(x, jacobian), response)``: the :class:`ForwardResult` and the FE
+        :class:`~problems.fe.Response` it was taken from (None when the material was refused)."""
         from problems.inverse.protocol import ForwardResult
 
         t0 = time.perf_counter()
@@ -168,9 +173,9 @@ class FEForwardModel:
             else:
                 resp = self.response(x)
         except ValueError as exc:  # invalid material parameters slipped past check()
-            return ForwardResult(False, None, str(exc), time.perf_counter() - t0)
+            return ForwardResult(False, None, str(exc), time.perf_counter() - t0), None
         if not resp.converged:
-            return ForwardResult(False, None, resp.message, time.perf_counter() - t0)
+            return ForwardResult(False, None, resp.message, time.perf_counter() - t0), resp
         W = front_face_operator(resp.mesh, self.points)  # as Response.front_face
         u = resp.displacements
         values = layout.stack(u[:, :, 1] @ W.T, u[:, :, 2] @ W.T, resp.reaction_kN)
@@ -185,7 +190,7 @@ class FEForwardModel:
             sens = resp.sensitivities
             plain_s = t1 - t0 - sens.wall_s + sens.timing.get("reused_tangent_s", 0.0)
         wall = time.perf_counter() - t0
-        return ForwardResult(True, values, message, wall, J, plain_s)
+        return ForwardResult(True, values, message, wall, J, plain_s), resp
 
     def jacobian_from(self, resp, chain, operator=None) -> np.ndarray | None:
         """dU/dx (m, n) in the layout of the measurement vector from a response with sensitivities

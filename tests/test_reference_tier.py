@@ -1,0 +1,127 @@
+"""The model-error tier's converged reference: the ``converged`` preset, the honesty rule for every
+spelling of it, and the one reference solve shared by the data generator and the convergence
+study (problems/inverse/response_cache.py)."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import pytest
+
+import problems.inverse.data as data
+from bench.studies.convergence import render_overview, run_convergence
+from problems.fe.mesh import discretisation_key, parse_mesh_spec
+from problems.inverse import response_cache
+from problems.inverse.build import check_discretisations
+from problems.inverse.cases import get_case
+from problems.inverse.forward import FEForwardModel
+from problems.inverse.model_error import HonestyError
+
+CASE = "linear-compression"
+
+
+def test_converged_is_the_model_error_mesh_and_a_preset_with_tokens():
+    assert data.MODEL_ERROR_MESH == data.tier_settings("model-error").mesh == "12,12,24:g8:hex27"
+    spec = parse_mesh_spec("converged")
+    assert (spec.shape, spec.grading, spec.element, spec.symmetry) == (
+        (12, 12, 24),
+        8.0,
+        "hex27",
+        "eighth",
+    )
+    assert discretisation_key("converged:quarter") == "12,12,24:g8:hex27"
+    with pytest.raises(ValueError, match="element given twice"):
+        parse_mesh_spec("converged:hex8")
+
+
+@pytest.mark.parametrize(
+    "role, kwargs",
+    [
+        ("forward", {"mesh": "12,12,24:hex27:g8:quarter"}),
+        ("hifi", {"mesh": "coarse", "hifi_mesh": "converged:eighth"}),  # corrections and BAE
+        ("hifi", {"mesh": "coarse", "hifi_mesh": "12,12,24:g8.0:hex27"}),
+    ],
+)
+def test_the_honesty_rule_refuses_every_spelling_of_the_converged_reference(role, kwargs):
+    ds = SimpleNamespace(case=CASE, settings=data.tier_settings("model-error"))
+    with pytest.raises(HonestyError, match=f"the {role} model uses discretisation 12,12,24:g8"):
+        check_discretisations(get_case(CASE), ds, **kwargs)
+    check_discretisations(get_case(CASE), ds, mesh="12,12,24:g4:hex27", hifi_mesh="paper")
+
+
+def test_the_honesty_rule_refuses_a_surrogate_trained_on_the_converged_reference(monkeypatch):
+    import problems.surrogate.model as surrogate_model
+
+    monkeypatch.setattr(surrogate_model, "discretisation_of", lambda fwd: fwd.trained_on)
+    ds = SimpleNamespace(case=CASE, settings=data.tier_settings("model-error"))
+    trained = SimpleNamespace(trained_on=discretisation_key("converged:quarter"))
+    with pytest.raises(HonestyError, match="the surrogate model uses"):
+        check_discretisations(get_case(CASE), ds, mesh="coarse", forward=trained)
+
+
+@pytest.fixture
+def counted_runs(monkeypatch, tmp_path):
+    """The data mesh made tiny (3,3,6:g4), the cache in ``tmp_path``; counts the FE runs."""
+    monkeypatch.setenv(data.CACHE_DIR_ENV, str(tmp_path / "cache"))
+    monkeypatch.setattr(data, "MODEL_ERROR_MESH", "3,3,6:g4")
+    runs = []
+    original = FEForwardModel.run_with_response
+
+    def counting(self, x, jacobian=False):
+        runs.append(self.mesh)
+        return original(self, x, jacobian)
+
+    monkeypatch.setattr(FEForwardModel, "run_with_response", counting)
+    return runs
+
+
+def test_data_and_study_share_the_one_reference_solve(counted_runs, tmp_path, monkeypatch):
+    shared = data.make_data(CASE, mesh="3,3,6:g4:quarter")
+    assert counted_runs == ["3,3,6:g4:quarter"]
+    entries = list(response_cache.folder().iterdir())
+    assert len(entries) == 1
+    # any spelling of the mesh takes the same entry; the bytes are those of a plain run
+    again = data.make_data(CASE, mesh="3,3,6:g4:quarter")
+    assert again.to_json() == shared.to_json() and len(counted_runs) == 1
+    with monkeypatch.context() as m:
+        m.setattr(data, "shares_reference_solve", lambda mesh: False)
+        assert data.make_data(CASE, mesh="3,3,6:g4:quarter").to_json() == shared.to_json()
+    counted_runs.clear()
+    folder = run_convergence(
+        CASE,
+        {"hex8 g4": ["2,2,4:g4", "3,3,6:g4", "4,4,8:g4"]},
+        ["3,3,6"],
+        tmp_path / "r" / "s" / CASE,
+    )
+    assert counted_runs == ["2,2,4:g4", "4,4,8:g4", "3,3,6"]  # 3,3,6:g4 from the cache
+    entry = json.loads(entries[0].read_text())
+    summary = json.loads((folder / "convergence.json").read_text())
+    rows = {r["mesh"]: r for r in summary["meshes"]}
+    assert summary["data_mesh"] == "3,3,6:g4"
+    assert rows["3,3,6:g4"]["cpu_s"] == entry["cpu_s"] and entry["jacobian"] is None
+    # the data run has no Jacobian: its errors are measured, its own bias is not
+    assert rows["3,3,6:g4"]["ok"] and "rms_sigma" in rows["3,3,6:g4"]
+    assert "worst_bias" not in rows["3,3,6:g4"]
+    assert abs(rows["3,3,6"]["worst_data_bias"]["pct"]) > 1.0  # uniform 3,3,6: biased
+    text = render_overview(tmp_path / "r").read_text()
+    assert "## The model-error tier's data mesh" in text
+    assert f"| {CASE} | s | 3,3,6:g4 |" in text
+    assert "## Candidate inverse models" in text and "| 2,2,4:g4 |" in text
+
+
+def test_a_torn_cache_entry_is_solved_again_and_a_jacobian_is_added_on_demand(counted_runs):
+    model, x = FEForwardModel(get_case(CASE), mesh="2,2,4"), get_case(CASE).reference
+    first = response_cache.solve(model, x)
+    assert not first["reused"] and first["jacobian"] is None
+    assert response_cache.solve(model, x)["reused"]
+    full = response_cache.solve(model, x, jacobian=True)  # the entry had none: solved again
+    assert not full["reused"] and full["jacobian"].shape == (len(first["values"]), 6)
+    assert (full["values"] == first["values"]).all()
+    assert response_cache.solve(model, x)["jacobian"] is not None  # now kept
+    path = next(response_cache.folder().iterdir())
+    path.write_text(path.read_text()[:-100])
+    assert response_cache.lookup(model, x) is None
+    assert not response_cache.solve(model, x)["reused"]
+    assert not response_cache.solve(model, x, reuse=False)["reused"]  # data --check: afresh
+    assert counted_runs == ["2,2,4"] * 4
