@@ -45,9 +45,9 @@ from problems.inverse.forward import FORWARD_SETTINGS, case_material
 
 
 def split_specs(text: str) -> list[str]:
-    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples (optionally ``:symmetry``) stay
-    whole."""
-    specs = re.findall(r"\d+\s*,\s*\d+\s*,\s*\d+(?::\w+)?|[A-Za-z]\w*(?::\w+)?", text)
+    """Mesh specs of a comma-separated list; ``NX,NY,NZ`` triples and their ``:TOKEN`` suffixes
+    (symmetry, grading ``gR``, element) stay whole."""
+    specs = re.findall(r"\d+\s*,\s*\d+\s*,\s*\d+(?::[\w.]+)*|[A-Za-z]\w*(?::[\w.]+)*", text)
     if not specs:
         raise SystemExit(f"no mesh spec in {text!r}")
     return specs
