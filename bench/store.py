@@ -13,18 +13,27 @@ A record carries ``digest``, the sha256 of its canonical JSON without that field
 read as they are (their config is still checked).
 
 Compact records: a record with a non-empty ``result.history`` is stored as two files, the JSON
-without ``result.history`` and the companion ``DIR/runs/<hash>.history.npz`` holding it as numpy
-columns (one array per history key, plus ``<key>.present`` when only some evaluations carry it;
-``x`` as an ``(n, d)`` float64 array). The JSON then names it in ``history_file``
-(``{"name", "sha256", "n"}``, the sha256 of the companion's bytes). The companion is written
-first (atomically), then the JSON; a reader checks the companion's sha256 and rebuilds exactly the
-same in-memory record as from a one-file record. ``digest`` always covers the whole in-memory
-record, history included, ``history_file`` left out: a torn or edited companion fails its sha256,
-one that decodes to other values fails the digest; either way the record counts as unreadable. A
-history that the columns cannot hold exactly (mixed types per key, ragged ``x``, ``"nan"``
-strings among floats) or whose companion would be larger than its JSON (short histories) stays in
-the one-file form. ``femubench records compact DIR`` converts
-older one-file records.
+without ``result.history`` and the companion ``DIR/runs/<hash>.history.xz`` (format 2): one xz
+stream holding a JSON index line ``[[name, dtype, shape], ...]`` and then the bytes of those
+numpy arrays. Each history key is one column (``x`` an ``(n, d)`` float64 array,
+``<key>.present`` a boolean column when only some evaluations carry the key), stored in the
+smallest of several exact encodings, entries ``<key>@<part>``: a column equal bit for bit to the
+running minimum of another (``best_cost`` of ``cost``) as that rule (``runmin``); otherwise the
+smallest of raw values in the narrowest dtype (``raw``/``f8``), float bytes regrouped by position
+(``shuf1``/``shuf2``), integer steps (``delta``, ``drle.v``/``drle.n``), run lengths
+(``rle.v``/``rle.n``), runs opening at another column's values (``rleref``); strings as a
+vocabulary and codes (``vocab`` + codes). ``_n`` is the number of evaluations, ``_format`` 2.
+The JSON names the companion in ``history_file`` (``{"name", "sha256", "n"}``, the sha256 of the
+companion's bytes). The companion is written first (atomically), then the JSON; a reader checks
+the companion's sha256 and rebuilds exactly the same in-memory record as from a one-file record
+(the writer decodes it before keeping it). Format-1 companions (``<hash>.history.npz``, plain
+``np.savez_compressed`` columns) are still read. ``digest`` always covers the whole in-memory
+record, history included, ``history_file`` left out: a torn or edited companion fails its
+sha256, one that decodes to other values fails the digest; either way the record counts as
+unreadable. A history that the columns cannot hold exactly (mixed types per key, ragged ``x``,
+``"nan"`` strings among floats) or whose companion would be larger than its JSON (short
+histories) stays in the one-file form. ``femubench records compact DIR`` converts one-file and
+format-1 records (optionally a subset: ``--track``, ``--record``, ``--limit``).
 
 A record file that cannot be read as a record (truncated, empty, not JSON, JSON of the wrong
 shape, a config that does not hash to the file name, or a content hash that does not match: a
@@ -81,8 +90,10 @@ STALE = "stale"
 DIGEST = "digest"
 #: The field of a compact record naming its history companion.
 HISTORY_FILE = "history_file"
-#: File-name suffix of a compact record's history companion.
-HISTORY_SUFFIX = ".history.npz"
+#: File-name suffix of a compact record's history companion (format 2, written today).
+HISTORY_SUFFIX = ".history.xz"
+#: File-name suffix of a format-1 companion (``np.savez_compressed`` columns), still read.
+HISTORY_SUFFIX_V1 = ".history.npz"
 #: Keys the ``config`` of a record must have.
 CONFIG_KEYS = ("case", "method", "seed", "start", "start_index", "budget")
 
@@ -115,15 +126,31 @@ def record_digest(record: dict[str, Any]) -> str:
     return hashlib.sha256(_canonical(record).encode()).hexdigest()
 
 
-def companion_path(path: str | Path) -> Path:
-    """The history companion ``<hash>.history.npz`` of the record file ``<hash>.json``."""
+def companion_path(path: str | Path, suffix: str = HISTORY_SUFFIX) -> Path:
+    """The history companion ``<hash>.history.xz`` (``suffix``: or the format-1
+    ``.history.npz``) of the record file ``<hash>.json``."""
     path = Path(path)
-    return path.with_name(path.stem + HISTORY_SUFFIX)
+    return path.with_name(path.stem + suffix)
+
+
+def companion_paths(path: str | Path) -> list[Path]:
+    """The history companions of the record file ``path`` that exist (either format)."""
+    return [
+        c for s in (HISTORY_SUFFIX, HISTORY_SUFFIX_V1) if (c := companion_path(path, s)).is_file()
+    ]
+
+
+#: Format of the history companions written today (2: each column in its smallest lossless
+#: encoding, LZMA-compressed; 1: plain ``np.savez_compressed`` columns, still read).
+HISTORY_FORMAT = 2
+#: Separator of a history key and its encoding part in a format-2 companion's entry names.
+_ENC = "@"
 
 
 def _history_columns(history: list) -> dict[str, Any] | None:
-    """The numpy columns of a JSON-decoded ``history`` (list of dicts), or None when they would
-    not give back exactly the same list (see :func:`_history_rows`)."""
+    """The numpy columns of a JSON-decoded ``history`` (list of dicts): ``_n`` and, per key, its
+    values (``x`` as ``(n, d)`` float64) and ``<key>.present`` when only some entries carry it;
+    None when the columns cannot hold the values exactly (mixed types per key, ragged ``x``)."""
     import numpy as np
 
     if not history or not all(isinstance(e, dict) for e in history):
@@ -131,7 +158,7 @@ def _history_columns(history: list) -> dict[str, Any] | None:
     n = len(history)
     cols: dict[str, Any] = {"_n": np.array(n, dtype=np.int64)}
     for key in sorted({k for e in history for k in e}):
-        if key == "_n" or key.endswith(".present"):
+        if key.startswith("_") or key.endswith(".present") or _ENC in key:
             return None
         present = [key in e for e in history]
         values = [e[key] for e in history if key in e]
@@ -155,11 +182,14 @@ def _history_columns(history: list) -> dict[str, Any] | None:
         cols[key] = arr
         if not all(present):
             cols[key + ".present"] = np.array(present, dtype=np.bool_)
-    return cols if _history_rows(cols) == history else None
+    return cols
 
 
 def _history_rows(cols) -> list[dict[str, Any]]:
-    """The history list of dicts from its numpy columns (keys in sorted order per entry)."""
+    """The history list of dicts from its numpy columns (keys in sorted order per entry);
+    ``cols`` as :func:`_history_columns` makes them, or a companion's entries (either format)."""
+    if "_format" in cols:
+        cols = _decode_columns(cols)
     n = int(cols["_n"])
     rows: list[dict[str, Any]] = [{} for _ in range(n)]
     for key in sorted(k for k in cols if k != "_n" and not k.endswith(".present")):
@@ -172,6 +202,234 @@ def _history_rows(cols) -> list[dict[str, Any]]:
         for i, v in zip(where, values, strict=True):
             rows[i][key] = v
     return rows
+
+
+def _small_int(values, unsigned: bool = False):
+    """The integers ``values`` as the narrowest numpy integer array that holds them exactly."""
+    import numpy as np
+
+    arr = np.asarray(values, dtype=np.int64)
+    kinds = (np.uint8, np.uint16, np.uint32) if unsigned else (np.int8, np.int16, np.int32)
+    for dt in kinds:
+        info = np.iinfo(dt)
+        if arr.size == 0 or (arr.min() >= info.min and arr.max() <= info.max):
+            return arr.astype(dt)
+    return arr
+
+
+def _run_starts(arr):
+    """Indices where a run of bitwise-equal values of the 1-d array ``arr`` begins."""
+    import numpy as np
+
+    change = np.ones(len(arr), dtype=bool)
+    if len(arr) > 1:
+        raw = arr.view(np.uint64) if arr.dtype.kind == "f" else arr
+        change[1:] = raw[1:] != raw[:-1]
+    return np.flatnonzero(change)
+
+
+def _candidates(arr) -> list[dict[str, Any]]:
+    """Lossless encodings of the column ``arr`` on its own (each: part name -> array; decoded by
+    :func:`_decode_columns`): raw (narrowest dtype; strings as a vocabulary and codes), byte
+    regrouped floats, deltas and run lengths."""
+    import numpy as np
+
+    base: dict[str, Any] = {}
+    if arr.dtype.kind == "U":  # strings: a vocabulary and small codes
+        vocab, codes = np.unique(arr, return_inverse=True)
+        base, arr = {"vocab": vocab}, _small_int(codes.reshape(-1), unsigned=True)
+    out: list[dict[str, Any]] = []
+    if arr.dtype.kind == "f":
+        out.append({"f8": arr})
+        # bytes regrouped by position (exponents together): compresses better
+        shuf = np.ascontiguousarray(arr.T).view(np.uint8).reshape(-1, 8).T
+        out.append({f"shuf{arr.ndim}": np.ascontiguousarray(shuf)})
+    else:
+        out.append({**base, "raw": arr if arr.dtype.kind == "b" or base else _small_int(arr)})
+        if arr.dtype.kind in "iu" and not base:
+            d = np.diff(arr.astype(np.int64), prepend=0)
+            s = _run_starts(d)
+            out.append({"delta": _small_int(d)})
+            lengths = _small_int(np.diff(np.append(s, len(d))), unsigned=True)
+            out.append({"drle.v": _small_int(d[s]), "drle.n": lengths})
+    if arr.ndim == 1:
+        s = _run_starts(arr)
+        n = _small_int(np.diff(np.append(s, len(arr))), unsigned=True)
+        v = arr[s] if arr.dtype.kind in "fb" or base else _small_int(arr[s])
+        out.append({**base, "rle.v": v, "rle.n": n})
+    return out
+
+
+def _derived(arr, raws: dict[str, Any]) -> list[dict[str, Any]]:
+    """Encodings of the 1-d column ``arr`` that refer to one of the columns ``raws``: its
+    running minimum (``runmin``) or run values opening at its values (``rleref``)."""
+    import numpy as np
+
+    out: list[dict[str, Any]] = []
+    if arr.ndim != 1 or arr.dtype.kind == "U":
+        return out
+    s = _run_starts(arr)
+    n = _small_int(np.diff(np.append(s, len(arr))), unsigned=True)
+    for ref, src in raws.items():
+        if src.shape != arr.shape or src.dtype != arr.dtype:
+            continue
+        if arr.dtype.kind == "f" and np.minimum.accumulate(src).tobytes() == arr.tobytes():
+            out.append({"runmin": np.array(ref)})
+        if src[s].tobytes() == arr[s].tobytes():
+            out.append({"rleref.n": n, "rleref.ref": np.array(ref)})
+    return out
+
+
+#: LZMA preset of the companions (6: xz's default; 9 gains < 1 % on histories at ~10x memory).
+_PRESET = 6
+
+
+def _packed_size(parts: dict[str, Any]) -> int:
+    """Bytes the parts add to the companion: LZMA-compressed alone, plus ~40 of index each."""
+    import lzma
+
+    filters = [{"id": lzma.FILTER_LZMA2, "preset": _PRESET}]
+    return sum(
+        40 + len(lzma.compress(a.tobytes(), format=lzma.FORMAT_RAW, filters=filters))
+        for a in parts.values()
+    )
+
+
+def _encode_columns(cols: dict[str, Any]) -> dict[str, Any]:
+    """The companion entries (format 2) of the columns ``cols`` (:func:`_history_columns`):
+    ``_n``, ``_format`` and ``<key>@<part>`` arrays. A column that is the running minimum of
+    another is stored as that rule (``runmin``); every other one in its smallest encoding, run
+    values opening at another column's values by reference (``rleref``). A column only refers
+    to one stored as itself."""
+    import numpy as np
+
+    raws = {k: v for k, v in cols.items() if k != "_n"}
+    chosen = {key: min(_candidates(arr), key=_packed_size) for key, arr in raws.items()}
+    referenced: set[str] = set()
+    for key, arr in raws.items():
+        if key in referenced:
+            continue
+        free = {k: v for k, v in raws.items() if k != key and not _refers(chosen[k])}
+        derived = _derived(arr, free)
+        best = next((d for d in derived if "runmin" in d), None)
+        if best is None and derived:
+            best = min(derived, key=_packed_size)
+            if _packed_size(best) >= _packed_size(chosen[key]):
+                best = None
+        if best is not None:
+            chosen[key] = best
+            referenced.add(str(best.get("runmin", best.get("rleref.ref"))))
+    entries = {"_n": cols["_n"], "_format": np.array(HISTORY_FORMAT, dtype=np.int64)}
+    for key, parts in chosen.items():
+        entries.update({f"{key}{_ENC}{p}": a for p, a in parts.items()})
+    return entries
+
+
+def _refers(parts: dict[str, Any]) -> bool:
+    return "runmin" in parts or "rleref.ref" in parts
+
+
+def _decode_columns(entries) -> dict[str, Any]:
+    """The columns (as :func:`_history_columns`) of a format-2 companion's ``entries``."""
+    import numpy as np
+
+    if int(entries["_format"]) != HISTORY_FORMAT:
+        raise ValueError(f"history format {int(entries['_format'])} is not {HISTORY_FORMAT}")
+    parts: dict[str, dict[str, Any]] = {}
+    for name, arr in entries.items():
+        if _ENC in name:
+            key, part = name.split(_ENC, 1)
+            parts.setdefault(key, {})[part] = arr
+    cols: dict[str, Any] = {"_n": entries["_n"]}
+
+    def column(key: str, seen=()):
+        if key in cols:
+            return cols[key]
+        if key in seen or key not in parts:
+            raise ValueError(f"history column {key!r} missing or circular")
+        p = parts[key]
+        if "f8" in p or "raw" in p:
+            arr = p.get("f8", p.get("raw"))
+        elif "shuf1" in p or "shuf2" in p:
+            b = p.get("shuf1", p.get("shuf2"))
+            arr = np.ascontiguousarray(b.T).view("<f8").reshape(-1)
+            if "shuf2" in p:
+                arr = arr.reshape(-1, int(entries["_n"])).T.copy()
+        elif "runmin" in p:
+            arr = np.minimum.accumulate(column(str(p["runmin"]), (*seen, key)))
+        elif "delta" in p:
+            arr = np.cumsum(p["delta"].astype(np.int64))
+        elif "drle.v" in p:
+            arr = np.cumsum(np.repeat(p["drle.v"].astype(np.int64), p["drle.n"]))
+        elif "rle.v" in p:
+            v = p["rle.v"]
+            arr = np.repeat(v.astype(np.int64) if v.dtype.kind in "iu" else v, p["rle.n"])
+        elif "rleref.n" in p:
+            n = p["rleref.n"].astype(np.int64)
+            src = column(str(p["rleref.ref"]), (*seen, key))
+            arr = np.repeat(src[np.cumsum(n) - n], n)
+        else:
+            raise ValueError(f"history column {key!r} has no known encoding ({sorted(p)})")
+        if "vocab" in p:
+            arr = p["vocab"][arr]
+        elif arr.dtype.kind in "iu":
+            arr = arr.astype(np.int64)
+        cols[key] = arr
+        return arr
+
+    for key in parts:
+        column(key)
+    return cols
+
+
+def _companion_bytes(entries: dict[str, Any]) -> bytes:
+    """A format-2 companion: one xz stream (no check: the record's sha256 covers it) of a JSON
+    index line ``[[name, dtype, shape], ...]`` followed by the arrays' bytes in that order."""
+    import lzma
+
+    index = [[k, a.dtype.str, list(a.shape)] for k, a in entries.items()]
+    head = json.dumps(index, separators=(",", ":")).encode() + b"\n"
+    body = b"".join(a.tobytes() for a in entries.values())
+    return lzma.compress(head + body, format=lzma.FORMAT_XZ, check=lzma.CHECK_NONE, preset=_PRESET)
+
+
+def _companion_entries(data: bytes) -> dict[str, Any]:
+    """The arrays of a format-2 companion's bytes (ValueError when they do not decode)."""
+    import lzma
+
+    import numpy as np
+
+    try:
+        raw = lzma.decompress(data, format=lzma.FORMAT_XZ)
+    except lzma.LZMAError as exc:
+        raise ValueError(str(exc)) from None
+    head, sep, body = raw.partition(b"\n")
+    if not sep:
+        raise ValueError("no index line")
+    entries, pos = {}, 0
+    for name, dtype, shape in json.loads(head):
+        dt = np.dtype(dtype)
+        if dt.hasobject:
+            raise ValueError(f"entry {name!r} holds objects")
+        size = dt.itemsize * math.prod(shape)
+        if pos + size > len(body):
+            raise ValueError(f"entry {name!r} is cut short")
+        entries[name] = np.frombuffer(body, dt, math.prod(shape), pos).reshape(shape)
+        pos += size
+    if pos != len(body):
+        raise ValueError(f"{len(body) - pos} bytes after the last entry")
+    return entries
+
+
+def _history_entries(history) -> dict[str, Any] | None:
+    """The format-2 companion entries of a JSON-decoded ``history``, None when they would not
+    give back exactly the same list (same canonical JSON, every float bit for bit)."""
+    cols = _history_columns(history) if isinstance(history, list) else None
+    if cols is None:
+        return None
+    entries = _encode_columns(cols)
+    same = json.dumps(_history_rows(entries), sort_keys=True) == json.dumps(history, sort_keys=True)
+    return entries if same else None
 
 
 def _record_text(record: dict[str, Any]) -> str:
@@ -192,20 +450,19 @@ def write_record(out_dir: str | Path, record: dict[str, Any]) -> Path:
 def write_encoded(path: Path, encoded: dict[str, Any]) -> bool:
     """Write the JSON-ready record ``encoded`` (with its ``digest``) to ``path``, compact when
     its history allows; True when compact."""
-    import numpy as np
 
     result = encoded.get("result")
-    cols = _history_columns(result.get("history")) if isinstance(result, dict) else None
-    if cols is None:
+    entries = _history_entries(result.get("history")) if isinstance(result, dict) else None
+    if entries is None:
         atomic_write_text(path, _record_text(encoded))
-        companion_path(path).unlink(missing_ok=True)  # left by an earlier compact record
+        for c in companion_paths(path):  # left by an earlier compact record
+            c.unlink()
         return False
-    buf = BytesIO()
-    np.savez_compressed(buf, **cols)
-    data = buf.getvalue()
+    data = _companion_bytes(entries)
     if len(data) >= len(json.dumps(result["history"], separators=(",", ":"))):
         atomic_write_text(path, _record_text(encoded))  # small history: one file is smaller
-        companion_path(path).unlink(missing_ok=True)
+        for c in companion_paths(path):
+            c.unlink()
         return False
     comp = companion_path(path)
     atomic_write(comp, lambda fh: fh.write(data))
@@ -216,6 +473,7 @@ def write_encoded(path: Path, encoded: dict[str, Any]) -> bool:
         "n": len(result["history"]),
     }
     atomic_write_text(path, _record_text(body))
+    companion_path(path, HISTORY_SUFFIX_V1).unlink(missing_ok=True)  # no longer named
     return True
 
 
@@ -227,9 +485,10 @@ def _inflate(rec, path: Path):
     import numpy as np
 
     ref = rec.pop(HISTORY_FILE)
-    comp = companion_path(path)
-    if not isinstance(ref, dict) or ref.get("name") != comp.name:
-        raise ValueError(f"{HISTORY_FILE} does not name {comp.name}")
+    names = {companion_path(path, s).name: s for s in (HISTORY_SUFFIX, HISTORY_SUFFIX_V1)}
+    if not isinstance(ref, dict) or ref.get("name") not in names:
+        raise ValueError(f"{HISTORY_FILE} names neither of {', '.join(names)}")
+    comp = companion_path(path, names[ref["name"]])
     try:
         data = comp.read_bytes()
     except OSError as exc:
@@ -237,9 +496,12 @@ def _inflate(rec, path: Path):
     if hashlib.sha256(data).hexdigest() != ref.get("sha256"):
         raise ValueError(f"history companion {comp.name} hash mismatch (torn or edited)")
     try:
-        with np.load(BytesIO(data), allow_pickle=False) as z:
-            history = _history_rows({k: z[k] for k in z.files})
-    except (OSError, ValueError, KeyError) as exc:
+        if comp.name.endswith(HISTORY_SUFFIX):
+            history = _history_rows(_companion_entries(data))
+        else:
+            with np.load(BytesIO(data), allow_pickle=False) as z:
+                history = _history_rows({k: z[k] for k in z.files})
+    except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
         raise ValueError(f"history companion {comp.name} cannot be decoded ({exc})") from None
     if not isinstance(rec.get("result"), dict):
         raise ValueError("'result' missing or not an object")
@@ -368,9 +630,8 @@ def set_aside(path: Path, folder: str = CORRUPT) -> Path:
     dest, n = dest_dir / stem, 1
     while dest.exists():
         dest, n = dest_dir / f"{stem}-{n}", n + 1
-    comp = companion_path(path)
-    if comp.is_file():
-        os.replace(comp, dest.with_name(dest.name + HISTORY_SUFFIX))
+    for comp in companion_paths(path):
+        os.replace(comp, dest.with_name(dest.name + comp.name[len(path.stem) :]))
     os.replace(path, dest)
     return dest
 
@@ -392,38 +653,64 @@ def set_aside_files(out_dir: str | Path, folder: str = CORRUPT) -> list[Path]:
     d = runs_dir(out_dir) / folder
     if not d.is_dir():
         return []
-    return sorted(p for p in d.iterdir() if p.is_file() and not p.name.endswith(HISTORY_SUFFIX))
+    return sorted(
+        p
+        for p in d.iterdir()
+        if p.is_file() and not p.name.endswith((HISTORY_SUFFIX, HISTORY_SUFFIX_V1))
+    )
 
 
-def compact_records(out_dir: str | Path, *, dry_run: bool = False) -> list[tuple[Path, int, int]]:
-    """Convert the one-file records of ``DIR/runs`` whose history the columns hold exactly to the
-    compact form; return ``(path, bytes before, bytes after)`` of each (after: JSON + companion).
-    Each is written to a temporary name, read back and compared with the original (equal, or
-    ValueError and nothing replaced), then renamed into place (companion first). ``dry_run``
-    writes into a temporary folder only. Unreadable records are left alone."""
+def compact_records(
+    out_dir: str | Path,
+    *,
+    dry_run: bool = False,
+    track: str | None = None,
+    limit: int | None = None,
+    only: list[str] | None = None,
+) -> list[tuple[Path, int, int, int]]:
+    """Convert the records of ``DIR/runs`` to the compact form of today: one-file records whose
+    history the columns hold exactly, and format-1 compact ones (``.history.npz``). Return
+    ``(path, bytes before, JSON bytes after, companion bytes after)`` of each converted record
+    (before: the JSON and any old companion). Each is written to a temporary name, read back and
+    compared with the original (same canonical JSON, or ValueError and nothing replaced), then
+    renamed into place (companion first). ``dry_run`` writes into a temporary folder only.
+    Unreadable records are left alone. Selection: ``track`` ``"fe"`` (records without a
+    ``config.track``) or a track name (e.g. ``"surrogate"``); ``only``: record file names or
+    hashes; ``limit``: at most that many conversions, in file-name order."""
     import tempfile
 
-    out = []
+    wanted = {Path(o).name.removesuffix(".json") for o in only} if only is not None else None
+    out: list[tuple[Path, int, int, int]] = []
     for path in sorted(runs_dir(out_dir).glob("*.json")):
+        if limit is not None and len(out) >= limit:
+            break
+        if wanted is not None and path.stem not in wanted:
+            continue
         text = path.read_text(encoding="utf-8")
         try:
             rec = load_record(path)
         except ValueError:
             continue
-        if HISTORY_FILE in json.loads(text):
+        if track is not None and (rec["config"].get("track") or "fe") != track:
             continue
+        ref = json.loads(text).get(HISTORY_FILE)
+        if isinstance(ref, dict) and str(ref.get("name")).endswith(HISTORY_SUFFIX):
+            continue  # compact already
+        before = len(text.encode()) + sum(c.stat().st_size for c in companion_paths(path))
         with tempfile.TemporaryDirectory(dir=path.parent, prefix=".compact-") as tmp:
             trial = Path(tmp) / path.name
-            if not write_encoded(trial, json.loads(text)):
+            if not write_encoded(trial, rec):
                 continue
-            if load_record(trial) != rec:
+            back = load_record(trial)
+            if json.dumps(back, sort_keys=True) != json.dumps(rec, sort_keys=True):
                 raise ValueError(f"{path.name}: the compact form does not load back equal")
             comp = companion_path(trial)
-            after = trial.stat().st_size + comp.stat().st_size
+            sizes = (trial.stat().st_size, comp.stat().st_size)
             if not dry_run:
                 os.replace(comp, companion_path(path))
                 os.replace(trial, path)
-        out.append((path, len(text.encode()), after))
+                companion_path(path, HISTORY_SUFFIX_V1).unlink(missing_ok=True)
+        out.append((path, before, *sizes))
     return out
 
 

@@ -1,4 +1,4 @@
-"""Compact run records: JSON + ``<hash>.history.npz`` companion, read back bit for bit."""
+"""Compact run records: JSON + ``<hash>.history.xz`` companion, read back bit for bit."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bench import store
@@ -105,3 +106,97 @@ def test_records_compact_cli_converts_verifies_and_reports_sizes(tmp_path, capsy
     assert cli(["records", "compact", str(tmp_path)]) == 0  # idempotent
     assert "converted 0 record(s)" in capsys.readouterr().out
     assert cli(["records", "compact", str(tmp_path / "nope")]) == 2
+
+
+COMPARISON = SHIPPED.parents[1] / "comparison" / "runs"
+#: One shipped record of each kind: FE track (CMA-ES: keys only some evaluations carry; PSO+LM:
+#: phases), surrogate track (CMA-ES) and MCMC on the surrogate.
+KINDS = {
+    "fe-cma": "db540e42605dedfc14c3b5dbbdb7fda88137308db704743c4ee4b3f44f0879a0",
+    "fe-pso+lm": "be67dfcfa698a7357c9580f0435b26a9fee5f0e89b9dc27f83dbac4fffa52c6b",
+    "surrogate-cma": "b1ab82a2b63c88a3f5bc8172124f67936c26d7a6ea51db7d633ea0fb92ce2f7b",
+    "mcmc": "8ec26fc11e0c513dbe6097e93f55a0cdc39f7694288f974d33890552f2528653",
+}
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_shipped_records_of_each_kind_round_trip_format_2(tmp_path, kind):
+    src = COMPARISON / f"{KINDS[kind]}.json"
+    original = store.load_record(src)
+    history = original["result"]["history"]
+    dest = tmp_path / src.name
+    assert store.write_encoded(dest, original) is True
+    comp = store.companion_path(dest)
+    assert comp.name.endswith(".history.xz")
+    back = store.load_record(dest)
+    assert json.dumps(back, sort_keys=True) == json.dumps(original, sort_keys=True)
+    # the format-1 companion of the same history (np.savez_compressed) is larger
+    from io import BytesIO
+
+    import numpy as np
+
+    buf = BytesIO()
+    np.savez_compressed(buf, **store._history_columns(history))
+    assert comp.stat().st_size < 0.8 * len(buf.getvalue())
+
+
+def test_derivable_columns_are_stored_as_their_rule():
+    h = [
+        {"cost": c, "best_cost": b, "n_evals": 30 * (i + 1), "phase": p, "x": [float(i), 2.0]}
+        for i, (c, b, p) in enumerate(
+            [(5.0, 5.0, "surrogate"), (7.0, 5.0, "surrogate"), (1.0, 1.0, "fe"), (3.0, 1.0, "fe")]
+        )
+    ]
+    entries = store._history_entries(h)
+    assert "best_cost@runmin" in entries and str(entries["best_cost@runmin"]) == "cost"
+    assert sorted(k for k in entries if k.startswith("phase@")) == ["phase@raw", "phase@vocab"]
+    assert entries["phase@raw"].dtype == np.uint8
+    assert store._history_rows(entries) == h
+    h[1]["best_cost"] = 7.0  # no longer a running minimum: kept as values
+    assert "best_cost@runmin" not in store._history_entries(h)
+    assert store._history_rows(store._history_entries(h)) == h
+
+
+def test_a_format_1_companion_is_read_and_converted(tmp_path, capsys):
+    from io import BytesIO
+
+    src = COMPARISON / f"{KINDS['fe-cma']}.json"
+    original = store.load_record(src)
+    buf = BytesIO()
+    np.savez_compressed(buf, **store._history_columns(original["result"]["history"]))
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    old = runs / f"{src.stem}.history.npz"
+    old.write_bytes(buf.getvalue())
+    import hashlib
+
+    body = {**original, "result": {k: v for k, v in original["result"].items() if k != "history"}}
+    body["history_file"] = {
+        "name": old.name,
+        "sha256": hashlib.sha256(buf.getvalue()).hexdigest(),
+        "n": len(original["result"]["history"]),
+    }
+    (runs / src.name).write_text(json.dumps(body, sort_keys=True))
+    assert store.load_record(runs / src.name) == original
+    assert cli(["records", "compact", str(tmp_path)]) == 0
+    assert "converted 1 record(s)" in capsys.readouterr().out
+    assert not old.exists() and store.companion_path(runs / src.name).is_file()
+    assert store.load_record(runs / src.name) == original
+
+
+def test_records_compact_selects_by_track_record_and_limit(tmp_path, capsys):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for h in KINDS.values():
+        shutil.copy(COMPARISON / f"{h}.json", runs)
+    assert cli(["records", "compact", str(tmp_path), "--track", "fe", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "would convert 2 record(s)" in out and "deleted 13549 bytes" in out
+    assert not list(runs.glob("*.xz"))
+    assert cli(["records", "compact", str(tmp_path), "--track", "surrogate", "--limit", "1"]) == 0
+    assert "converted 1 record(s)" in capsys.readouterr().out
+    assert [p.stem.split(".")[0] for p in runs.glob("*.xz")] == [KINDS["mcmc"]]
+    assert cli(["records", "compact", str(tmp_path), "--record", KINDS["fe-cma"]]) == 0
+    assert len(list(runs.glob("*.xz"))) == 2
+    assert cli(["records", "compact", str(tmp_path), "--limit", "0"]) == 2
+    assert "--limit 0 must be >= 1" in capsys.readouterr().err
