@@ -5,7 +5,8 @@ Jacobian, as ratios to the ``coarse`` 8-node baseline measured in the same run.
         [--meshes "3,3,6:g4:hex27,4,4,8:g4:hex27,...,coarse,6,6,12:g4"]
         [--cases linear-compression,hyperbolic-shear,exponent-tension] [--repeat 3] [--out PATH]
 
-Per mesh and case, at the case's reference parameters: the CPU time of this process (best of
+Per mesh (``dofs``: of the quarter mesh, whose lower half the eighth model solves) and case, at
+the case's reference parameters: the CPU time of this process (best of
 ``--repeat``; CPU rather than wall time because the cores are shared) of the plain forward
 evaluation ``FEForwardModel(case, mesh)(x)`` (1.5 mm in 10 snapshots, the default loading and
 Newton settings: what one evaluation of the inverse loop costs) and of ``model(x, jacobian=True)``
