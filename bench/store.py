@@ -33,7 +33,7 @@ sha256, one that decodes to other values fails the digest; either way the record
 unreadable. A history that the columns cannot hold exactly (mixed types per key, ragged ``x``,
 ``"nan"`` strings among floats) or whose companion would be larger than its JSON (short
 histories) stays in the one-file form. ``femubench records compact DIR`` converts one-file and
-format-1 records (optionally a subset: ``--track``, ``--record``, ``--limit``).
+format-1 records (optionally a subset: ``--track``, ``--tier``, ``--record``, ``--limit``).
 
 A record file that cannot be read as a record (truncated, empty, not JSON, JSON of the wrong
 shape, a config that does not hash to the file name, or a content hash that does not match: a
@@ -665,6 +665,7 @@ def compact_records(
     *,
     dry_run: bool = False,
     track: str | None = None,
+    tier: str | None = None,
     limit: int | None = None,
     only: list[str] | None = None,
 ) -> list[tuple[Path, int, int, int]]:
@@ -675,8 +676,9 @@ def compact_records(
     compared with the original (same canonical JSON, or ValueError and nothing replaced), then
     renamed into place (companion first). ``dry_run`` writes into a temporary folder only.
     Unreadable records are left alone. Selection: ``track`` ``"fe"`` (records without a
-    ``config.track``) or a track name (e.g. ``"surrogate"``); ``only``: record file names or
-    hashes; ``limit``: at most that many conversions, in file-name order."""
+    ``config.track``) or a track name (e.g. ``"surrogate"``); ``tier``: the data tier
+    (``config.tier``, ``"model-error"`` when absent, as :func:`method_label`); ``only``: record
+    file names or hashes; ``limit``: at most that many conversions, in file-name order."""
     import tempfile
 
     wanted = {Path(o).name.removesuffix(".json") for o in only} if only is not None else None
@@ -692,6 +694,8 @@ def compact_records(
         except ValueError:
             continue
         if track is not None and (rec["config"].get("track") or "fe") != track:
+            continue
+        if tier is not None and rec["config"].get("tier", "model-error") != tier:
             continue
         ref = json.loads(text).get(HISTORY_FILE)
         if isinstance(ref, dict) and str(ref.get("name")).endswith(HISTORY_SUFFIX):

@@ -200,3 +200,41 @@ def test_records_compact_selects_by_track_record_and_limit(tmp_path, capsys):
     assert len(list(runs.glob("*.xz"))) == 2
     assert cli(["records", "compact", str(tmp_path), "--limit", "0"]) == 2
     assert "--limit 0 must be >= 1" in capsys.readouterr().err
+
+
+def test_records_compact_selects_by_tier(tmp_path, capsys):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    model_error = "1c79f646a17686b843bb0630d731e042eb86ed66092e2a2e420244836f90cae2"
+    for h in (*KINDS.values(), model_error):
+        shutil.copy(COMPARISON / f"{h}.json", runs)
+    assert cli(["records", "compact", str(tmp_path), "--tier", "no-such-tier"]) == 0
+    assert "converted 0 record(s)" in capsys.readouterr().out
+    assert cli(["records", "compact", str(tmp_path), "--track", "fe", "--tier", "consistent"]) == 0
+    assert "converted 2 record(s)" in capsys.readouterr().out
+    assert {p.name.split(".")[0] for p in runs.glob("*.xz")} == {
+        KINDS["fe-cma"],
+        KINDS["fe-pso+lm"],
+    }
+    assert cli(["records", "compact", str(tmp_path), "--tier", "model-error"]) == 0
+    assert "converted 1 record(s)" in capsys.readouterr().out
+    assert store.companion_path(runs / f"{model_error}.json").is_file()
+
+
+def test_the_report_of_a_folder_is_byte_identical_after_compaction(tmp_path):
+    from bench.report import write_report
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for h in KINDS.values():
+        shutil.copy(COMPARISON / f"{h}.json", runs)
+
+    def report(dest):
+        write_report(tmp_path, ["md", "csv", "tex"], figures=False, dest=dest)
+        return {p.relative_to(dest): p.read_bytes() for p in sorted(dest.rglob("*")) if p.is_file()}
+
+    before = report(tmp_path / "before")
+    assert len(store.compact_records(tmp_path)) == len(KINDS)
+    assert len(list(runs.glob("*.xz"))) == len(KINDS)
+    after = report(tmp_path / "after")
+    assert len(before) > 3 and after == before

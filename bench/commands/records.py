@@ -21,6 +21,9 @@ def add_arguments(parser) -> None:
         "--track",
         help="only records of this track: 'fe' (no surrogate) or a track name such as 'surrogate'",
     )
+    parser.add_argument(
+        "--tier", help="only records of this data tier, e.g. 'consistent' or 'model-error'"
+    )
     parser.add_argument("--limit", type=int, help="convert at most this many records (N >= 1)")
     parser.add_argument(
         "--record",
@@ -43,7 +46,12 @@ def main(args) -> int:
         print(f"femubench records: --limit {args.limit} must be >= 1", file=sys.stderr)
         return 2
     done = store.compact_records(
-        Path(args.dir), dry_run=args.dry_run, track=args.track, limit=args.limit, only=args.record
+        Path(args.dir),
+        dry_run=args.dry_run,
+        track=args.track,
+        tier=args.tier,
+        limit=args.limit,
+        only=args.record,
     )
     before = sum(d[1] for d in done)
     text, binary = sum(d[2] for d in done), sum(d[3] for d in done)
