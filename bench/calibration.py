@@ -906,8 +906,12 @@ def render_mcmc(report: dict) -> list[str]:
             "with the sampled model's chi2 offset at the optimum taken out)",
             f"- chi2 at the optimum: FE {c['chi2_optimum_fe']:.6g}, sampled model "
             f"{c['chi2_optimum_sampled']:.6g}; at the best draw: sampled model "
-            f"{c['chi2_best_draw']:.6g}, FE {c['chi2_best_draw_fe']:.6g} (FE below the optimum's:"
-            " lm stopped short of the mode)",
+            f"{c['chi2_best_draw']:.6g}, FE {c['chi2_best_draw_fe']:.6g} ("
+            + (
+                "the FE model fits the best draw better: lm stopped short of the mode)"
+                if c["chi2_best_draw_fe"] < c["chi2_optimum_fe"] - 1.0
+                else "not better on the FE model: the optimum is the mode)"
+            ),
             "",
             "| parameter | MCMC mean | MCMC sd | sd / Laplace sd (noise only) | MCMC 95 % |",
             "|---|---|---|---|---|",
