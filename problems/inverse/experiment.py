@@ -947,7 +947,10 @@ def import_experiment(exp: Experiment) -> Dataset:
     d_mm, f_kN = read_log(exp)
     correlation = None
     if exp.route == "images":
-        per_image, n_nan, correlation = correlate_images(exp)
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1):  # one BLAS thread: the same images, the same bytes
+            per_image, n_nan, correlation = correlate_images(exp)
     else:
         per_image, n_nan = read_dic(exp)
     use = np.array(exp.use_images, int) - 1 if exp.use_images else np.arange(len(per_image))
