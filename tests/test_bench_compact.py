@@ -119,6 +119,12 @@ KINDS = {
 }
 
 
+def _copy_one_file(h: str, runs: Path) -> None:
+    """The shipped comparison record ``h`` into ``runs`` in the one-file form it was written in
+    (some are shipped compact)."""
+    (runs / f"{h}.json").write_text(store._record_text(store.load_record(COMPARISON / f"{h}.json")))
+
+
 @pytest.mark.parametrize("kind", sorted(KINDS))
 def test_shipped_records_of_each_kind_round_trip_format_2(tmp_path, kind):
     src = COMPARISON / f"{KINDS[kind]}.json"
@@ -188,7 +194,7 @@ def test_records_compact_selects_by_track_record_and_limit(tmp_path, capsys):
     runs = tmp_path / "runs"
     runs.mkdir()
     for h in KINDS.values():
-        shutil.copy(COMPARISON / f"{h}.json", runs)
+        _copy_one_file(h, runs)
     assert cli(["records", "compact", str(tmp_path), "--track", "fe", "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert "would convert 2 record(s)" in out and "deleted 13549 bytes" in out
@@ -207,7 +213,7 @@ def test_records_compact_selects_by_tier(tmp_path, capsys):
     runs.mkdir()
     model_error = "1c79f646a17686b843bb0630d731e042eb86ed66092e2a2e420244836f90cae2"
     for h in (*KINDS.values(), model_error):
-        shutil.copy(COMPARISON / f"{h}.json", runs)
+        _copy_one_file(h, runs)
     assert cli(["records", "compact", str(tmp_path), "--tier", "no-such-tier"]) == 0
     assert "converted 0 record(s)" in capsys.readouterr().out
     assert cli(["records", "compact", str(tmp_path), "--track", "fe", "--tier", "consistent"]) == 0
@@ -227,7 +233,7 @@ def test_the_report_of_a_folder_is_byte_identical_after_compaction(tmp_path):
     runs = tmp_path / "runs"
     runs.mkdir()
     for h in KINDS.values():
-        shutil.copy(COMPARISON / f"{h}.json", runs)
+        _copy_one_file(h, runs)
 
     def report(dest):
         write_report(tmp_path, ["md", "csv", "tex"], figures=False, dest=dest)
