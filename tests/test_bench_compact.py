@@ -244,3 +244,29 @@ def test_the_report_of_a_folder_is_byte_identical_after_compaction(tmp_path):
     assert len(list(runs.glob("*.xz"))) == len(KINDS)
     after = report(tmp_path / "after")
     assert len(before) > 3 and after == before
+
+
+def test_records_compact_dry_run_predicts_the_diff_text_of_its_commit(tmp_path, capsys):
+    import re
+    import subprocess
+
+    out_dir = tmp_path / "results" / "comparison"  # the shipped paths: same header lengths
+    runs = out_dir / "runs"
+    runs.mkdir(parents=True)
+    for h in KINDS.values():
+        _copy_one_file(h, runs)
+
+    def git(*a):
+        cmd = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(tmp_path), *a]
+        return subprocess.run(cmd, check=True, capture_output=True).stdout
+
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "one-file")
+    assert cli(["records", "compact", str(out_dir), "--dry-run"]) == 0
+    predicted = int(re.search(r"diff text ~([0-9]+) bytes", capsys.readouterr().out).group(1))
+    assert cli(["records", "compact", str(out_dir)]) == 0
+    git("add", "-A")
+    git("commit", "-qm", "compact")
+    actual = len(git("show", "--binary", "HEAD"))
+    assert predicted == pytest.approx(actual, rel=0.05), (predicted, actual)
