@@ -218,13 +218,14 @@ def _small_int(values, unsigned: bool = False):
 
 
 def _run_starts(arr):
-    """Indices where a run of bitwise-equal values of the 1-d array ``arr`` begins."""
+    """Indices where a run of bitwise-equal values (rows of a 2-d array) of ``arr`` begins."""
     import numpy as np
 
     change = np.ones(len(arr), dtype=bool)
     if len(arr) > 1:
         raw = arr.view(np.uint64) if arr.dtype.kind == "f" else arr
-        change[1:] = raw[1:] != raw[:-1]
+        diff = raw[1:] != raw[:-1]
+        change[1:] = diff.reshape(len(arr) - 1, -1).any(axis=1)
     return np.flatnonzero(change)
 
 
@@ -252,7 +253,7 @@ def _candidates(arr) -> list[dict[str, Any]]:
             out.append({"delta": _small_int(d)})
             lengths = _small_int(np.diff(np.append(s, len(d))), unsigned=True)
             out.append({"drle.v": _small_int(d[s]), "drle.n": lengths})
-    if arr.ndim == 1:
+    if arr.ndim == 1 or arr.dtype.kind == "f":  # rows of x repeat (MCMC: rejected moves)
         s = _run_starts(arr)
         n = _small_int(np.diff(np.append(s, len(arr))), unsigned=True)
         v = arr[s] if arr.dtype.kind in "fb" or base else _small_int(arr[s])
@@ -363,7 +364,8 @@ def _decode_columns(entries) -> dict[str, Any]:
             arr = np.cumsum(np.repeat(p["drle.v"].astype(np.int64), p["drle.n"]))
         elif "rle.v" in p:
             v = p["rle.v"]
-            arr = np.repeat(v.astype(np.int64) if v.dtype.kind in "iu" else v, p["rle.n"])
+            v = v.astype(np.int64) if v.dtype.kind in "iu" else v
+            arr = np.repeat(v, p["rle.n"], axis=0)
         elif "rleref.n" in p:
             n = p["rleref.n"].astype(np.int64)
             src = column(str(p["rleref.ref"]), (*seen, key))
