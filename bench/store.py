@@ -691,17 +691,20 @@ def compact_records(
         if wanted is not None and path.stem not in wanted:
             continue
         text = path.read_text(encoding="utf-8")
+        try:  # select on the stored JSON first: checking a record costs more than parsing it
+            stored = json.loads(text)
+            config, ref = stored["config"], stored.get(HISTORY_FILE)
+            of_track, of_tier = config.get("track") or "fe", config.get("tier", "model-error")
+        except (ValueError, TypeError, KeyError, AttributeError):
+            continue  # unreadable: left alone
+        if (track is not None and of_track != track) or (tier is not None and of_tier != tier):
+            continue
+        if isinstance(ref, dict) and str(ref.get("name")).endswith(HISTORY_SUFFIX):
+            continue  # compact already
         try:
             rec = load_record(path)
         except ValueError:
             continue
-        if track is not None and (rec["config"].get("track") or "fe") != track:
-            continue
-        if tier is not None and rec["config"].get("tier", "model-error") != tier:
-            continue
-        ref = json.loads(text).get(HISTORY_FILE)
-        if isinstance(ref, dict) and str(ref.get("name")).endswith(HISTORY_SUFFIX):
-            continue  # compact already
         before = len(text.encode()) + sum(c.stat().st_size for c in companion_paths(path))
         with tempfile.TemporaryDirectory(dir=path.parent, prefix=".compact-") as tmp:
             trial = Path(tmp) / path.name
