@@ -33,7 +33,8 @@ sha256, one that decodes to other values fails the digest; either way the record
 unreadable. A history that the columns cannot hold exactly (mixed types per key, ragged ``x``,
 ``"nan"`` strings among floats) or whose companion would be larger than its JSON (short
 histories) stays in the one-file form. ``femubench records compact DIR`` converts one-file and
-format-1 records (optionally a subset: ``--track``, ``--tier``, ``--record``, ``--limit``).
+format-1 records (optionally a subset: ``--track``, ``--tier``, ``--method``, ``--record``,
+``--limit``).
 
 A record file that cannot be read as a record (truncated, empty, not JSON, JSON of the wrong
 shape, a config that does not hash to the file name, or a content hash that does not match: a
@@ -668,6 +669,7 @@ def compact_records(
     dry_run: bool = False,
     track: str | None = None,
     tier: str | None = None,
+    method: str | None = None,
     limit: int | None = None,
     only: list[str] | None = None,
 ) -> list[tuple[Path, int, int, int]]:
@@ -679,8 +681,9 @@ def compact_records(
     renamed into place (companion first). ``dry_run`` writes into a temporary folder only.
     Unreadable records are left alone. Selection: ``track`` ``"fe"`` (records without a
     ``config.track``) or a track name (e.g. ``"surrogate"``); ``tier``: the data tier
-    (``config.tier``, ``"model-error"`` when absent, as :func:`method_label`); ``only``: record
-    file names or hashes; ``limit``: at most that many conversions, in file-name order."""
+    (``config.tier``, ``"model-error"`` when absent, as :func:`method_label`); ``method``: the
+    solver (``config.method``, e.g. ``"mcmc"``); ``only``: record file names or hashes;
+    ``limit``: at most that many conversions, in file-name order."""
     import tempfile
 
     wanted = {Path(o).name.removesuffix(".json") for o in only} if only is not None else None
@@ -695,9 +698,12 @@ def compact_records(
             stored = json.loads(text)
             config, ref = stored["config"], stored.get(HISTORY_FILE)
             of_track, of_tier = config.get("track") or "fe", config.get("tier", "model-error")
+            of_method = config.get("method")
         except (ValueError, TypeError, KeyError, AttributeError):
             continue  # unreadable: left alone
         if (track is not None and of_track != track) or (tier is not None and of_tier != tier):
+            continue
+        if method is not None and of_method != method:
             continue
         if isinstance(ref, dict) and str(ref.get("name")).endswith(HISTORY_SUFFIX):
             continue  # compact already

@@ -226,6 +226,11 @@ def test_records_compact_selects_by_tier(tmp_path, capsys):
     assert cli(["records", "compact", str(tmp_path), "--tier", "model-error"]) == 0
     assert "converted 1 record(s)" in capsys.readouterr().out
     assert store.companion_path(runs / f"{model_error}.json").is_file()
+    assert cli(["records", "compact", str(tmp_path), "--method", "mcmc", "--dry-run"]) == 0
+    assert "would convert 1 record(s)" in capsys.readouterr().out
+    assert cli(["records", "compact", str(tmp_path), "--method", "mcmc"]) == 0
+    assert store.companion_path(runs / f"{KINDS['mcmc']}.json").is_file()
+    assert not store.companion_path(runs / f"{KINDS['surrogate-cma']}.json").exists()
 
 
 def test_the_report_of_a_folder_is_byte_identical_after_compaction(tmp_path):

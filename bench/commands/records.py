@@ -28,6 +28,7 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--tier", help="only records of this data tier, e.g. 'consistent' or 'model-error'"
     )
+    parser.add_argument("--method", help="only records of this solver, e.g. 'mcmc' or 'sa'")
     parser.add_argument("--limit", type=int, help="convert at most this many records (N >= 1)")
     parser.add_argument(
         "--record",
@@ -54,6 +55,7 @@ def main(args) -> int:
         dry_run=args.dry_run,
         track=args.track,
         tier=args.tier,
+        method=args.method,
         limit=args.limit,
         only=args.record,
     )
