@@ -44,14 +44,13 @@ from problems.fe.mesh import SPEC_PRESETS, SPECIMEN_MM, quarter_size
 from problems.fe.newton import Loading, MachineLoading
 from problems.inverse.case import Case
 from problems.inverse.cases import get_case
+from problems.inverse.user_cache import CACHE_DIR_ENV, cache_dir  # noqa: F401 (this module's API)
 
 FORMAT = "femubench-data/1"
 #: The shipped default data sets (package data of problems.inverse).
 SHIPPED_DIR = Path(__file__).resolve().parent / "datasets"
 #: Environment variable: directory of the default data sets, instead of :data:`SHIPPED_DIR`.
 DATA_DIR_ENV = "FEMUBENCH_DATA_DIR"
-#: Environment variable: directory of the cache of computed non-default data sets.
-CACHE_DIR_ENV = "FEMUBENCH_CACHE_DIR"
 TIERS = ("model-error", "consistent")
 #: the tier of data imported from a real (or virtual) test's files (problems/inverse/experiment.py):
 #: no model made them, so their ``mesh`` is empty
@@ -81,16 +80,6 @@ def data_dir() -> Path:
     """Directory of the default data sets: ``$FEMUBENCH_DATA_DIR`` if set, else the shipped ones."""
     env = os.environ.get(DATA_DIR_ENV)
     return Path(env).expanduser() if env else SHIPPED_DIR
-
-
-def cache_dir() -> Path:
-    """Directory of computed non-default data sets: ``$FEMUBENCH_CACHE_DIR`` if set, else
-    ``$XDG_CACHE_HOME/femubench/data`` (default ``~/.cache/femubench/data``)."""
-    env = os.environ.get(CACHE_DIR_ENV)
-    if env:
-        return Path(env).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base).expanduser() / "femubench" / "data"
 
 
 @dataclass(frozen=True)

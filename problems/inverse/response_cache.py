@@ -5,10 +5,10 @@ reference (``12,12,24:g8:hex27``, ~300 CPU s per case with its Jacobian) solving
 double the tier's cost.
 
 An entry is one JSON file in ``<data cache dir>/responses/`` (default
-``~/.cache/femubench/data/responses``, see :func:`problems.inverse.data.cache_dir`), keyed by the
-*request*: the case, the discretisation key (any spelling of one mesh gives the same entry), the
-parameters, the loading (snapshot levels, plates), the measurement grid, the specimen and the
-Newton settings. It holds the measurement vector, the exact Jacobian when the run that made it
+``~/.cache/femubench/data/responses``, see :func:`problems.inverse.user_cache.cache_dir`),
+keyed by the *request*: the case, the discretisation key (any spelling of one mesh gives the
+same entry), the parameters, the loading (snapshot levels, plates), the measurement grid, the
+specimen and the Newton settings. It holds the measurement vector, the exact Jacobian when the run that made it
 was asked for one (it costs ~0.5 plain runs more; the data need none, and the study takes the
 data mesh's run as it is), the snapshot levels and mesh of the response, and the CPU and wall
 times of the run. Written atomically with a SHA-256 of its content; an entry
@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from problems.fe.mesh import discretisation_key
+from problems.inverse.user_cache import cache_dir
 from problems.io import jsonio
 from problems.io.atomic import atomic_write_text
 
@@ -36,8 +37,6 @@ SCHEMA = 1
 
 def folder() -> Path:
     """Where the entries live: ``responses/`` in the data cache directory."""
-    from problems.inverse.data import cache_dir
-
     return cache_dir() / "responses"
 
 
