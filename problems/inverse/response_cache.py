@@ -5,16 +5,16 @@ reference (``12,12,24:g8:hex27``, ~300 CPU s per case with its Jacobian) solving
 double the tier's cost.
 
 An entry is one JSON file in ``<data cache dir>/responses/`` (default
-``~/.cache/femubench/data/responses``, see :func:`problems.inverse.user_cache.cache_dir`),
-keyed by the *request*: the case, the discretisation key (any spelling of one mesh gives the
-same entry), the parameters, the loading (snapshot levels, plates), the measurement grid, the
-specimen and the Newton settings. It holds the measurement vector, the exact Jacobian when the run that made it
-was asked for one (it costs ~0.5 plain runs more; the data need none, and the study takes the
-data mesh's run as it is), the snapshot levels and mesh of the response, and the CPU and wall
-times of the run. Written atomically with a SHA-256 of its content; an entry
-that is torn, edited or of another request is computed again. Failed runs are not cached.
-The key holds the inputs, not the code: after a change of the FE code, ``femubench data --check``
-(which solves afresh, ``reuse=False``) or deleting the folder makes the runs again.
+``~/.cache/femubench/data/responses``, see :func:`problems.inverse.user_cache.cache_dir`), keyed
+by the *request*: the case, the discretisation key (any spelling of one mesh gives the same
+entry), the parameters, the loading (snapshot levels, plates), the measurement grid, the
+specimen and the Newton settings. It holds the measurement vector, the exact Jacobian when the
+run that made it was asked for one (it costs ~0.5 plain runs more; the data need none, and the
+study takes the data mesh's run as it is), the snapshot levels and mesh of the response, and the
+CPU and wall times of the run. Written atomically with a SHA-256 of its content; an entry that
+is torn, edited or of another request is computed again. Failed runs are not cached. The key
+holds the inputs, not the code: after a change of the FE code, ``femubench data --check`` (which
+solves afresh, ``reuse=False``) or deleting the folder makes the runs again.
 """
 
 from __future__ import annotations
