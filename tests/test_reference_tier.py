@@ -125,3 +125,13 @@ def test_a_torn_cache_entry_is_solved_again_and_a_jacobian_is_added_on_demand(co
     assert not response_cache.solve(model, x)["reused"]
     assert not response_cache.solve(model, x, reuse=False)["reused"]  # data --check: afresh
     assert counted_runs == ["2,2,4"] * 4
+
+
+def test_a_shipped_set_made_with_other_settings_is_served_with_a_warning(monkeypatch):
+    """A shipped model-error set made on another mesh than the tier's (e.g. one not yet remade)
+    is not silently taken for the tier's: the warning names the file, both meshes and the fix."""
+    monkeypatch.setattr(data, "MODEL_ERROR_MESH", "6,6,12:g4")
+    made = r"mesh '12,12,24:g8:hex27' \(asked '6,6,12:g4'\).*--force"
+    with pytest.warns(UserWarning, match=made):
+        ds = data.get_data(CASE, data.tier_settings("model-error"))
+    assert ds.settings.mesh == "12,12,24:g8:hex27"

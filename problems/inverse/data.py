@@ -554,7 +554,7 @@ def get_data(case: str, settings: DataSettings | None = None, *, progress: bool 
     path = data_path(case, settings)
     if path.exists():
         try:
-            return load(path)
+            ds = load(path)
         except ValueError as exc:
             if is_default(settings):  # a data set, not a cache: say which file to fix
                 raise
@@ -564,6 +564,21 @@ def get_data(case: str, settings: DataSettings | None = None, *, progress: bool 
 
             moved = set_aside_torn(path)  # a torn cache: set aside, computed again
             warnings.warn(f"{exc}; moved to {moved} and computed again", stacklevel=2)
+        else:
+            if ds.settings != settings:  # a shipped set of other settings: served, but said
+                import warnings
+
+                asked, made = settings.to_dict(), ds.settings.to_dict()
+                diff = ", ".join(
+                    f"{k} {made.get(k)!r} (asked {asked.get(k)!r})"
+                    for k in sorted(set(asked) | set(made))
+                    if asked.get(k) != made.get(k)
+                )
+                warnings.warn(
+                    f"{path} was made with {diff}; `femubench data {case} --force` remakes it",
+                    stacklevel=2,
+                )
+            return ds
     if progress:
         print(
             f"computing data for {case} on mesh {settings.mesh} (cached in {path}) ...", flush=True
