@@ -148,6 +148,16 @@ def objective_for(data: Dataset, case, mesh: str, correction=None):
     return evaluator
 
 
+def done_before(path: Path, key: str) -> dict | None:
+    """The JSON record at ``path`` when it holds ``key`` (a resumable result of the same inputs),
+    else None: missing, torn or made from other inputs."""
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    return old if isinstance(old, dict) and old.get("key") == key else None
+
+
 def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
     """Hash of what makes one variant's result: data, case box and start, mesh, budget, seed."""
     body = {
@@ -324,15 +334,11 @@ def calibrate(
         case = lab_case(name, data, summary)
         key = variant_key(data, case, settings)
         path = out / "variants" / f"{name}.json"
-        if path.exists():
-            try:
-                old = json.loads(path.read_text())
-            except (OSError, json.JSONDecodeError):
-                old = {}
-            if old.get("key") == key:
-                progress(f"{name}: done before ({path})")
-                results[name] = old
-                continue
+        old = done_before(path, key)
+        if old is not None:
+            progress(f"{name}: done before ({path})")
+            results[name] = old
+            continue
         progress(f"{name}: identifying from the test's start on mesh {settings.mesh} ...")
         res = calibrate_variant(data, case, settings) | {"key": key}
         atomic_write_text(path, json.dumps(res, indent=1, allow_nan=True) + "\n")

@@ -209,19 +209,15 @@ def score(truth, variant: str, report: dict) -> dict:
 def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) -> dict:
     """Experiment ``i``: its record from ``out/experiments`` when the key matches, else made,
     calibrated, scored and written (atomically)."""
-    from bench.calibration import CalibrationSettings, calibrate
+    from bench.calibration import CalibrationSettings, calibrate, done_before
     from problems.inverse.virtual_experiment import write_virtual_experiment
 
     key = s.key(i)
     path = out / "experiments" / f"e{i:03d}.json"
-    if path.exists():
-        try:
-            old = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
-            old = {}
-        if old.get("key") == key:
-            progress(f"experiment {i}: done before ({path})")
-            return old
+    old = done_before(path, key)
+    if old is not None:
+        progress(f"experiment {i}: done before ({path})")
+        return old
     t0 = time.perf_counter()
     test = draw_test(s, i)
     name = f"coverage-{s.variant}-{i:03d}"
