@@ -38,6 +38,10 @@ FORMAT = "femubench-calibration/1"
 CONDITION_WARNING = 1e8
 #: Laplace standard deviation (% of the value) above which a parameter is called poorly identified
 STD_WARNING_PERCENT = 25.0
+#: discretisation treatments of a calibration (:class:`CalibrationSettings`)
+CORRECTIONS = ("none", "one-point", "iterated")
+#: discretisation error bands of the identified parameters (:func:`with_error_band`)
+ERROR_BANDS = ("gci", "none")
 
 
 @dataclass(frozen=True)
@@ -46,11 +50,15 @@ class CalibrationSettings:
     check_mesh: a finer mesh on which the best variant is run once at its optimum to state the
     inverse mesh's discretisation error next to the fit (``auto``: the next finer preset of a
     preset inverse mesh, problems/inverse/build.py; ``""``: none);
-    correction: ``none``, or ``iterated``: the discretisation error at the current optimum, from
-    one run on ``check_mesh``, subtracted from the data and the problem re-solved from there,
-    until the parameters move less than 0.1 % (at most ``correction_rounds`` rounds;
-    solvers/corrected.py). Do not use the mesh that made a virtual experiment's data as
-    ``check_mesh``."""
+    correction: ``none``; ``one-point``: the discretisation error at the untreated optimum, from
+    one run on ``check_mesh``, subtracted from the data and the problem re-solved once;
+    ``iterated``: the same, repeated at each new optimum until the parameters move less than
+    0.1 % (at most ``correction_rounds`` rounds; solvers/corrected.py). Do not use the mesh that
+    made a virtual experiment's data as ``check_mesh``;
+    error_band: ``gci`` (default): with a correction, each parameter's discretisation band
+    (:func:`problems.analysis.convergence.gci_band` from the untreated and the corrected
+    estimate) stated next to the fit and added to the Laplace 95 % half-width
+    (:func:`with_error_band`); ``none``: Laplace intervals alone."""
 
     mesh: str = "coarse"
     budget: int = 80
@@ -58,16 +66,21 @@ class CalibrationSettings:
     check_mesh: str = "auto"
     correction: str = "none"
     correction_rounds: int = 5
+    error_band: str = "gci"
 
     def __post_init__(self):
-        if self.correction not in ("none", "iterated"):
+        if self.correction not in CORRECTIONS:
             raise ValueError(
-                f"correction = {self.correction!r} is unknown; allowed: none, iterated"
+                f"--correction {self.correction!r} is unknown; allowed: {', '.join(CORRECTIONS)}"
             )
-        if self.correction == "iterated" and not self.fine_mesh:
+        if self.error_band not in ERROR_BANDS:
             raise ValueError(
-                f"correction 'iterated' needs a finer mesh: check_mesh = {self.check_mesh!r} "
-                f"names none for inverse mesh {self.mesh!r}"
+                f"--error-band {self.error_band!r} is unknown; allowed: {', '.join(ERROR_BANDS)}"
+            )
+        if self.correction != "none" and not self.fine_mesh:
+            raise ValueError(
+                f"--correction {self.correction} needs a finer mesh: --check-mesh "
+                f"{self.check_mesh or 'none'} names none for inverse mesh {self.mesh!r}"
             )
 
     @property
@@ -170,6 +183,7 @@ def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
         "budget": settings.budget,
         "seed": settings.seed,
         **({"correction": settings.fine_mesh} if settings.correction != "none" else {}),
+        **({"treatment": "one-point"} if settings.correction == "one-point" else {}),
     }
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -183,9 +197,10 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
 
     ev = objective_for(data, case, settings.mesh)
     result = solve(ev, "lm", budget=settings.budget, seed=settings.seed, x0=case.start)
-    rounds, first = [], 0
-    if settings.correction == "iterated" and result.cost < math.inf:
+    rounds, first, untreated = [], 0, None
+    if settings.correction != "none" and result.cost < math.inf:
         first = result.n_evals  # the uncorrected run the rounds start from
+        untreated = [float(v) for v in result.x]
         from problems.inverse.model_error import one_point
         from solvers.corrected import solve_iterated
 
@@ -206,7 +221,7 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
             budget=settings.budget,
             x0=result.x,
             seed=settings.seed,
-            max_rounds=settings.correction_rounds,
+            max_rounds=1 if settings.correction == "one-point" else settings.correction_rounds,
         )
         ev, rounds = built[-1], result.extra["correction_rounds"]
     solved = ev.n_evals  # the run's evaluations on the last objective (in result.n_evals)
@@ -230,6 +245,9 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
         "correction": settings.correction,
         "correction_rounds": rounds,
         "n_fine_runs": len(rounds),
+        "fine_mesh": settings.fine_mesh if rounds else "",
+        # the untreated optimum on the inverse mesh: the coarser estimate of the error band
+        "x_untreated": untreated,
     }
     if not best.usable:
         return out | {"x": x.tolist(), "chi2": math.inf}
@@ -291,6 +309,54 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
     }
 
 
+def with_error_band(result: dict, settings: CalibrationSettings) -> dict:
+    """A variant's ``result`` with the discretisation error of its inverse model stated and
+    used (docs/calibrating.md, "Discretisation error band").
+
+    With ``settings.error_band == "gci"`` and a correction that ran (the result holds the
+    untreated optimum ``x_untreated`` on the inverse mesh and the corrected ``x``, which stands
+    for the estimate on the finer mesh ``fine_mesh``): per parameter the band
+    ``U = gci_band(x_untreated, x, r, p)`` (r from the two meshes' element counts, p the
+    inverse mesh family's order and the safety factor of :mod:`problems.analysis.convergence`),
+    and the 95 % interval
+    ``x +- (1.96 sd + U)``: the Laplace half-width (noise, Birge-widened) and the band added,
+    not in quadrature (the band is a bound on a bias, not an independent noise). The Laplace
+    interval alone is kept as ``ci95_laplace_lower/upper``. Otherwise the result unchanged
+    (``band`` says why). Values in the parameters' units."""
+    from problems.analysis.convergence import GCI_SAFETY, gci_band, gci_order, refinement_ratio
+
+    if not result.get("ok") or "std" not in result:
+        return result
+    if settings.error_band == "none":
+        return result | {"band": {"method": "none", "reason": "turned off (--error-band none)"}}
+    untreated = result.get("x_untreated")
+    if not untreated or not result.get("fine_mesh"):
+        return result | {
+            "band": {"method": "none", "reason": "no correction ran: one estimate only"}
+        }
+    x, std = np.asarray(result["x"], float), np.asarray(result["std"], float)
+    r = refinement_ratio(settings.mesh, result["fine_mesh"])
+    p = gci_order(settings.mesh)
+    u = gci_band(untreated, x, r, p)
+    half = 1.96 * std + u
+    return result | {
+        "band": {
+            "method": "gci",
+            "order": p,
+            "safety": GCI_SAFETY,
+            "ratio": r,
+            "inverse_mesh": settings.mesh,
+            "fine_mesh": result["fine_mesh"],
+        },
+        "band_abs": u.tolist(),
+        "band_percent": (100.0 * u / np.abs(x)).tolist(),
+        "ci95_laplace_lower": result["ci95_lower"],
+        "ci95_laplace_upper": result["ci95_upper"],
+        "ci95_lower": (x - half).tolist(),
+        "ci95_upper": (x + half).tolist(),
+    }
+
+
 def calibrate(
     experiment_path,
     out_dir,
@@ -347,6 +413,7 @@ def calibrate(
             f"{name}: chi2 {res['chi2']:.6g}, rms {res.get('rms_sigma', math.nan):.3g} sigma, "
             f"{res['n_evals']} evaluations"
         )
+    results = {name: with_error_band(res, settings) for name, res in results.items()}
     report = assemble(exp, data, summary, results, settings)
     if mcmc is not None and report["ranking"]:
         ranked = [r["variant"] for r in report["ranking"]]
@@ -841,8 +908,10 @@ def render_markdown(report: dict) -> str:
         lines += ["", f"### {name}: {v['status']} after {v['n_evals']} evaluations"]
         if v.get("correction", "none") != "none":
             lines.append(
-                f"- iterated discretisation correction: {len(v['correction_rounds'])} round(s), "
-                f"last move {v['correction_rounds'][-1]['move']:.2g} (relative)"
+                f"- {v['correction']} discretisation correction"
+                + (f" on mesh `{v['fine_mesh']}`" if v.get("fine_mesh") else "")
+                + f": {len(v['correction_rounds'])} round(s), last move "
+                f"{v['correction_rounds'][-1]['move']:.2g} (relative)"
             )
         if not v.get("ok"):
             lines.append(f"- failed: {v['message']}")
@@ -853,7 +922,24 @@ def render_markdown(report: dict) -> str:
             f"{blocks['u_v']:.3f}, force {blocks['force']:.3f}); Fisher condition "
             f"{v['condition']:.3g}; Birge ratio {v['birge_ratio']:.3g}"
         )
-        lines += [
+        lines += _parameter_table(v)
+        for w in v["warnings"]:
+            lines.append(f"- warning: {w}")
+    lines += [
+        "",
+        "Figures: `force_displacement.png` (measured against the best variants), `residuals.png`"
+        " (residuals of the best variant on the face, last image, in sigma units).",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _parameter_table(v: dict) -> list[str]:
+    """A variant's parameter table (Markdown lines): value, Laplace sd and interval and, when
+    the discretisation band was taken (:func:`with_error_band`), the untreated value on the
+    inverse mesh, the band and the interval with it."""
+    band = v.get("band") or {}
+    if band.get("method") != "gci":
+        lines = [
             "",
             "| parameter | start | value | sd | sd % | 95 % interval |",
             "|---|---|---|---|---|---|",
@@ -864,14 +950,28 @@ def render_markdown(report: dict) -> str:
                 f"{_fmt(v['std'][j])} | {v['std_percent'][j]:.3g} | "
                 f"[{_fmt(v['ci95_lower'][j])}, {_fmt(v['ci95_upper'][j])}] |"
             )
-        for w in v["warnings"]:
-            lines.append(f"- warning: {w}")
-    lines += [
+        if band.get("reason"):
+            lines.append(f"- no discretisation band: {band['reason']}")
+        return lines
+    lines = [
+        f"- discretisation error of the inverse model (GCI): U = {band['safety']:g} |x - "
+        f"x_untreated| / (r^p - 1), r = {band['ratio']:.3g} (`{band['inverse_mesh']}` -> "
+        f"`{band['fine_mesh']}`), p = {band['order']:g} (the smallest order the convergence "
+        "studies observed for this mesh family); 95 % interval = value +- (1.96 sd + U)",
         "",
-        "Figures: `force_displacement.png` (measured against the best variants), `residuals.png`"
-        " (residuals of the best variant on the face, last image, in sigma units).",
+        "| parameter | start | value | untreated (inverse mesh) | sd | sd % | band U | U % | "
+        "95 % interval (Laplace) | 95 % interval with the band |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    return "\n".join(lines) + "\n"
+    for j, n in enumerate(v["names"]):
+        lines.append(
+            f"| {n} ({v['units'][j]}) | {_fmt(v['start'][j])} | {_fmt(v['x'][j])} | "
+            f"{_fmt(v['x_untreated'][j])} | {_fmt(v['std'][j])} | {v['std_percent'][j]:.3g} | "
+            f"{_fmt(v['band_abs'][j])} | {v['band_percent'][j]:.3g} | "
+            f"[{_fmt(v['ci95_laplace_lower'][j])}, {_fmt(v['ci95_laplace_upper'][j])}] | "
+            f"[{_fmt(v['ci95_lower'][j])}, {_fmt(v['ci95_upper'][j])}] |"
+        )
+    return lines
 
 
 def render_mcmc(report: dict) -> list[str]:

@@ -63,8 +63,9 @@ class CoverageSettings:
     specimens    : (width, depth, height) mm drawn from, uniformly
     strains      : nominal strains of the images (levels = strain x height)
     spacing_mm   : DIC grid step on the face
-    correction, check_mesh : as :class:`bench.calibration.CalibrationSettings` (``""``: no
-                   discretisation check; never the data mesh)
+    correction, check_mesh, error_band : as :class:`bench.calibration.CalibrationSettings`
+                   (check_mesh ``""``: no discretisation check, ``auto``: the inverse mesh's
+                   default high-fidelity mesh; never the data mesh)
     """
 
     variant: str = "linear-compression"
@@ -79,6 +80,7 @@ class CoverageSettings:
     spacing_mm: float = 5.0
     correction: str = "none"
     check_mesh: str = ""
+    error_band: str = "gci"
 
     def __post_init__(self):
         from problems.fe.mesh import discretisation_key, parse_mesh_spec
@@ -108,7 +110,8 @@ class CoverageSettings:
                 f"--data-mesh {self.data_mesh} ({data.key}) is not finer than --inverse-mesh "
                 f"{self.inverse_mesh} ({inverse.key}) in every direction"
             )
-        if self.check_mesh and discretisation_key(self.check_mesh) == data.key:
+        fine = self.calibration_settings().fine_mesh  # the correction's needs checked too
+        if fine and discretisation_key(fine) == data.key:
             raise ValueError(
                 f"--check-mesh {self.check_mesh}: the data mesh's discretisation ({data.key}); "
                 "never a model of the calibration"
@@ -121,6 +124,19 @@ class CoverageSettings:
             raise ValueError(f"--strains {self.strains}: increasing values in (0, 0.05)")
         if list(self.strains) != sorted(set(self.strains)):
             raise ValueError(f"--strains {self.strains}: increasing values in (0, 0.05)")
+
+    def calibration_settings(self):
+        """The :class:`bench.calibration.CalibrationSettings` of each experiment's calibration."""
+        from bench.calibration import CalibrationSettings
+
+        return CalibrationSettings(
+            self.inverse_mesh,
+            self.budget,
+            self.seed,
+            check_mesh=self.check_mesh,
+            correction=self.correction,
+            error_band=self.error_band,
+        )
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -141,6 +157,8 @@ class CoverageSettings:
         """Hash of what makes experiment ``i`` and its calibration (``n`` excluded: a study
         extended to more experiments keeps the ones done)."""
         body = {k: v for k, v in self.to_dict().items() if k != "n"} | {"index": i}
+        if self.correction == "none":  # no band without a correction: studies before it resume
+            body.pop("error_band")
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -188,28 +206,43 @@ def score(truth, variant: str, report: dict) -> dict:
     x = np.asarray(v["x"], float)
     lo, hi = np.asarray(v["ci95_lower"]), np.asarray(v["ci95_upper"])
     covered = (lo <= truth) & (truth <= hi)
-    return out | {
-        "names": v["names"],
-        "x": x.tolist(),
-        "error_percent": (100.0 * (x / truth - 1.0)).tolist(),
-        "std_percent": v["std_percent"],
-        "ci95_lower": lo.tolist(),
-        "ci95_upper": hi.tolist(),
-        "covered": covered.tolist(),
-        "all_covered": bool(covered.all()),
-        "birge_ratio": v["birge_ratio"],
-        "rms_sigma": v["rms_sigma"],
-        "n_evals": v["n_evals"],
-        "true_first_aic": bool(by_aic and by_aic[0] == variant),
-        "true_first_evidence": bool(by_z and by_z[0] == variant),
-        "model_probability": prob.get(variant, math.nan),
-    }
+    band = {}
+    if "band_percent" in v:  # the discretisation band widened the intervals: Laplace's alone too
+        lo_l, hi_l = np.asarray(v["ci95_laplace_lower"]), np.asarray(v["ci95_laplace_upper"])
+        band = {
+            "band_percent": v["band_percent"],
+            "covered_laplace": ((lo_l <= truth) & (truth <= hi_l)).tolist(),
+            "x_untreated": v["x_untreated"],
+            "error_untreated_percent": (
+                100.0 * (np.asarray(v["x_untreated"]) / truth - 1.0)
+            ).tolist(),
+        }
+    return (
+        out
+        | band
+        | {
+            "names": v["names"],
+            "x": x.tolist(),
+            "error_percent": (100.0 * (x / truth - 1.0)).tolist(),
+            "std_percent": v["std_percent"],
+            "ci95_lower": lo.tolist(),
+            "ci95_upper": hi.tolist(),
+            "covered": covered.tolist(),
+            "all_covered": bool(covered.all()),
+            "birge_ratio": v["birge_ratio"],
+            "rms_sigma": v["rms_sigma"],
+            "n_evals": v["n_evals"],
+            "true_first_aic": bool(by_aic and by_aic[0] == variant),
+            "true_first_evidence": bool(by_z and by_z[0] == variant),
+            "model_probability": prob.get(variant, math.nan),
+        }
+    )
 
 
 def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) -> dict:
     """Experiment ``i``: its record from ``out/experiments`` when the key matches, else made,
     calibrated, scored and written (atomically)."""
-    from bench.calibration import CalibrationSettings, calibrate, done_before
+    from bench.calibration import calibrate, done_before
     from problems.inverse.virtual_experiment import write_virtual_experiment
 
     key = s.key(i)
@@ -229,14 +262,11 @@ def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) 
             f"mesh {s.data_mesh} ..."
         )
         write_virtual_experiment(test, data_folder, name)
-    settings = CalibrationSettings(
-        s.inverse_mesh, s.budget, s.seed, check_mesh=s.check_mesh, correction=s.correction
-    )
     report = calibrate(
         exp,
         work / "calibration" / f"e{i:03d}-{key}",
         models=list(s.models),
-        settings=settings,
+        settings=s.calibration_settings(),
         progress=lambda m: progress(f"experiment {i}: {m}"),
         figures=False,
     )
@@ -276,6 +306,14 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
             "within_target": int(np.sum(e <= TARGET_ERROR_PERCENT)),
             "covered": int(C[:, j].sum()),
         }
+        bands = [r["band_percent"][j] for r in ok if "band_percent" in r]
+        if bands:  # the discretisation band (% of the value) and the Laplace interval alone
+            per[n] |= {
+                "mean_band_percent": float(np.mean(bands)),
+                "covered_laplace": sum(
+                    bool(r["covered_laplace"][j]) for r in ok if "band_percent" in r
+                ),
+            }
     n = len(records)
     return {
         "format": FORMAT,
@@ -336,13 +374,33 @@ def render_summary(summary: dict) -> str:
         f"- every parameter within {TARGET_ERROR_PERCENT:g} %: {summary['all_within_target']} "
         f"of {summary['n_ok']}",
         "",
-        "| parameter | mean abs error % | max abs error % | within 2 % | 95 % interval covers |",
-        "|---|---|---|---|---|",
     ]
+    banded = any("mean_band_percent" in p for p in summary["parameters"].values())
+    if banded:
+        lines += [
+            "95 % intervals: the Laplace half-width plus the discretisation band (GCI of the "
+            "corrected against the untreated estimate, docs/calibrating.md); 'Laplace alone' "
+            "without the band.",
+            "",
+            "| parameter | mean abs error % | max abs error % | within 2 % | 95 % interval covers "
+            "| mean band % | Laplace alone covers |",
+            "|---|---|---|---|---|---|---|",
+        ]
+    else:
+        lines += [
+            "| parameter | mean abs error % | max abs error % | within 2 % | 95 % interval "
+            "covers |",
+            "|---|---|---|---|---|",
+        ]
     for name, p in summary["parameters"].items():
         lines.append(
             f"| {name} | {p['mean_abs_error_percent']:.3g} | {p['max_abs_error_percent']:.3g} | "
             f"{p['within_target']} of {summary['n_ok']} | {p['covered']} of {summary['n_ok']} |"
+            + (
+                f" {p['mean_band_percent']:.3g} | {p['covered_laplace']} of {summary['n_ok']} |"
+                if "mean_band_percent" in p
+                else (" - | - |" if banded else "")
+            )
         )
     lines += [
         "",

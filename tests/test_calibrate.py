@@ -154,6 +154,16 @@ def test_iterated_correction_removes_the_discretisation_bias(tmp_path):
     # measured: largest relative error 0.55 uncorrected, 0.16 corrected
     assert errors["none"] > 0.1 and errors["iterated"] < errors["none"] / 3, errors
     assert rep["discretisation"]["rms_sigma"] > 0
+    # the discretisation band (default with a correction): from the untreated and the corrected
+    # estimate, added to the Laplace half-width, in report.json and report.md; here it covers
+    # the truth the Laplace intervals alone miss
+    x, u = np.array(v["x"]), np.array(v["band_abs"])
+    assert v["band"]["method"] == "gci" and v["band"]["fine_mesh"] == "5,5,10"
+    assert np.all(u > 0) and np.all(np.array(v["ci95_upper"]) > np.array(v["ci95_laplace_upper"]))
+    assert np.all(np.abs(x - truth) <= 1.96 * np.array(v["std"]) + u)
+    assert "band U" in (tmp_path / "iterated" / "report.md").read_text()
+    saved = json.loads((tmp_path / "iterated" / "report.json").read_text())
+    assert saved["variants"]["linear-compression"]["band_percent"] == v["band_percent"]
 
 
 def test_shipped_calibration_matches_the_example():

@@ -39,10 +39,19 @@ def add_arguments(p) -> None:
     )
     p.add_argument(
         "--correction",
-        choices=["none", "iterated"],
+        choices=["none", "one-point", "iterated"],
         default="none",
-        help="iterated: subtract the discretisation error at the optimum (one run on the check "
-        "mesh) from the data and re-solve, until the parameters move < 0.1 %% (default none)",
+        help="one-point: subtract the discretisation error at the untreated optimum (one run on "
+        "the check mesh) from the data and re-solve; iterated: repeat at each new optimum until "
+        "the parameters move < 0.1 %% (default none)",
+    )
+    p.add_argument(
+        "--error-band",
+        choices=["gci", "none"],
+        default="gci",
+        help="with a correction: each parameter's discretisation band (grid convergence index "
+        "from the untreated and the corrected estimate) stated and added to its 95 %% interval "
+        "(default gci; none: Laplace intervals alone)",
     )
     p.add_argument(
         "--check-mesh",
@@ -98,6 +107,7 @@ def main(args) -> int:
         args.budget or exp.budget,
         check_mesh=check,
         correction=args.correction,
+        error_band=args.error_band,
     )
     mcmc, mcmc_models = None, "best"
     if args.mcmc is not None:

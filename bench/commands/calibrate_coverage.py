@@ -64,11 +64,24 @@ def add_arguments(p) -> None:
         help="nominal strains of the images, comma-separated (default the example's 8)",
     )
     p.add_argument("--spacing", type=finite_float, default=5.0, help="DIC grid step, mm")
-    p.add_argument("--correction", choices=["none", "iterated"], default="none")
+    p.add_argument(
+        "--correction",
+        choices=["none", "one-point", "iterated"],
+        default="none",
+        help="discretisation correction of the calibration on --check-mesh (default none)",
+    )
     p.add_argument(
         "--check-mesh",
         default="none",
-        help="finer mesh of the discretisation check/correction (default none; never the data's)",
+        help="finer mesh of the discretisation check/correction ('auto': the inverse mesh's "
+        "default high-fidelity mesh; default none; never the data's)",
+    )
+    p.add_argument(
+        "--error-band",
+        choices=["gci", "none"],
+        default="gci",
+        help="with a correction, widen each 95 %% interval by the discretisation band (default "
+        "gci; none: Laplace alone)",
     )
     p.add_argument("--out", type=output_dir, required=True, help="records and summary folder")
     p.add_argument(
@@ -84,7 +97,7 @@ def main(args) -> int:
     for option, spec in (
         ("--data-mesh", args.data_mesh),
         ("--inverse-mesh", args.inverse_mesh),
-        *((("--check-mesh", args.check_mesh),) if args.check_mesh != "none" else ()),
+        *((("--check-mesh", args.check_mesh),) if args.check_mesh not in ("none", "auto") else ()),
     ):
         try:
             parse_mesh_spec(spec)
@@ -109,6 +122,7 @@ def main(args) -> int:
         args.spacing,
         args.correction,
         "" if args.check_mesh == "none" else args.check_mesh,
+        args.error_band,
     )
     summary = run_coverage(settings, args.out, work=args.work)
     n = summary["n_done"]

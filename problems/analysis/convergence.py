@@ -163,3 +163,53 @@ def linearised_bias(jacobian, residual, sd, x_ref) -> np.ndarray:
     rhs = np.asarray(residual, float) / np.asarray(sd, float)
     dz, *_ = np.linalg.lstsq(A, -rhs, rcond=None)
     return dz
+
+
+#: order p of the discretisation band of an identified parameter (:func:`gci_band`), per mesh
+#: family ("element gGRADING", else the element): the smallest order observed in the shipped
+#: convergence studies of that family (results/studies/convergence, field and force, every
+#: triple; none is asymptotic throughout), rounded down. A smaller p widens the band.
+#: hex27 g8 (the default inverse model's): field 2.43 -> 3.27, force 2.05 -> 1.67; other hex27
+#: gradings (g4, nine cases): down to 0.93; hex8 (nine cases): down to 0.68
+GCI_ORDERS = {"hex27 g8": 1.67, "hex27": 0.92, "hex8": 0.67}
+#: Roache's safety factor of a grid convergence index from two discretisations, or from three
+#: outside the asymptotic range (1.25 is for three grids with an asymptotic observed order)
+GCI_SAFETY = 3.0
+
+
+def refinement_ratio(coarse: str, fine: str) -> float:
+    """Refinement ratio r = h_coarse / h_fine of two mesh specs of one specimen: the cube root
+    of their element-count ratio (1.5 for ``6,6,12:g8:hex27`` -> ``9,9,18:g8:hex27``)."""
+    from problems.fe.mesh import parse_mesh_spec
+
+    n_c = math.prod(parse_mesh_spec(coarse).shape)
+    n_f = math.prod(parse_mesh_spec(fine).shape)
+    if n_f <= n_c:
+        raise ValueError(f"mesh {fine!r} is not finer than {coarse!r} ({n_f} <= {n_c} elements)")
+    return (n_f / n_c) ** (1.0 / 3.0)
+
+
+def gci_order(mesh: str) -> float:
+    """The order of :func:`gci_band` for estimates on ``mesh``'s family (:data:`GCI_ORDERS`)."""
+    from problems.fe.mesh import parse_mesh_spec
+
+    spec = parse_mesh_spec(mesh)
+    return GCI_ORDERS.get(f"{spec.element} g{spec.grading:g}", GCI_ORDERS[spec.element])
+
+
+def gci_band(x_coarse, x_fine, ratio: float, order: float, safety: float = GCI_SAFETY):
+    """Grid convergence index (Roache) of the finer of two estimates: the half-width (same units
+    as ``x``) of the band around ``x_fine`` that holds the discretisation-free value,
+
+        U = safety * |x_fine - x_coarse| / (ratio^order - 1),
+
+    the Richardson estimate of the finer estimate's own discretisation error times a safety
+    factor. ``x_coarse``, ``x_fine``: the estimates (e.g. identified parameters) from the
+    coarser and the finer discretisation; ``ratio`` > 1: h_coarse / h_fine; ``order``: of the
+    family (:func:`gci_order`). Returns an array shaped like ``x``."""
+    if not ratio > 1.0 or not order > 0.0 or not safety >= 1.0:
+        raise ValueError(
+            f"GCI needs ratio > 1, order > 0 and safety >= 1 (got {ratio}, {order}, {safety})"
+        )
+    diff = np.abs(np.asarray(x_fine, float) - np.asarray(x_coarse, float))
+    return safety * diff / (ratio**order - 1.0)
