@@ -128,9 +128,10 @@ def main(args) -> int:
     print(f"calibration report: {out / 'report.md'}")
     for i, row in enumerate(report["ranking"], 1):
         v = report["variants"][row["variant"]]
+        # the 95 % half-width: Laplace's, plus the discretisation band when one was taken
         values = ", ".join(
-            f"{n} {x:.4g} +- {1.96 * s:.2g}" for n, x, s in zip(v["names"], v["x"], v["std"])
-        )
+            f"{n} {x:.4g} +- {hi - x:.2g}" for n, x, hi in zip(v["names"], v["x"], v["ci95_upper"])
+        ) + (" (95 %, with the discretisation band)" if "band_abs" in v else "")
         print(
             f"{i}. {row['variant']}: dAIC {row['delta_aic']:.3g}, rms {row['rms_sigma']:.3f} "
             f"sigma; {values}"
