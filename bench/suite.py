@@ -372,33 +372,22 @@ def load_suite(path: str | Path) -> Suite:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    suite = parse_suite(raw, name=path.stem, source=text, where=str(path))
-    missing = missing_surrogates(suite)
-    if missing:
-        raise ValueError(
-            f"{path}: invalid suite:\n  - "
-            + "\n  - ".join(
-                f"tracks: no default surrogate of {case} on mesh {mesh} ({folder}); build it "
-                f"with `femubench surrogate {case} --mesh {mesh}`"
-                for case, mesh, folder in missing
-            )
-        )
-    return suite
+    return parse_suite(raw, name=path.stem, source=text, where=str(path))
 
 
-def missing_surrogates(suite: Suite) -> list[tuple[str, str, Path]]:
-    """``(case, mesh, folder)`` of every default surrogate the suite's surrogate-track runs need
-    and the surrogate root (bench.experiment.surrogate_track.surrogate_root) does not hold."""
-    from bench.experiment.surrogate_track import surrogate_root
+def missing_surrogates(runs) -> list[str]:
+    """One line per default surrogate that the surrogate-track runs among ``runs`` need and
+    that is nowhere to be found (:func:`bench.experiment.surrogate_track.surrogate_folder`),
+    saying how to get it. ``femubench run`` asks this of its pending runs only: a suite whose
+    surrogate-track runs all have their records needs no surrogate."""
+    from bench.experiment.surrogate_track import missing_default, surrogate_folder
     from problems.surrogate.store import JSON_NAME, NPZ_NAME, default_name
 
-    needed = dict.fromkeys((r.case, r.mesh) for r in suite.runs() if r.track == "surrogate")
-    root = surrogate_root() if needed else None
     missing = []
-    for case, mesh in needed:
-        folder = root / default_name(case, mesh)
-        if not all((folder / name).is_file() for name in (JSON_NAME, NPZ_NAME)):
-            missing.append((case, mesh, folder))
+    for case, mesh in dict.fromkeys((r.case, r.mesh) for r in runs if r.track == "surrogate"):
+        folder = surrogate_folder(default_name(case, mesh))
+        if folder is None or not all((folder / n).is_file() for n in (JSON_NAME, NPZ_NAME)):
+            missing.append(missing_default(case, mesh))
     return missing
 
 

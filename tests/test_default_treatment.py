@@ -3,12 +3,15 @@ tier and treatment (``--tier``, ``--correction``)."""
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
 from bench.experiment.objective import assemble, bae_path
 from bench.experiment.spec import RunSpec, Treatment
 from problems.inverse.cases import CASES, default_treatment
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_default_treatment_is_bae_with_a_plate_margin_on_every_case():
@@ -72,9 +75,11 @@ def test_identify_refuses_a_margin_with_the_default(capsys):
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_the_default_bae_statistics_are_shipped(name):
-    """`make run` uses the default treatment: its statistics must not be recomputed (32 paper
-    runs per case)."""
+def test_the_default_bae_statistics_are_release_artefacts(name):
+    """`make run` uses the default treatment: its statistics (32 paper runs per case) are listed
+    in the release manifest with the command that rebuilds exactly them, and when present (in the
+    tree or the artefact directory) they are the listed bytes and the documented statistics."""
+    from bench import artefacts
     from problems.inverse.build import resolve_data
     from problems.inverse.cases import get_case
     from problems.inverse.model_error import Correction
@@ -83,13 +88,51 @@ def test_the_default_bae_statistics_are_shipped(name):
     spec = replace(spec, treatment=Treatment("default").resolved(name, spec.mesh, "model-error"))
     data = resolve_data(get_case(name), spec.mesh, spec.data.tier, None)
     path = bae_path(spec, spec.treatment.hifi_mesh, data)
-    assert path.exists(), f"{path.name} missing: run `femubench model-error {name}`"
-    corr = Correction.load(path)  # hash-checked
+    rel = f"model_error/{path.name}"
+    entry = artefacts.read_manifest(ROOT / "results").get(rel)
+    assert entry is not None, f"{rel} is not in results/{artefacts.MANIFEST}"
+    assert entry["rebuild"].startswith(f"femubench identify {name} --solver lm --mesh coarse")
+    assert "--correction bae --hifi-mesh paper --plate-margin-mm 30 " in entry["rebuild"]
+    roots = (ROOT / "results", artefacts.search_roots()[1])
+    found = next((r / rel for r in roots if (r / rel).exists()), None)
+    if found is None:
+        return
+    assert artefacts.mismatches(found, entry) == []
+    corr = Correction.load(found)  # hash-checked
     assert corr.treatment == "bae" and corr.provenance["samples"] == 32 and corr.n_hifi >= 28
     assert corr.provenance["hifi_mesh"] == "paper" and corr.provenance["inverse_mesh"] == "coarse"
 
 
-def test_default_objective_uses_the_shipped_statistics_without_a_run():
+@pytest.fixture
+def stored_statistics(tmp_path, monkeypatch):
+    """Small BAE statistics of linear-compression's default treatment stored where the default
+    objective looks for them, in a fresh results root (the shipped ones may be absent: they are
+    release artefacts). Returns the Correction."""
+    import numpy as np
+
+    from bench.experiment.objective import prepare
+    from problems.inverse.model_error import Correction
+
+    monkeypatch.setenv("FEMUBENCH_RESULTS_DIR", str(tmp_path / "results"))
+    monkeypatch.setenv("FEMUBENCH_ARTEFACT_DIR", str(tmp_path / "artefacts"))
+    asm = prepare(RunSpec("linear-compression", "lm", treatment=Treatment("default")))
+    m = asm.objective().problem.data.size
+    corr = Correction(
+        "bae",
+        np.zeros(m),
+        np.full((m, 2), 1e-6),
+        n_hifi=32,
+        hifi_wall_s=3.0,
+        n_inverse=32,
+        inverse_wall_s=1.0,
+        points=np.ones((32, 6)),
+        provenance={"case": "linear-compression", "hifi_mesh": "paper", "samples": 32},
+    )
+    corr.save(bae_path(asm.spec, asm.hifi_mesh, asm.data))
+    return corr
+
+
+def test_default_objective_uses_the_stored_statistics_without_a_run(stored_statistics):
     obj = assemble(RunSpec("linear-compression", "lm", treatment=Treatment("default")))
     prov = obj.provenance
     assert (prov["treatment"], prov["hifi_mesh"], prov["region_plate_margin_mm"]) == (
@@ -97,7 +140,8 @@ def test_default_objective_uses_the_shipped_statistics_without_a_run():
         "paper",
         30.0,
     )
-    assert obj.n_evals == 0 and obj.charges["hifi"]["n"] == 32
+    hifi = obj.charges["hifi"]  # the stored statistics' runs, charged; none made now
+    assert obj.n_evals == 0 and (hifi["n"], hifi["wall_s"]) == (32, 3.0)
 
 
 @pytest.mark.parametrize(
@@ -124,7 +168,7 @@ def test_study_objective_refuses_tier_with_data_and_iterated():
     assert obj.provenance["treatment"] == "none"  # consistent data: nothing to correct
 
 
-def test_study_objective_default_treatment_on_model_error_data():
+def test_study_objective_default_treatment_on_model_error_data(stored_statistics):
     from bench.studies import study_objective
 
     obj, text = study_objective("linear-compression", tier="model-error", correction="default")

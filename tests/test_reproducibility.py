@@ -15,12 +15,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.experiment.spec import RunSpec
+
 ROOT = Path(__file__).resolve().parent.parent
 
 #: (results folder, the configuration to pick): cheap runs, one per kind of shipped run
 PICKS = [
     ("results/default", {"case": "linear-compression", "method": "lm", "tier": "consistent"}),
-    ("results/default", {"case": "linear-shear", "method": "cma", "track": "surrogate"}),
+    # needs the shipped surrogate (a release artefact, maybe absent: skipped; docs/artefacts.md)
+    pytest.param(
+        "results/default",
+        {"case": "linear-shear", "method": "cma", "track": "surrogate"},
+        marks=pytest.mark.slow,
+    ),
     ("results/default", {"case": "exponent-tension", "method": "lm", "tier": "model-error"}),
     # the shipped comparison (suites/comparison.toml): an FE-track run from a seeded random start
     (
@@ -44,12 +51,22 @@ def _record(folder: str, want: dict) -> dict:
     raise AssertionError(f"no record of {want} in {folder}/runs")
 
 
-@pytest.mark.parametrize("folder, want", PICKS, ids=[f"{f}:{w['method']}" for f, w in PICKS])
+def _label(pick) -> str:
+    folder, want = pick.values if hasattr(pick, "values") else pick
+    return f"{folder}:{want['method']}"
+
+
+@pytest.mark.parametrize("folder, want", PICKS, ids=[_label(p) for p in PICKS])
 def test_a_shipped_record_is_reproduced_bit_for_bit(folder, want, tmp_path):
     from bench import store
     from bench.runner import run_one
+    from bench.suite import missing_surrogates
 
     shipped = _record(folder, want)
+    if want.get("track") == "surrogate":
+        missing = missing_surrogates([RunSpec.from_dict(shipped["config"])])
+        if missing:
+            pytest.skip(missing[0])
     again = run_one(shipped["config"], suite=shipped.get("suite"))
     store.write_record(tmp_path, again)
     again = store.load_record(store.record_path(tmp_path, again["config_hash"]))

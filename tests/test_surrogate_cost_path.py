@@ -196,9 +196,11 @@ def test_misfit_in_coefficient_space_is_the_whitened_misfit(whitening):
 
 @pytest.fixture(scope="module")
 def shipped():
-    from bench.experiment.surrogate_track import load_for
+    """Small surrogates of the two cases' FE layouts (no FE run; the shipped ones may be absent:
+    they are release artefacts, see docs/artefacts.md)."""
+    from tests.test_surrogate_identify import fake_surrogate
 
-    return {n: load_for("default", n, "coarse") for n in ("hyperbolic-tension", "linear-shear")}
+    return {n: fake_surrogate(case=n) for n in ("hyperbolic-tension", "linear-shear")}
 
 
 def _objectives(sur, name, **kw):
@@ -262,12 +264,17 @@ def test_a_failing_cost_path_falls_back_to_the_models_call(shipped):
     assert fast._misfit is None
 
 
-def test_surrogate_command_times_a_stored_surrogate_without_changing_it(tmp_path, capsys):
+def test_surrogate_command_times_a_stored_surrogate_without_changing_it(
+    shipped, tmp_path, capsys, monkeypatch
+):
     import json
 
     from bench.cli import main
     from bench.experiment.surrogate_track import load_for
+    from problems.surrogate.store import save
 
+    save(shipped["linear-shear"], tmp_path / "linear-shear__coarse")
+    monkeypatch.setenv("FEMUBENCH_SURROGATE_DIR", str(tmp_path))
     before = load_for("default", "linear-shear", "coarse").hash
     out = tmp_path / "t.json"
     assert main(["surrogate", "linear-shear", "--time", "--json", str(out)]) == 0

@@ -27,11 +27,13 @@ from problems.surrogate.training import Runs
 CASE = "linear-compression"
 
 
-def fake_surrogate(mesh: str = "coarse", discretisation: str | None = None, n: int = 40):
+def fake_surrogate(
+    mesh: str = "coarse", discretisation: str | None = None, n: int = 40, case: str = CASE
+):
     """A surrogate of the case's FE layout fitted to a cheap smooth map of x (no FE run): the
-    consistent data's values plus a smooth function of the scaled parameters."""
-    case = get_case(CASE)
-    data = get_data(CASE, tier_settings("consistent"))
+    consistent data's values plus a smooth function of the scaled parameters (of ``case``)."""
+    name, case = case, get_case(case)
+    data = get_data(name, tier_settings("consistent"))
     rng = np.random.default_rng(0)
     X = case.lower + rng.random((n, len(case.names))) * (case.upper - case.lower)
     Z = (X - case.lower) / (case.upper - case.lower)
@@ -58,7 +60,7 @@ def fake_surrogate(mesh: str = "coarse", discretisation: str | None = None, n: i
     info = dict(
         sur.info,
         description={
-            "case": CASE,
+            "case": name,
             "mesh": mesh,
             "discretisation": discretisation or discretisation_key(mesh),
             "n_snapshots": 10,

@@ -51,7 +51,7 @@ def main(args) -> int:
     from bench.paths import results_root
     from bench.progress import enabled, warn_if_long
     from bench.runner import default_workers, pending_runs, worker_count
-    from bench.suite import load_suite
+    from bench.suite import load_suite, missing_surrogates
     from problems.inverse.cases import get_case
 
     suite = load_suite(args.suite)  # ValueError -> message + exit 2 (bench.cli)
@@ -60,6 +60,9 @@ def main(args) -> int:
         suite = suite.with_problem(spec["entry"].rpartition(":")[2], spec)
     out = Path(args.out) if args.out else results_root() / suite.name
     runs, pending = pending_runs(suite, out, force=args.force, retry_failed=args.retry_failed)
+    missing = missing_surrogates(pending)
+    if missing:
+        raise ValueError(f"{args.suite}: cannot run:\n  - " + "\n  - ".join(missing))
     if args.workers is not None and args.scheduler is None:
         n = worker_count(args.workers, len(pending))
         if n < args.workers:

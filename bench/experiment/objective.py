@@ -185,22 +185,30 @@ def bae_path(spec: RunSpec, hifi_mesh: str, data) -> Path:
 
 
 def bae_correction(spec: RunSpec, hifi, inverse, hifi_mesh: str, data, mapper=None):
-    """The BAE statistics of ``spec``: loaded when stored (hash-checked), else computed and
-    stored."""
+    """The BAE statistics of ``spec``: loaded when stored (hash-checked; found in the results root
+    or the artefact directory by :func:`bench.artefacts.locate`, checked against the release
+    manifest), else computed and stored at :func:`bae_path` (a release artefact that is missing
+    is named with a one-line warning first: how to get it instead, and how long computing takes).
+    """
+    import warnings
+
+    from bench import artefacts
     from problems.inverse.cases import get_case
     from problems.inverse.model_error import Correction, bae_statistics
 
     path = bae_path(spec, hifi_mesh, data)
-    if path.exists():
+    rel = f"{path.parent.name}/{path.name}"
+    found = artefacts.locate(rel)
+    if found is not None:
         try:
-            return Correction.load(path)
+            return Correction.load(found)
         except ValueError as exc:  # a torn cache: set it aside and compute it again
-            import warnings
-
             from problems.io.atomic import set_aside_torn
 
-            moved = set_aside_torn(path)
+            moved = set_aside_torn(found)
             warnings.warn(f"{exc}; moved to {moved} and computed again", stacklevel=2)
+    elif artefacts.listed(rel):
+        warnings.warn(f"{artefacts.missing(rel)}; computing them now", stacklevel=2)
     case = get_case(spec.case)
     corr = bae_statistics(
         hifi,

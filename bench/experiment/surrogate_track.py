@@ -32,26 +32,55 @@ def surrogate_root():
     return default_root() or results_root() / "surrogates"
 
 
+def surrogate_folder(key: str):
+    """The folder of the stored surrogate named ``key``: ``$FEMUBENCH_SURROGATE_DIR/<key>`` when
+    that is set, else ``surrogates/<key>`` in the results root or the artefact directory
+    (:func:`bench.artefacts.locate`, checked against the release manifest); None when absent."""
+    from bench import artefacts
+    from problems.surrogate.store import default_root
+
+    env = default_root()
+    if env is not None:
+        return env / key if (env / key).is_dir() else None
+    return artefacts.locate(f"surrogates/{key}")
+
+
+def missing_default(case: str, mesh: str) -> str:
+    """One line: the default surrogate of ``case`` on ``mesh`` is missing, and how to get it."""
+    from bench import artefacts
+    from problems.surrogate.store import default_name, default_root
+
+    rel = f"surrogates/{default_name(case, mesh)}"
+    what = f"no default surrogate of {case} on mesh {mesh}"
+    if default_root() is None and artefacts.listed(rel):
+        return f"{what}: {artefacts.missing(rel)}"
+    build = f"femubench surrogate {case} --mesh {mesh}"
+    return f"{what} in {surrogate_root()} (build it with `{build}`)"
+
+
 def load_for(name: str, case: str, mesh: str):
     """The stored surrogate ``name`` (a path, a name under the surrogate root, or ``default`` =
-    ``<case>__<mesh>`` there), checked to be a surrogate of ``case``."""
+    ``<case>__<mesh>`` there; names are found by :func:`surrogate_folder`), checked to be a
+    surrogate of ``case``."""
+    from pathlib import Path
+
     from problems.surrogate.store import default_name, load
 
-    root = surrogate_root()
     key = default_name(case, mesh) if name == DEFAULT else name
-    try:
-        sur = load(key, root=root)
-    except FileNotFoundError:
+    folder = Path(key).expanduser() if name != DEFAULT else None
+    if folder is None or not folder.exists():
+        folder = surrogate_folder(key)
+    if folder is None:
         if name == DEFAULT:
-            raise FileNotFoundError(
-                f"no default surrogate of {case} on mesh {mesh} in {root} (build it with "
-                f"`femubench surrogate {case} --mesh {mesh}`)"
-            ) from None
-        raise
+            raise FileNotFoundError(missing_default(case, mesh))
+        raise FileNotFoundError(
+            f"surrogate {name!r} is neither a folder or file nor in {surrogate_root()}"
+        )
+    sur = load(folder)
     got = (sur.info.get("description") or {}).get("case")
     if got is not None and got != case:
         raise ValueError(f"surrogate {name!r} is of case {got!r}, not {case!r}")
-    sur.info["path"] = str(root / key) if name == DEFAULT else str(key)
+    sur.info["path"] = str(folder)
     return sur
 
 

@@ -1,0 +1,316 @@
+"""Release artefacts: the large inputs the shipped results were made with (the stored default
+surrogates, ``surrogates/<name>/``, and the BAE statistics, ``model_error/<file>.npz``) that can
+live outside the source tree.
+
+The manifest ``<results root>/artefacts.json`` (format ``femubench-artefacts/1``) lists each
+artefact by its path relative to the results root with its size (``bytes``), its ``sha256``, the
+``femubench`` command that rebuilds it (``rebuild``) and how long that took (``rebuild_s``, s of
+wall time). A file artefact's ``sha256`` is that of its bytes; a folder's is that of the lines
+``<sha256>  <name>\\n`` of its files in name order (as ``sha256sum`` prints them), each file also
+listed under ``files`` with its own ``sha256`` and ``bytes``.
+
+:func:`locate` is the one lookup of every loader (:func:`bench.experiment.surrogate_track.load_for`,
+:func:`bench.experiment.objective.bae_correction`): the artefact in the results root if it is
+there, else in :func:`~problems.inverse.user_cache.artefact_dir` (``$FEMUBENCH_ARTEFACT_DIR``,
+default ``~/.cache/femubench/artefacts``). A listed artefact found with other bytes than the
+manifest's is used with a one-line warning naming both hashes (a rebuild need not be bit-identical);
+a missing one is named with its rebuild command by :func:`missing`. :func:`pack` writes the
+listed artefacts into one ``.tar.xz`` (attached to a release), :func:`unpack` verifies every file
+of such an archive against the manifest before anything is put in place.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tarfile
+import tempfile
+import warnings
+from pathlib import Path
+
+FORMAT = "femubench-artefacts/1"
+#: File name of the manifest in the results root.
+MANIFEST = "artefacts.json"
+
+_digests: dict[tuple, str] = {}
+
+
+def manifest_path(root: str | Path | None = None) -> Path:
+    """The manifest of the results root ``root`` (default :func:`bench.paths.results_root`)."""
+    from bench.paths import results_root
+
+    return Path(root if root is not None else results_root()) / MANIFEST
+
+
+def read_manifest(root: str | Path | None = None) -> dict[str, dict]:
+    """``{relative path: entry}`` of the manifest of ``root`` ({} when it has none); ValueError
+    naming the file when it is not a manifest."""
+    path = manifest_path(root)
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON: {exc}") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ValueError(f"{path} is not an artefact manifest (format {FORMAT})")
+    return doc.get("artefacts", {})
+
+
+def write_manifest(entries: dict[str, dict], root: str | Path | None = None) -> Path:
+    """Write the manifest of ``root`` (atomically, sorted, one key per line)."""
+    from problems.io.atomic import atomic_write_text
+
+    doc = {"format": FORMAT, "artefacts": dict(sorted(entries.items()))}
+    return atomic_write_text(manifest_path(root), json.dumps(doc, indent=1, sort_keys=True) + "\n")
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of the bytes of ``path``; remembered per (path, size, mtime) in this
+    process, so a loader that reads the same file again does not hash it again."""
+    st = os.stat(path)
+    key = (str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _digests:
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        _digests[key] = h.hexdigest()
+    return _digests[key]
+
+
+def folder_sha256(files: dict[str, dict]) -> str:
+    """SHA-256 of a folder artefact: of the ``sha256sum`` lines of its ``files``, in name order."""
+    lines = "".join(f"{files[n]['sha256']}  {n}\n" for n in sorted(files))
+    return hashlib.sha256(lines.encode()).hexdigest()
+
+
+def describe(path: str | Path) -> dict:
+    """``{"sha256", "bytes"}`` of the file ``path``, or of the folder ``path`` with ``files``
+    (its regular files, recursively, by relative POSIX name)."""
+    path = Path(path)
+    if path.is_file():
+        return {"sha256": file_sha256(path), "bytes": path.stat().st_size}
+    if not path.is_dir():
+        raise FileNotFoundError(f"artefact {path} does not exist")
+    files = {
+        p.relative_to(path).as_posix(): {"sha256": file_sha256(p), "bytes": p.stat().st_size}
+        for p in sorted(path.rglob("*"))
+        if p.is_file()
+    }
+    return {
+        "files": files,
+        "sha256": folder_sha256(files),
+        "bytes": sum(f["bytes"] for f in files.values()),
+    }
+
+
+def mismatches(path: str | Path, entry: dict) -> list[str]:
+    """One line per file of ``path`` whose bytes are not the manifest ``entry``'s (both hashes
+    named), or that is missing; [] when ``path`` is the listed artefact."""
+    path = Path(path)
+    if "files" not in entry:
+        got = file_sha256(path) if path.is_file() else None
+        return [] if got == entry["sha256"] else [_mismatch(path, got, entry["sha256"])]
+    out = []
+    for name, want in sorted(entry["files"].items()):
+        p = path / name
+        got = file_sha256(p) if p.is_file() else None
+        if got != want["sha256"]:
+            out.append(_mismatch(p, got, want["sha256"]))
+    return out
+
+
+def _mismatch(path: Path, got: str | None, want: str) -> str:
+    if got is None:
+        return f"{path} is missing (the release's sha256 {want[:16]})"
+    return f"{path}: sha256 {got[:16]} is not the release's {want[:16]} ({MANIFEST})"
+
+
+def search_roots() -> list[Path]:
+    """Where :func:`locate` looks, in order: the results root, then the artefact directory."""
+    from bench.paths import results_root
+    from problems.inverse.user_cache import artefact_dir
+
+    return [results_root(), artefact_dir()]
+
+
+def locate(rel: str) -> Path | None:
+    """The artefact ``rel`` (a path relative to the results root, e.g. ``surrogates/x__coarse``):
+    in the results root if there, else in the artefact directory; None when in neither. A listed
+    artefact whose bytes differ from the manifest's is returned with a one-line warning naming
+    both hashes (and how many files differ)."""
+    entry = read_manifest().get(rel)
+    for root in search_roots():
+        path = root / rel
+        if path.exists():
+            bad = mismatches(path, entry) if entry is not None else []
+            if bad:
+                more = f" (and {len(bad) - 1} more file(s))" if len(bad) > 1 else ""
+                warnings.warn(
+                    f"{bad[0]}{more}: not the artefact the shipped results were made with "
+                    "(rebuilt or changed); results made with it may differ",
+                    stacklevel=2,
+                )
+            return path
+    return None
+
+
+def listed(rel: str) -> dict | None:
+    """The manifest entry of ``rel``, or None when the manifest does not list it."""
+    return read_manifest().get(rel)
+
+
+def duration(seconds: float) -> str:
+    """``seconds`` as ``~N min`` (or ``~N.N h`` from 90 min on)."""
+    minutes = seconds / 60.0
+    return f"~{minutes / 60:.1f} h" if minutes >= 90 else f"~{max(1, round(minutes))} min"
+
+
+def missing(rel: str) -> str:
+    """One line for an artefact in neither place: where it was looked for and, when the manifest
+    lists it, how to get it (the release archive, or its rebuild command and its duration)."""
+    roots = " nor in ".join(str(r) for r in search_roots())
+    entry = listed(rel)
+    if entry is None:
+        return f"{rel} is neither in {roots}"
+    return (
+        f"{rel} is neither in {roots}: unpack the release archive "
+        f"(`femubench artefacts unpack FILE.tar.xz`) or rebuild it with `{entry['rebuild']}` "
+        f"({duration(entry['rebuild_s'])})"
+    )
+
+
+def add(path: str | Path, rebuild: str, rebuild_s: float) -> tuple[str, dict]:
+    """List (or re-list) the artefact ``path`` (inside the results root) in its manifest with
+    its sizes and hashes of now, the command ``rebuild`` and its duration ``rebuild_s`` (s)."""
+    from bench.paths import results_root
+
+    root = results_root()
+    path = Path(path).resolve()
+    try:
+        rel = path.relative_to(root.resolve()).as_posix()
+    except ValueError:
+        raise ValueError(f"PATH {path} is not inside the results root {root}") from None
+    if not rebuild.startswith("femubench "):
+        raise ValueError(f"--rebuild {rebuild!r}: give the femubench command that rebuilds it")
+    if not rebuild_s > 0:
+        raise ValueError(f"--rebuild-s {rebuild_s}: must be > 0 (s of wall time)")
+    entries = read_manifest(root)
+    entries[rel] = {**describe(path), "rebuild": rebuild, "rebuild_s": float(rebuild_s)}
+    write_manifest(entries, root)
+    return rel, entries[rel]
+
+
+def pack(archive: str | Path) -> tuple[Path, list[str]]:
+    """Write every listed artefact (found by :func:`locate`'s order) into the ``.tar.xz``
+    ``archive`` under its relative path, atomically and reproducibly (sorted members, no owners,
+    mtime 0). ValueError, before anything is written, when one is missing or differs from the
+    manifest. Returns the archive and the artefacts packed."""
+    from problems.io.atomic import atomic_write
+
+    archive = Path(archive)
+    if not archive.name.endswith(".tar.xz"):
+        raise ValueError(f"ARCHIVE {archive.name!r}: the name must end in .tar.xz")
+    entries = read_manifest()
+    if not entries:
+        raise ValueError(f"{manifest_path()} lists no artefacts")
+    found, problems = {}, []
+    for rel, entry in sorted(entries.items()):
+        path = next((r / rel for r in search_roots() if (r / rel).exists()), None)
+        if path is None:
+            problems.append(missing(rel))
+            continue
+        problems += mismatches(path, entry)
+        found[rel] = path
+    if problems:
+        raise ValueError("cannot pack: " + "; ".join(problems))
+
+    def write(fh):
+        with tarfile.open(fileobj=fh, mode="w:xz", preset=6) as tar:
+            for rel, path in found.items():
+                names = sorted(entries[rel]["files"]) if "files" in entries[rel] else [""]
+                for name in names:
+                    member = f"{rel}/{name}" if name else rel
+                    src = path / name if name else path
+                    info = tar.gettarinfo(str(src), arcname=member)
+                    info.uid = info.gid = 0
+                    info.uname = info.gname = ""
+                    info.mtime = 0
+                    info.mode = 0o644
+                    with open(src, "rb") as data:
+                        tar.addfile(info, data)
+
+    atomic_write(archive, write)
+    return archive, list(found)
+
+
+def _owner(member: str, entries: dict[str, dict]) -> tuple[str, str] | None:
+    """``(artefact, file name inside it or "")`` of an archive member, None when not listed."""
+    if member in entries and "files" not in entries[member]:
+        return member, ""
+    for rel, entry in entries.items():
+        if member.startswith(rel + "/") and member[len(rel) + 1 :] in entry.get("files", {}):
+            return rel, member[len(rel) + 1 :]
+    return None
+
+
+def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
+    """Put the artefacts of ``archive`` (written by :func:`pack`) into ``dest`` (default the
+    artefact directory). Every member is checked first: it must be a regular file the manifest
+    lists, and every artefact complete with the manifest's sha256 of each file; any problem is a
+    ValueError naming it (both hashes for a mismatch) and nothing is put in place. Each artefact
+    then replaces its old copy in ``dest`` as a unit. Returns the artefacts unpacked."""
+    from problems.inverse.user_cache import artefact_dir
+    from problems.io.atomic import atomic_dir
+
+    archive = Path(archive)
+    dest = Path(dest) if dest is not None else artefact_dir()
+    entries = read_manifest()
+    if not entries:
+        raise ValueError(f"{manifest_path()} lists no artefacts: nothing to check the archive by")
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=dest, prefix=".unpack.") as tmp:
+        tmp = Path(tmp)
+        got: dict[str, set] = {}
+        try:
+            tar = tarfile.open(archive, mode="r:xz")
+        except (tarfile.TarError, EOFError, OSError) as exc:
+            raise ValueError(f"ARCHIVE {archive} is not a .tar.xz ({exc})") from None
+        with tar:
+            try:
+                members = tar.getmembers()
+            except (tarfile.TarError, EOFError, OSError) as exc:
+                raise ValueError(f"ARCHIVE {archive} is torn ({exc})") from None
+            for m in members:
+                if m.isdir():
+                    continue
+                owner = _owner(m.name, entries)
+                if not m.isfile() or owner is None:
+                    raise ValueError(
+                        f"ARCHIVE {archive}: member {m.name!r} is not a file of an artefact "
+                        f"listed in {manifest_path()}"
+                    )
+                target = tmp / m.name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with tar.extractfile(m) as src, open(target, "wb") as out:
+                    shutil.copyfileobj(src, out)
+                got.setdefault(owner[0], set()).add(owner[1])
+        if not got:
+            raise ValueError(f"ARCHIVE {archive} holds no artefact")
+        problems = [line for rel in sorted(got) for line in mismatches(tmp / rel, entries[rel])]
+        if problems:
+            raise ValueError(f"ARCHIVE {archive}: " + "; ".join(problems))
+        for rel in sorted(got):
+            final = dest / rel
+            if "files" in entries[rel]:
+                with atomic_dir(final) as staged:
+                    for name in entries[rel]["files"]:
+                        (staged / name).parent.mkdir(parents=True, exist_ok=True)
+                        os.replace(tmp / rel / name, staged / name)
+            else:
+                final.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(tmp / rel, final)
+    return sorted(got)

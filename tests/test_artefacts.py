@@ -1,0 +1,240 @@
+"""Release artefacts outside the tree (bench/artefacts.py, ``femubench artefacts``): the manifest's
+hashes, the lookup (results root, then the artefact directory) with its mismatch warning and its
+missing line, pack and unpack with their checks, and the loaders of surrogates and BAE statistics
+that use it. All on small temporary artefacts."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import shutil
+import tarfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench import artefacts as A
+from bench.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SUR_CMD = "femubench surrogate linear-compression --mesh coarse"
+BAE_CMD = "femubench identify linear-compression --solver lm --correction bae"
+
+
+@pytest.fixture
+def roots(tmp_path, monkeypatch):
+    """A results root with one folder artefact (two files) and one file artefact, both listed;
+    an empty artefact directory. Returns (results root, artefact directory)."""
+    results, cache = tmp_path / "results", tmp_path / "cache"
+    monkeypatch.setenv("FEMUBENCH_RESULTS_DIR", str(results))
+    monkeypatch.setenv("FEMUBENCH_ARTEFACT_DIR", str(cache))
+    monkeypatch.delenv("FEMUBENCH_SURROGATE_DIR", raising=False)
+    folder = results / "surrogates" / "s__coarse"
+    folder.mkdir(parents=True)
+    (folder / "a.json").write_text('{"a": 1}\n')
+    (folder / "b.npz").write_bytes(bytes(range(256)) * 40)
+    (results / "model_error").mkdir()
+    (results / "model_error" / "x.npz").write_bytes(b"statistics" * 100)
+    assert main(["artefacts", "add", str(folder), "--rebuild", SUR_CMD, "--rebuild-s", "660"]) == 0
+    assert (
+        main(
+            [
+                "artefacts",
+                "add",
+                str(results / "model_error" / "x.npz"),
+                "--rebuild",
+                BAE_CMD,
+                "--rebuild-s",
+                "5400",
+            ]
+        )
+        == 0
+    )
+    return results, cache
+
+
+def test_the_manifest_holds_sizes_and_sha256_of_files_and_folders(roots):
+    results, _ = roots
+    entries = A.read_manifest()
+    f = entries["model_error/x.npz"]
+    assert f["sha256"] == hashlib.sha256(b"statistics" * 100).hexdigest() and f["bytes"] == 1000
+    d = entries["surrogates/s__coarse"]
+    lines = "".join(
+        f"{hashlib.sha256((results / 'surrogates/s__coarse' / n).read_bytes()).hexdigest()}  {n}\n"
+        for n in ("a.json", "b.npz")
+    )
+    assert d["sha256"] == hashlib.sha256(lines.encode()).hexdigest()
+    assert d["bytes"] == 9 + 10240 and set(d["files"]) == {"a.json", "b.npz"}
+    assert (d["rebuild"], d["rebuild_s"]) == (SUR_CMD, 660.0)
+
+
+def test_locate_prefers_the_tree_then_the_cache_and_warns_on_other_bytes(roots, capsys):
+    results, cache = roots
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert A.locate("model_error/x.npz") == results / "model_error" / "x.npz"
+    want = A.read_manifest()["model_error/x.npz"]["sha256"]
+    (results / "model_error" / "x.npz").write_bytes(b"rebuilt")
+    got = hashlib.sha256(b"rebuilt").hexdigest()
+    with pytest.warns(UserWarning) as caught:
+        assert A.locate("model_error/x.npz") == results / "model_error" / "x.npz"
+    msg = str(caught[0].message)
+    assert got[:16] in msg and want[:16] in msg and "\n" not in msg
+    assert main(["artefacts", "verify"]) == 1
+    out, err = capsys.readouterr()
+    assert "MISMATCH" in out and got[:16] in err and want[:16] in err
+    # gone from the tree: found in the artefact directory
+    (results / "model_error" / "x.npz").unlink()
+    assert A.locate("model_error/x.npz") is None
+    (cache / "model_error").mkdir(parents=True)
+    (cache / "model_error" / "x.npz").write_bytes(b"statistics" * 100)
+    assert A.locate("model_error/x.npz") == cache / "model_error" / "x.npz"
+    assert main(["artefacts", "verify"]) == 0
+
+
+def test_a_missing_artefact_is_one_line_with_its_rebuild_command_and_time(roots):
+    results, _ = roots
+    (results / "model_error" / "x.npz").unlink()
+    line = A.missing("model_error/x.npz")
+    assert "\n" not in line and f"`{BAE_CMD}` (~1.5 h)" in line
+    assert "femubench artefacts unpack" in line and str(results) in line
+    assert A.duration(660) == "~11 min" and A.duration(20) == "~1 min"
+
+
+def test_pack_then_unpack_restores_the_same_bytes_reproducibly(roots, tmp_path, capsys):
+    results, cache = roots
+    a, b = tmp_path / "a.tar.xz", tmp_path / "b.tar.xz"
+    assert main(["artefacts", "pack", str(a)]) == 0
+    assert A.file_sha256(a) in capsys.readouterr().out
+    assert main(["artefacts", "pack", str(b)]) == 0
+    assert a.read_bytes() == b.read_bytes()  # same artefacts, same archive
+    files = ("model_error/x.npz", "surrogates/s__coarse/a.json", "surrogates/s__coarse/b.npz")
+    before = {rel: (results / rel).read_bytes() for rel in files}
+    shutil.rmtree(results / "surrogates")
+    (results / "model_error" / "x.npz").unlink()
+    assert A.locate("surrogates/s__coarse") is None and A.locate("model_error/x.npz") is None
+    assert main(["artefacts", "unpack", str(a)]) == 0
+    for rel, data in before.items():
+        assert (cache / rel).read_bytes() == data
+    assert A.locate("surrogates/s__coarse") == cache / "surrogates" / "s__coarse"
+    assert sorted(p.name for p in cache.iterdir()) == ["model_error", "surrogates"]  # no temp left
+
+
+def _archive(path: Path, members: dict[str, bytes]) -> Path:
+    with tarfile.open(path, "w:xz") as tar:
+        for name, data in members.items():
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    "members, needle",
+    [
+        ({"model_error/x.npz": b"tampered"}, "is not the release's"),
+        ({"../evil": b"x"}, "is not a file of an artefact"),
+        ({"model_error/other.npz": b"x"}, "is not a file of an artefact"),
+        ({"surrogates/s__coarse/a.json": b'{"a": 1}\n'}, "b.npz is missing"),
+    ],
+)
+def test_unpack_refuses_an_archive_that_is_not_the_manifest(
+    roots, tmp_path, capsys, members, needle
+):
+    _, cache = roots
+    archive = _archive(tmp_path / "bad.tar.xz", members)
+    assert main(["artefacts", "unpack", str(archive)]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1, err
+    if "tampered" in str(members):
+        assert hashlib.sha256(b"tampered").hexdigest()[:16] in err
+    assert not any(p.is_file() for p in cache.rglob("*"))  # nothing was put in place
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["pack", "out.zip"], "must end in .tar.xz"),
+        (["pack"], "give the ARCHIVE or PATH"),
+        (["add", "model_error/x.npz"], "--rebuild CMD and --rebuild-s S"),
+        (["add", "/etc/hostname", "--rebuild", BAE_CMD, "--rebuild-s", "1"], "not inside"),
+        (["verify", "--rebuild-s", "3"], "with 'add' only"),
+        (["unpack", "missing.tar.xz"], "is not a .tar.xz"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(roots, capsys, argv, needle):
+    assert main(["artefacts", *argv]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_shipped_manifest_lists_every_stored_surrogate_and_statistic():
+    """Every shipped default surrogate and BAE statistic is a listed release artefact with a
+    command and a time, and every listed one is one of those."""
+    entries = A.read_manifest(ROOT / "results")
+    sur = {k for k in entries if k.startswith("surrogates/")}
+    bae = {k for k in entries if k.startswith("model_error/")}
+    assert len(sur) == 10 and len(bae) == 18 and len(entries) == 28
+    for rel, e in entries.items():
+        assert e["rebuild"].startswith("femubench ") and e["rebuild_s"] > 60 and e["bytes"] > 1e5
+        if (ROOT / "results" / rel).exists():
+            assert A.mismatches(ROOT / "results" / rel, e) == [], rel
+
+
+def test_surrogates_are_loaded_from_the_artefact_directory(roots):
+    from bench.experiment.surrogate_track import load_for
+    from problems.surrogate.store import save
+    from tests.test_surrogate_identify import fake_surrogate
+
+    _, cache = roots
+    with pytest.raises(FileNotFoundError, match="no default surrogate of linear-compression"):
+        load_for("default", "linear-compression", "coarse")
+    sur = fake_surrogate(n=12)
+    folder = save(sur, cache / "surrogates" / "linear-compression__coarse")
+    got = load_for("default", "linear-compression", "coarse")
+    assert got.hash == sur.info["hash"] and got.info["path"] == str(folder)
+
+
+def test_make_runs_suite_with_its_records_needs_no_surrogate(tmp_path, monkeypatch, capsys):
+    """`make run` on the shipped records: every surrogate-track run has its record, so no
+    surrogate is asked for even when none is anywhere."""
+    monkeypatch.setenv("FEMUBENCH_SURROGATE_DIR", str(tmp_path / "none"))
+    suite, out = ROOT / "suites" / "default.toml", ROOT / "results" / "default"
+    assert main(["run", str(suite), "--out", str(out), "--dry-run", "--quiet"]) == 0
+    assert " 0 to run" in capsys.readouterr().out
+
+
+def test_missing_bae_statistics_are_named_before_they_are_computed(roots, monkeypatch):
+    """A listed BAE statistic in neither place: one warning line with the way to get it, then
+    the computation (stopped here)."""
+    import problems.inverse.model_error as me
+    from bench.experiment.objective import bae_path, prepare
+    from bench.experiment.spec import RunSpec, Treatment
+
+    results, cache = roots
+    spec = RunSpec("linear-compression", "lm", treatment=Treatment("default"))
+    asm = prepare(spec)
+    rel = f"model_error/{bae_path(asm.spec, asm.hifi_mesh, asm.data).name}"
+    m = asm.objective().problem.data.size
+    corr = me.Correction(
+        "bae", np.zeros(m), np.full((m, 1), 1e-6), n_hifi=7, points=np.ones((7, 6))
+    )
+    corr.save(results / rel)
+    argv = ["artefacts", "add", str(results / rel), "--rebuild", BAE_CMD, "--rebuild-s", "300"]
+    assert main(argv) == 0
+    (cache / "model_error").mkdir(parents=True)
+    (results / rel).replace(cache / rel)
+    assert prepare(spec).correction().n_hifi == 7  # from the artefact directory, no run
+
+    (cache / rel).unlink()
+
+    def stop(*a, **k):
+        raise RuntimeError("computing")
+
+    monkeypatch.setattr(me, "bae_statistics", stop)
+    with pytest.warns(UserWarning, match=r"~5 min\); computing them now") as caught:
+        with pytest.raises(RuntimeError, match="computing"):
+            prepare(spec).correction()
+    assert BAE_CMD in str(caught[0].message)
