@@ -9,8 +9,12 @@ otherwise.
 
 The test, at scaled point ``z`` with whitened residual ``r`` and Jacobian ``J = dr/dz``:
 
-1. *active bounds*: a variable at a bound whose cost gradient ``g = J^T r`` pushes outward is
-   held (the projected gradient's rule); the others are free;
+1. *active bounds*: a variable at a bound, or within ``tol`` (relative, the step's measure
+   below) of it, whose cost gradient ``g = J^T r`` pushes outward is held (the projected
+   gradient's rule on an epsilon-active set, as in Bertsekas' projected Newton methods: ``trf``
+   returns a bounded minimum a hair inside the box, and a start nudged 1e-10 off a bound is not
+   a free variable either); its part of the step is its distance to the bound; the others are
+   free;
 2. *Gauss-Newton step*: ``d`` solves ``J_free d = -r`` in the least-squares sense (minimum
    norm), projected onto the box. At a first-order point of a least-squares problem
    (``J_free^T r = 0``, zero or non-zero residual alike) ``d = 0``; near one, ``|d_i|`` estimates
@@ -68,14 +72,17 @@ def first_order(z, r, J, lower, upper, data_cost: float, tol: float = STEP_TOL) 
         return Optimality(True, 0.0, False, "zero residual")
     g = J.T @ r
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
-    held = ((z <= lo) & (g > 0)) | ((z >= hi) & (g < 0))
-    free = ~held
+    scale = np.where(z != 0, np.abs(z), 1.0)
+    near_lo, near_hi = z - lo <= tol * scale, hi - z <= tol * scale
+    held_lo, held_hi = near_lo & (g > 0), near_hi & (g < 0)
+    free = ~(held_lo | held_hi)
     d = np.zeros_like(z)
     rank = n_free = int(free.sum())
     if n_free:
         d[free], _, rank, _ = np.linalg.lstsq(J[:, free], -r, rcond=None)
     d = np.clip(z + d, lo, hi) - z
-    scale = np.where(z != 0, np.abs(z), 1.0)
+    d[held_lo] = lo[held_lo] - z[held_lo]
+    d[held_hi] = hi[held_hi] - z[held_hi]
     step = float(np.max(np.abs(d) / scale)) if d.size else 0.0
     flat = data_cost > 0 and cost >= data_cost
     if step > tol:

@@ -106,6 +106,28 @@ def strictly_inside(z, lo, hi, rstep: float = 1e-10) -> np.ndarray:
     return z
 
 
+def dogbox_start(z, lo, hi, rstep: float = 1e-10) -> np.ndarray:
+    """The start handed to dogbox: ``z`` in the box, a parameter within ``rstep * (hi - lo)``
+    (``rstep * max(1, |bound|)`` for a single finite bound) of a bound put exactly *on* it.
+
+    dogbox keeps a variable exactly on a bound whose gradient points outward out of its step (the
+    active set; least_squares leaves a dogbox start where it is and puts every accepted iterate
+    that reaches a bound exactly on it). A start a hair *inside* the box defeats that: the variable
+    is free, the dogleg step is cut where it meets the bound, every other component shrinks with
+    it, and the whole first step (~``rstep``) trips the ``xtol`` test, ending the run at its start
+    (hyperbolic-tension's default start, pt0 on its lower bound, stopped after 2 evaluations).
+    Dimensionless, in the scaled coordinates z."""
+    z = np.clip(np.array(z, float), lo, hi)
+    box = np.isfinite(lo) & np.isfinite(hi)
+    span = np.where(box, hi - lo, 1.0)
+    with np.errstate(invalid="ignore"):
+        near_lo = np.isfinite(lo) & (z - lo <= rstep * np.where(box, span, np.maximum(1, abs(lo))))
+        near_hi = np.isfinite(hi) & (hi - z <= rstep * np.where(box, span, np.maximum(1, abs(hi))))
+    z[near_lo] = lo[near_lo]
+    z[near_hi & ~near_lo] = hi[near_hi & ~near_lo]
+    return z
+
+
 def verdict(r: Run, z, residual, J, library_status: int, message: str) -> Outcome:
     """The Outcome of a least-squares run that stopped at ``z`` (residual, Jacobian ``J`` there)
     with least_squares ``library_status``: budget/iterations/failed from the library, else
@@ -132,9 +154,9 @@ def _least_squares(r: Run, method: str) -> Outcome:
     for its Jacobian, and most points are accepted. Iterations = Jacobian evaluations."""
     obj, o = r.objective, r.options
     lo, hi = r.lower, r.upper
-    # least_squares starts strictly inside the box; do the same here so that its first call is
-    # the point checked here
-    z0 = strictly_inside(r.z0, lo, hi)
+    # trf (and lm, unbounded) start strictly inside the box, as least_squares makes them, so that
+    # its first call is the point checked here; dogbox starts on a bound it is within a hair of
+    z0 = dogbox_start(r.z0, lo, hi) if method == "dogbox" else strictly_inside(r.z0, lo, hi)
     eager = obj.exact_jacobian
     ev0 = obj.evaluate(z0, with_jacobian=eager)
     if not ev0.usable:

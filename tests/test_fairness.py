@@ -210,9 +210,9 @@ def test_a_suite_sets_free_repeats_and_its_records_say_so():
 
 
 def test_least_squares_start_strictly_inside_keeps_the_box_relative_margin():
-    # a finite box: the margin 1e-10 * (hi - lo) lm's shipped records were made with (a start on
-    # a bound of the default suite, e.g. hyperbolic-tension, moved by scipy's rule instead took
-    # 9 evaluations where its record says 7); a half-infinite bound: scipy's own rule
+    # trf's start: a finite box, the margin 1e-10 * (hi - lo) (box-relative, as the records were
+    # made); a half-infinite bound: scipy's own rule. (dogbox starts *on* the bound instead:
+    # test_lm_start_on_a_bound_is_not_a_stall)
     from scipy.optimize._lsq.common import make_strictly_feasible
 
     from solvers.scipy_ import strictly_inside
@@ -225,3 +225,65 @@ def test_least_squares_start_strictly_inside_keeps_the_box_relative_margin():
     assert np.array_equal(got[box], np.clip(z, lo + 1e-10 * (hi - lo), hi - 1e-10 * (hi - lo))[box])
     assert np.array_equal(got[~box], make_strictly_feasible(z, lo, hi)[~box])
     assert np.array_equal(make_strictly_feasible(got, lo, hi)[[0, 2, 3]], got[[0, 2, 3]])
+
+
+def _bound_problem():
+    """x1 starts on its lower bound 1 and the gradient and the Gauss-Newton step both push it
+    out: the bounded minimum is (0.5, 1)."""
+    from problems.user import least_squares
+
+    def model(x):
+        return np.array([x[0], x[1], x[0] + 10.0 * x[1]])
+
+    return least_squares(model, np.array([3.0, 0.5, 8.0]), [0.0, 1.0], [10.0, 2.0])
+
+
+def test_lm_start_on_a_bound_is_not_a_stall():
+    """The failure mode of hyperbolic-tension's untreated Table 1 run (pt0 starts on its lower
+    bound; LM stopped at the start with ``xtol`` after 2 evaluations): dogbox from a start nudged
+    1e-10 inside the box takes a first step ~1e-10 long (cut where the free variable meets its
+    bound) and its xtol test ends the run there. lm hands dogbox the start *on* the bound, where
+    its active set holds the variable, and converges to the bounded minimum."""
+    from scipy.optimize import least_squares as scipy_ls
+
+    from solvers.scipy_ import dogbox_start, strictly_inside
+
+    p = _bound_problem()
+    ev = Evaluator(p)
+    lo, hi, z0 = p.lower, p.upper, np.array([1.0, 1.0])
+    tol = {"xtol": 1e-10, "ftol": 1e-10, "gtol": 1e-10}
+    nudged = scipy_ls(
+        lambda z: ev.evaluate(z).residual, strictly_inside(z0, lo, hi), bounds=(lo, hi),
+        method="dogbox", **tol,
+    )  # fmt: skip
+    assert nudged.status == 3 and nudged.nfev == 2 and abs(nudged.x[0] - 1.0) < 1e-9  # the stall
+    assert np.array_equal(dogbox_start(z0, lo, hi), z0)  # on the bound: left there
+    assert np.array_equal(dogbox_start([1.0, 1.0 + 1e-12], lo, hi), z0)  # a hair inside: onto it
+    assert np.array_equal(dogbox_start([1.0, 1.5], lo, hi), [1.0, 1.5])  # inside: untouched
+    res = solve(Evaluator(p), "lm", budget=100, x0=[1.0, 1.0])
+    assert res.status == "converged" and res.n_evals <= 8
+    assert res.x == pytest.approx([0.5, 1.0], abs=1e-9)
+
+
+def test_status_at_a_bound_is_the_first_order_truth():
+    """The status test on the problem above: the stalled start (x1 1e-10 inside its bound) is not
+    a first-order point (Gauss-Newton step 0.5 in x0); the bounded minimum is one, exactly on the
+    bound (dogbox) or a hair inside it (trf returns 1 + 2e-16; before the epsilon-active set that
+    was a Gauss-Newton step of 5, "stalled"), and trf's run says so."""
+    from solvers.optimality import data_cost, first_order
+
+    p = _bound_problem()
+    ev = Evaluator(p)
+
+    def test(z):
+        e = ev.evaluate(np.asarray(z, float))
+        return first_order(z, e.residual, ev.jacobian(np.asarray(z, float)), p.lower, p.upper,
+                           data_cost(ev))  # fmt: skip
+
+    stalled = test([1.0, 1.0 + 1e-10])
+    assert not stalled.converged and stalled.step == pytest.approx(0.5, rel=1e-6)
+    assert test([0.5, 1.0]).converged and test([0.5, 1.0 + 2e-16]).converged
+    outward = test([0.5, 1.0 + 1e-3])  # 1e-3 off the bound: free, not a first-order point
+    assert not outward.converged and outward.step > 1e-3
+    res = solve(Evaluator(p), "trf", budget=100, x0=[1.0, 1.0])
+    assert res.status == "converged" and res.x == pytest.approx([0.5, 1.0], abs=1e-6)
