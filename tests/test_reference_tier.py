@@ -5,6 +5,7 @@ study (problems/inverse/response_cache.py)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -125,6 +126,45 @@ def test_a_torn_cache_entry_is_solved_again_and_a_jacobian_is_added_on_demand(co
     assert not response_cache.solve(model, x)["reused"]
     assert not response_cache.solve(model, x, reuse=False)["reused"]  # data --check: afresh
     assert counted_runs == ["2,2,4"] * 4
+
+
+def test_an_entry_of_other_code_is_not_served(counted_runs, monkeypatch):
+    """The key holds the hash of the FE, material and forward-model sources: an entry written
+    under another code hash is solved again, one of the same code hash is served."""
+    model, x = FEForwardModel(get_case(CASE), mesh="2,2,4"), get_case(CASE).reference
+    monkeypatch.setattr(response_cache, "code_hash", lambda: "old-code")
+    assert not response_cache.solve(model, x)["reused"]
+    assert response_cache.solve(model, x)["reused"]
+    monkeypatch.setattr(response_cache, "code_hash", lambda: "new-code")
+    assert response_cache.lookup(model, x) is None
+    assert not response_cache.solve(model, x)["reused"]
+    monkeypatch.setattr(response_cache, "code_hash", lambda: "old-code")
+    assert response_cache.solve(model, x)["reused"]
+    assert counted_runs == ["2,2,4"] * 2
+
+
+def test_the_code_hash_follows_the_response_sources_only(tmp_path):
+    for rel in (
+        "fe/newton.py",
+        "fe/sub/kernel.py",
+        "materials/dp.py",
+        "inverse/forward.py",
+        "inverse/data.py",
+        "analysis/gsa.py",
+    ):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(f"# {rel}\n")
+    before = response_cache.sources_hash(tmp_path)
+    (tmp_path / "inverse/data.py").write_text("changed\n")  # not a response source
+    (tmp_path / "analysis/gsa.py").write_text("changed\n")
+    assert response_cache.sources_hash(tmp_path) == before
+    for rel in ("fe/sub/kernel.py", "materials/dp.py", "inverse/forward.py"):
+        (tmp_path / rel).write_text("changed\n")
+        assert response_cache.sources_hash(tmp_path) != before
+        before = response_cache.sources_hash(tmp_path)
+    assert response_cache.code_hash() == response_cache.sources_hash(
+        Path(response_cache.__file__).resolve().parents[1]
+    )
 
 
 def test_a_shipped_set_made_with_other_settings_is_served_with_a_warning(monkeypatch):

@@ -8,17 +8,21 @@ An entry is one JSON file in ``<data cache dir>/responses/`` (default
 ``~/.cache/femubench/data/responses``, see :func:`problems.inverse.user_cache.cache_dir`), keyed
 by the *request*: the case, the discretisation key (any spelling of one mesh gives the same
 entry), the parameters, the loading (snapshot levels, plates), the measurement grid, the
-specimen and the Newton settings. It holds the measurement vector, the exact Jacobian when the
-run that made it was asked for one (it costs ~0.5 plain runs more; the data need none, and the
-study takes the data mesh's run as it is), the snapshot levels and mesh of the response, and the
-CPU and wall times of the run. Written atomically with a SHA-256 of its content; an entry that
-is torn, edited or of another request is computed again. Failed runs are not cached. The key
-holds the inputs, not the code: after a change of the FE code, ``femubench data --check`` (which
-solves afresh, ``reuse=False``) or deleting the folder makes the runs again.
+specimen, the Newton settings and the hash of the code that computes the response
+(:func:`code_hash`: the sources of :data:`CODE_SOURCES`, read once per process). It holds the
+measurement vector, the exact Jacobian when the run that made it was asked for one (it costs
+~0.5 plain runs more; the data need none, and the study takes the data mesh's run as it is), the
+snapshot levels and mesh of the response, and the CPU and wall times of the run. Written
+atomically with a SHA-256 of its content; an entry that is torn, edited or of another request is
+computed again. Failed runs are not cached. After a change of the FE, material or forward-model
+code an entry is not served (its request names another code hash; the stale file stays until the
+folder is deleted); ``femubench data --check`` solves afresh (``reuse=False``) whatever the cache
+holds.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import time
@@ -33,6 +37,34 @@ from problems.io import jsonio
 from problems.io.atomic import atomic_write_text
 
 SCHEMA = 1
+
+#: the sources that determine a response, as globs under ``problems/``: the FE code, the
+#: materials, and the forward model with what it reads (the measurement layout, the cases'
+#: materials and fixed parameters)
+CODE_SOURCES = (
+    "fe/**/*.py",
+    "materials/**/*.py",
+    "inverse/forward.py",
+    "inverse/layout.py",
+    "inverse/case.py",
+    "inverse/cases.py",
+)
+
+
+def sources_hash(root: Path, patterns=CODE_SOURCES) -> str:
+    """SHA-256 (16 hex digits) of the files under ``root`` matched by ``patterns``: their
+    relative paths and bytes, in sorted order."""
+    h = hashlib.sha256()
+    for path in sorted({p for pattern in patterns for p in root.glob(pattern) if p.is_file()}):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(path.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=1)
+def code_hash() -> str:
+    """The hash of this checkout's :data:`CODE_SOURCES` (computed once per process)."""
+    return sources_hash(Path(__file__).resolve().parents[1])
 
 
 def folder() -> Path:
@@ -52,6 +84,7 @@ def request(model, x) -> dict:
         "points": np.asarray(model.points, float).tolist(),
         "specimen_mm": [float(v) for v in model.specimen_mm],
         "newton": asdict(model.settings),
+        "code": code_hash(),
     }
 
 
