@@ -87,15 +87,9 @@ def test_model_probabilities():
     assert p["a"] == pytest.approx(0.75) and p["b"] == pytest.approx(0.25) and p["c"] == 0.0
 
 
-def test_mcmc_on_the_fe_model_checks_the_laplace_evidence(tmp_path, monkeypatch):
-    """A tiny virtual experiment (data on 3,3,6, inverse mesh 2,2,4): a short emcee run on the FE
-    model itself. E is well identified: its posterior sd is Laplace's; beta is not, and its box
-    cuts the Gaussian, so the Laplace evidence is only near the bridge one (measured: -6.0 at
-    60 steps, -3.7 at 150, -3.0 at 400: a real non-Gaussian posterior, not chain noise). The
-    optimum lies in the chain's 95 % intervals; the report has the section; a rerun reads the
-    chain back."""
-    import bench.calibration as cal
-    from bench.calibration import CalibrationSettings, McmcSettings, calibrate
+def _tiny_experiment(tmp_path):
+    """A virtual linear-compression test on a 3,3,6 mesh at three levels (seconds to calibrate
+    on 2,2,4); returns its experiment file."""
     from problems.inverse.virtual_experiment import VirtualTest, write_virtual_experiment
 
     t = VirtualTest(
@@ -106,7 +100,20 @@ def test_mcmc_on_the_fe_model_checks_the_laplace_evidence(tmp_path, monkeypatch)
         spacing_mm=20.0,
         seed=3,
     )
-    exp = write_virtual_experiment(t, tmp_path / "ve", "mc")
+    return write_virtual_experiment(t, tmp_path / "ve", "mc")
+
+
+def test_mcmc_on_the_fe_model_checks_the_laplace_evidence(tmp_path, monkeypatch):
+    """A tiny virtual experiment (data on 3,3,6, inverse mesh 2,2,4): a short emcee run on the FE
+    model itself. E is well identified: its posterior sd is Laplace's; beta is not, and its box
+    cuts the Gaussian, so the Laplace evidence is only near the bridge one (measured: -6.0 at
+    60 steps, -3.7 at 150, -3.0 at 400: a real non-Gaussian posterior, not chain noise). The
+    optimum lies in the chain's 95 % intervals; the report has the section; a rerun reads the
+    chain back."""
+    import bench.calibration as cal
+    from bench.calibration import CalibrationSettings, McmcSettings, calibrate
+
+    exp = _tiny_experiment(tmp_path)
     kw = dict(
         models=["linear-compression"],
         settings=CalibrationSettings("2,2,4", 20, check_mesh=""),
@@ -157,17 +164,8 @@ def test_mcmc_on_a_surrogate(tmp_path):
     local box, a longer chain on it; E's sd is Laplace's, and the evidence difference with the
     surrogate's offset taken out is of the FE chain's size."""
     from bench.calibration import CalibrationSettings, McmcSettings, calibrate
-    from problems.inverse.virtual_experiment import VirtualTest, write_virtual_experiment
 
-    t = VirtualTest(
-        "linear-compression",
-        (31000.0, 33.0, 0.88, 11.0, 21.5, 1300.0),
-        data_mesh="3,3,6",
-        levels_mm=(0.05, 0.2, 0.5),
-        spacing_mm=20.0,
-        seed=3,
-    )
-    exp = write_virtual_experiment(t, tmp_path / "ve", "mc")
+    exp = _tiny_experiment(tmp_path)
     rep = calibrate(
         exp,
         tmp_path / "out",
