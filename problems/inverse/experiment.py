@@ -302,24 +302,31 @@ def _files(sec: dict, where: str, base: Path, errors: list[str], suffixes=None) 
     return out
 
 
+def _file(sec: dict, key: str, where: str, base: Path, errors: list[str]) -> Path | None:
+    """The existing file named by ``key`` of table ``where``, relative to ``base``; None (and an
+    error) when it is missing, not a string or no file."""
+    name = sec.get(key)
+    if not isinstance(name, str):
+        errors.append(f"[{where}] {key} = {name!r}: missing or not a file name")
+        return None
+    path = (base / name).resolve()
+    if not path.is_file():
+        errors.append(f"[{where}] {key} = {name!r}: no such file {path}")
+        return None
+    return path
+
+
 def _parse_images(im: dict, base: Path, errors: list[str]):
     """The ``[images]`` table: (reference image, deformed images, DICConfig, roi or None)."""
     from problems.dic.imageio import READ_SUFFIXES
 
     ref = im.get("reference")
-    reference = None
-    if not isinstance(ref, str):
-        errors.append(f"[images] reference = {ref!r}: missing or not a file name")
-    else:
-        reference = (base / ref).resolve()
-        if not reference.is_file():
-            errors.append(f"[images] reference = {ref!r}: no such file {reference}")
-            reference = None
-        elif reference.suffix.lower() not in READ_SUFFIXES:
-            errors.append(
-                f"[images] reference = {ref!r}: not an image; allowed: {', '.join(READ_SUFFIXES)}"
-            )
-            reference = None
+    reference = _file(im, "reference", "images", base, errors)
+    if reference is not None and reference.suffix.lower() not in READ_SUFFIXES:
+        errors.append(
+            f"[images] reference = {ref!r}: not an image; allowed: {', '.join(READ_SUFFIXES)}"
+        )
+        reference = None
     files = _files(im, "images", base, errors, READ_SUFFIXES)
     if reference is not None and reference in files:
         errors.append(f"[images] files: the reference {ref!r} is among the deformed images")
@@ -483,15 +490,7 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
             )
 
     lg = sec["loading"]
-    log = lg.get("log")
-    log_path = None
-    if not isinstance(log, str):
-        errors.append(f"[loading] log = {log!r}: missing or not a file name")
-    else:
-        log_path = (base / log).resolve()
-        if not log_path.is_file():
-            errors.append(f"[loading] log = {log!r}: no such file {log_path}")
-            log_path = None
+    log_path = _file(lg, "log", "loading", base, errors)
     log_columns = {}
     for key in ("displacement_column", "force_column", "image_column"):
         v = lg.get(key)
