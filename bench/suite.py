@@ -37,7 +37,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,6 +52,7 @@ from bench.experiment.spec import (
 )
 from problems.inverse.build import PLATE_MARGIN_TEXT, Region
 from problems.inverse.evaluator import BUDGET_UNITS
+from problems.io.tomlio import read_toml
 
 SUITE_KEYS = {
     "name": "suite name (string; default: the file name without .toml)",
@@ -356,22 +356,7 @@ def _types_like(default) -> tuple:
 def load_suite(path: str | Path) -> Suite:
     """Read and validate a suite TOML file; raise ValueError naming every problem."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"suite file {str(path)!r} does not exist")
-    blob = path.read_bytes()
-    if b"\0" in blob:
-        raise ValueError(f"{path}: a binary file (NUL bytes), not a TOML suite")
-    try:
-        text = blob.decode("utf-8-sig")  # a leading byte-order mark is accepted
-    except UnicodeDecodeError as exc:
-        raise ValueError(
-            f"{path}: not UTF-8 text (byte {blob[exc.start]:#04x} at offset {exc.start}); "
-            "save the suite as UTF-8"
-        ) from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    raw, text = read_toml(path, "suite")
     return parse_suite(raw, name=path.stem, source=text, where=str(path))
 
 

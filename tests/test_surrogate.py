@@ -408,3 +408,35 @@ def test_validation_times_the_model_in_process_on_the_cpu_clock(rbf_surrogate):
     without = validate(rbf_surrogate, runs, SIGMA, BLOCKS)
     assert without.fe_eval_s == 7.0 and without.clock.startswith("wall")
     assert without.blocks == val.blocks  # the errors do not depend on the timing
+
+
+def test_cli_builds_several_cases_and_skips_the_built_ones(tmp_path, monkeypatch, capsys):
+    """``femubench surrogate all --skip-done`` (the shipped defaults' rebuild, resumable): a case
+    whose folder holds surrogate.json and build.json is skipped, the others are built in turn."""
+    import problems.surrogate as surrogate_pkg
+    from bench.cli import main
+    from problems.inverse.cases import CASES
+    from problems.surrogate.store import SURROGATE_DIR_ENV
+
+    monkeypatch.setenv(SURROGATE_DIR_ENV, str(tmp_path))
+    names = list(CASES)
+    for name in names[:-1]:
+        folder = tmp_path / f"{name}__coarse"
+        folder.mkdir()
+        (folder / "surrogate.json").write_text("{}")
+        (folder / "build.json").write_text("{}")
+    (tmp_path / f"{names[-1]}__coarse").mkdir()  # a build that stopped: no build.json
+
+    def build_case_surrogate(case, **kwargs):
+        raise ValueError(f"building {case.name} with {kwargs['settings'].n_train} samples")
+
+    monkeypatch.setattr(surrogate_pkg, "build_case_surrogate", build_case_surrogate)
+    assert main(["surrogate", "all", "--samples", "300", "--skip-done", "--quiet"]) == 2
+    out, err = capsys.readouterr()
+    assert out.count("skip ") == len(names) - 1 and f"=== {names[-1]}" in out
+    assert f"building {names[-1]} with 300 samples" in err
+    # without --skip-done the first built one is refused before any work
+    assert main(["surrogate", names[0], "linear-shear"]) == 2
+    assert "already holds a surrogate" in capsys.readouterr().err
+    assert main(["surrogate", names[0], "linear-shear", "--out", str(tmp_path / "x")]) == 2
+    assert "--out and --json take one case" in capsys.readouterr().err

@@ -1,7 +1,17 @@
 """``femubench model-error CASE``: the parameter bias of the discretisation error and what each
-model-error treatment buys, at what cost (see bench/studies/model_error.py)."""
+model-error treatment buys, at what cost (see bench/studies/model_error.py).
+
+``femubench model-error --plan FILE`` runs the phases of a study plan one after another: a TOML
+file of ``[[phase]]`` tables, each the cases and options of one invocation (keys
+:data:`PHASE_KEYS`, spelled as the options: ``treatments = ["bae"]``, ``margins = [30]``,
+``bias-only = true``), the cluster options, ``--out`` and ``--quiet`` from the command line
+applying to every phase. The study is resumable (finished rows are skipped), so a plan is too.
+The shipped plan of the whole study is ``suites/studies/model_error.toml``; ``--dry-run`` prints
+its phases as command lines and computes nothing."""
 
 from __future__ import annotations
+
+import argparse
 
 NAME = "model-error"
 HELP = (
@@ -21,7 +31,20 @@ def add_arguments(p) -> None:
         positive_int,
     )
 
-    p.add_argument("cases", nargs="+", metavar="CASE", help="FE case name(s), or all")
+    p.add_argument(
+        "cases", nargs="*", metavar="CASE", help="FE case name(s), or all (not with --plan)"
+    )
+    p.add_argument(
+        "--plan",
+        metavar="FILE",
+        help="run the [[phase]] tables of a study plan (TOML, e.g. "
+        "suites/studies/model_error.toml) one after another",
+    )
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="with --plan: print each phase as a command line, compute nothing",
+    )
     p.add_argument(
         "--meshes",
         type=comma_list(mesh_spec, what="mesh"),
@@ -61,7 +84,7 @@ def add_arguments(p) -> None:
         metavar="DIR",
         type=output_dir,
         help="output directory (default results/studies/model_error/<case>; with several cases "
-        "DIR/<case>)",
+        "or --plan DIR/<case>)",
     )
     add_cluster_arguments(
         p, default_workers=1, workers_help="Dask worker processes (default 1: in-process)"
@@ -89,7 +112,94 @@ def _treatment(text: str) -> str:
     return text
 
 
+#: the keys of a plan's phase: its cases, the study's options (as on the command line) and a note
+PHASE_KEYS = (
+    "cases",
+    "meshes",
+    "treatments",
+    "margins",
+    "dic",
+    "bias-only",
+    "budget",
+    "no-figures",
+    "note",
+)
+
+
+class _PhaseParser(argparse.ArgumentParser):
+    """The command's parser for one phase of a plan: an error is a ValueError naming the phase."""
+
+    def __init__(self, where: str):
+        super().__init__(prog="femubench model-error", add_help=False)
+        self.where = where
+        add_arguments(self)
+
+    def error(self, message):
+        raise ValueError(f"{self.where}: {message}")
+
+
+def plan_phases(path) -> list[tuple[str, list[str], argparse.Namespace]]:
+    """The phases of the study plan at ``path``: ``(note, argv, parsed options)`` each, checked
+    as the command line is (ValueError naming the file and the phase)."""
+    from problems.io.tomlio import read_toml
+
+    raw, _ = read_toml(path, "study plan")
+    phases = raw.get("phase")
+    if not isinstance(phases, list) or not phases:
+        raise ValueError(f"{path}: a study plan needs [[phase]] tables")
+    out = []
+    for i, phase in enumerate(phases, 1):
+        where = f"{path}: phase {i}"
+        unknown = sorted(set(phase) - set(PHASE_KEYS))
+        if unknown:
+            raise ValueError(
+                f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(PHASE_KEYS)}"
+            )
+        cases = phase.get("cases")
+        if not (isinstance(cases, list) and cases and all(isinstance(c, str) for c in cases)):
+            raise ValueError(f'{where}: cases must be a list of case names (or ["all"])')
+        argv = list(cases)
+        for key, value in phase.items():
+            if key in ("cases", "note"):
+                continue
+            if value is True:
+                argv.append(f"--{key}")
+            elif isinstance(value, list):
+                argv += [
+                    f"--{key}",
+                    ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value),
+                ]
+            elif value is not False:
+                argv += [f"--{key}", str(value)]
+        out.append((str(phase.get("note", "")), argv, _PhaseParser(where).parse_args(argv)))
+    return out
+
+
 def main(args) -> int:
+    import shlex
+
+    if not args.plan:
+        if args.dry_run:
+            raise ValueError("--dry-run goes with --plan")
+        if not args.cases:
+            raise ValueError("give the cases (CASE ... or all) or --plan FILE")
+        return run_study(args)
+    if args.cases or args.render:
+        raise ValueError("--plan gives the cases of each phase: no CASE and no --render with it")
+    phases = plan_phases(args.plan)
+    shared = {k: getattr(args, k) for k in ("out", "workers", "scheduler", "quiet")}
+    for i, (note, argv, phase) in enumerate(phases, 1):
+        line = shlex.join(["femubench", "model-error", *argv])
+        print(f"=== phase {i}/{len(phases)}: {note + ': ' if note else ''}{line}", flush=True)
+        if not args.dry_run:
+            vars(phase).update(shared, no_figures=phase.no_figures or args.no_figures)
+            run_study(phase, out_is_root=True)
+    return 0
+
+
+def run_study(args, out_is_root: bool = False) -> int:
+    """The study on ``args.cases`` with the options of ``args`` (one command line or phase).
+    ``out_is_root``: ``args.out`` holds a folder per case even for one case (a plan's phases)."""
     from pathlib import Path
 
     from bench.parallel import mapper
@@ -101,14 +211,12 @@ def main(args) -> int:
     analytic = [c for c in cases if get_case(c).is_analytic]
     if analytic:
         raise ValueError(f"case {analytic[0]}: the model-error study needs an FE case")
-    outs = {
-        name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name
-        for name in cases
-    }
+    per_case = out_is_root or len(cases) > 1
+    outs = {name: Path(args.out) / name if args.out and per_case else args.out for name in cases}
 
     def overview():
         # every case folder under the study's root: overview.md and the all-cases figure
-        if args.out is None or len(cases) > 1:
+        if args.out is None or per_case:
             root = (
                 Path(args.out) if args.out else default_output_dir("model_error", cases[0]).parent
             )

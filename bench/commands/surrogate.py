@@ -1,5 +1,11 @@
-"""``femubench surrogate CASE``: build, validate and store a POD + RBF/GP surrogate of the FE
-forward model."""
+"""``femubench surrogate CASE [CASE ...]``: build, validate and store a POD + RBF/GP surrogate of
+the FE forward model, one case after another.
+
+The nine shipped default surrogates (docs/surrogate.md §9) are rebuilt, resumably, by::
+
+    femubench surrogate all --mesh coarse --samples 300 --local 40 --local-scale 0.1 \
+        --holdout 50 --regression gp --gp-restarts 1 --workers 2 --skip-done
+"""
 
 from __future__ import annotations
 
@@ -12,7 +18,12 @@ HELP = (
 
 
 def add_arguments(p) -> None:
-    p.add_argument("case", metavar="CASE", help="FE case name (see `femubench cases`)")
+    p.add_argument(
+        "cases",
+        nargs="+",
+        metavar="CASE",
+        help="FE case name(s) (see `femubench cases`), or all; built one after another",
+    )
     p.add_argument(
         "--mesh", default="coarse", help="FE mesh of the forward model (default: coarse)"
     )
@@ -93,17 +104,26 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--out",
         metavar="DIR",
-        help="output folder (default <results root>/surrogates/<case>__<mesh>, or "
-        "$FEMUBENCH_SURROGATE_DIR)",
+        help="output folder, one case only (default <results root>/surrogates/<case>__<mesh>, "
+        "or $FEMUBENCH_SURROGATE_DIR)",
     )
     p.add_argument(
-        "--json", metavar="FILE", help="write the summary (hold-out errors, cost, hash) as JSON"
+        "--json",
+        metavar="FILE",
+        help="write the summary (hold-out errors, cost, hash) as JSON (one case only)",
     )
-    p.add_argument(
+    existing = p.add_mutually_exclusive_group()
+    existing.add_argument(
         "--force",
         action="store_true",
         help="replace the surrogate already stored in the output folder (e.g. a shipped default "
         "one); without it an existing surrogate is refused before any work",
+    )
+    existing.add_argument(
+        "--skip-done",
+        action="store_true",
+        help="skip a case whose output folder already holds a built surrogate (surrogate.json "
+        "and build.json): a batch of cases resumes where it stopped",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument(
@@ -191,6 +211,26 @@ def summary(sur, folder, size_bytes: int) -> dict:
 
 
 def main(args) -> int:
+    """Build (or time) the surrogate of each case of ``args.cases`` in turn; a failed case stops
+    the batch (run it again with ``--skip-done`` to resume)."""
+    from argparse import Namespace
+
+    from bench.studies import case_names
+
+    names = case_names(args.cases)
+    if len(names) > 1 and (args.out or args.json):
+        raise ValueError(f"--out and --json take one case, got {len(names)} cases")
+    for name in names:
+        if len(names) > 1:
+            print(f"=== {name}", flush=True)
+        status = build(Namespace(**vars(args), case=name))
+        if status:
+            return status
+    return 0
+
+
+def build(args) -> int:
+    """Build, validate and store the surrogate of ``args.case`` (or ``--time`` it)."""
     import json
     from pathlib import Path
 
@@ -238,6 +278,9 @@ def main(args) -> int:
     if args.gp_restarts < 0:
         raise ValueError(f"--gp-restarts {args.gp_restarts} is out of range: must be >= 0")
     folder = Path(args.out) if args.out else surrogate_root() / default_name(case.name, args.mesh)
+    if args.skip_done and all((folder / f).is_file() for f in (JSON_NAME, BUILD_NAME)):
+        print(f"skip {case.name}: {folder} holds a built surrogate")
+        return 0
     check_folder(folder, args.force)
     refuse_inputs("--json", args.json, [args.data, folder / JSON_NAME, folder / NPZ_NAME])
     print(
