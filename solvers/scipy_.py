@@ -107,16 +107,17 @@ def strictly_inside(z, lo, hi, rstep: float = 1e-10) -> np.ndarray:
 
 
 def dogbox_start(z, lo, hi, rstep: float = 1e-10) -> np.ndarray:
-    """The start handed to dogbox: ``z`` in the box, a parameter within ``rstep * (hi - lo)``
-    (``rstep * max(1, |bound|)`` for a single finite bound) of a bound put exactly *on* it.
+    """Where dogbox continues after an ``xtol`` stop in its first step: ``z`` in the box, a
+    parameter within ``rstep * (hi - lo)`` (``rstep * max(1, |bound|)`` for a single finite
+    bound) of a bound put exactly *on* it.
 
-    dogbox keeps a variable exactly on a bound whose gradient points outward out of its step (the
-    active set; least_squares leaves a dogbox start where it is and puts every accepted iterate
-    that reaches a bound exactly on it). A start a hair *inside* the box defeats that: the variable
-    is free, the dogleg step is cut where it meets the bound, every other component shrinks with
-    it, and the whole first step (~``rstep``) trips the ``xtol`` test, ending the run at its start
-    (hyperbolic-tension's default start, pt0 on its lower bound, stopped after 2 evaluations).
-    Dimensionless, in the scaled coordinates z."""
+    dogbox keeps a variable exactly on a bound whose gradient points outward out of its step (its
+    active set; every accepted iterate that reaches a bound is put exactly on it). A start a hair
+    *inside* the box (least_squares' and :func:`strictly_inside`'s 1e-10) defeats that when the
+    Gauss-Newton step also points out: the variable is free, the dogleg step is cut where it meets
+    the bound, every other component shrinks with it, and the whole first step (~1e-10) trips the
+    ``xtol`` test, ending the run at its start (hyperbolic-tension's default start, pt0 on its
+    lower bound, stopped after 2 evaluations 25 % from the reference). Dimensionless, in z."""
     z = np.clip(np.array(z, float), lo, hi)
     box = np.isfinite(lo) & np.isfinite(hi)
     span = np.where(box, hi - lo, 1.0)
@@ -151,23 +152,28 @@ def _least_squares(r: Run, method: str) -> Outcome:
     """least_squares (``method``: dogbox, trf or lm) on the whitened residual in z. With exact
     Jacobians every trial point is evaluated with its Jacobian (one run with sensitivities,
     ``jacobian_cost`` forward-equivalents nominal): an accepted point then needs no second run
-    for its Jacobian, and most points are accepted. Iterations = Jacobian evaluations."""
+    for its Jacobian, and most points are accepted. Iterations = Jacobian evaluations.
+
+    A dogbox run that stops on ``xtol`` within its first step at a point that is not first-order
+    continues once from where it stopped (:func:`dogbox_start`): the start, nudged 1e-10 inside
+    the box, let a variable whose gradient points out of it cut the first step to ~1e-10, which
+    dogbox's xtol test (run on every trial step) took for convergence."""
     obj, o = r.objective, r.options
     lo, hi = r.lower, r.upper
-    # trf (and lm, unbounded) start strictly inside the box, as least_squares makes them, so that
-    # its first call is the point checked here; dogbox starts on a bound it is within a hair of
-    z0 = dogbox_start(r.z0, lo, hi) if method == "dogbox" else strictly_inside(r.z0, lo, hi)
+    # least_squares starts trf strictly inside the box; every method starts there, so that its
+    # first call is the point checked here (and records keep their trajectories)
+    z0 = strictly_inside(r.z0, lo, hi)
     eager = obj.exact_jacobian
     ev0 = obj.evaluate(z0, with_jacobian=eager)
     if not ev0.usable:
         return Outcome("failed", f"start point failed: {ev0.message}")
     n_jac = [0]
-    first = [True]
+    start = [z0]  # the start of the least_squares call under way, until its first call
 
     def fun(z):
-        # least_squares' first call is at z0, which was evaluated above on its behalf
-        reuse = first[0] and np.array_equal(z, z0)
-        first[0] = False
+        # least_squares' first call is at its start, which was evaluated on its behalf
+        reuse = start[0] is not None and np.array_equal(z, start[0])
+        start[0] = None
         return obj.evaluate(z, with_jacobian=eager, reuse=reuse).residual.copy()
 
     last: dict[bytes, np.ndarray] = {}
@@ -192,22 +198,26 @@ def _least_squares(r: Run, method: str) -> Outcome:
         if method == "lm"
         else {"bounds": (lo, hi), "max_nfev": o["max_nfev"] or r.budget}
     )
-    res = least_squares(
-        fun,
-        z0,
-        jac=jac,
-        method=method,
-        ftol=o["ftol"],
-        xtol=o["xtol"],
-        gtol=o["gtol"],
-        x_scale=o["x_scale"],
-        **kw,
-    )
+    tols = {k: o[k] for k in ("ftol", "xtol", "gtol", "x_scale")}
+    res = least_squares(fun, z0, jac=jac, method=method, **tols, **kw)
+    nfev, njev, note = int(res.nfev), int(res.njev or 0), ""
     ev = obj.evaluate(res.x, reuse=True)
+    first_step = n_jac[0] <= 2  # the start's Jacobian and at most one accepted step's
+    if method == "dogbox" and res.status in (3, 4) and first_step and obj.remaining >= 1:
+        opt = first_order(res.x, ev.residual, res.jac, lo, hi, data_cost(obj), o["opt_tol"])
+        z1 = dogbox_start(res.x, lo, hi)
+        if not opt.converged and obj.evaluate(z1, with_jacobian=eager, reuse=True).usable:
+            start[0] = z1
+            if "max_nfev" in kw and o["max_nfev"]:
+                kw["max_nfev"] = max(1, o["max_nfev"] - nfev)
+            res = least_squares(fun, z1, jac=jac, method=method, **tols, **kw)
+            nfev, njev = nfev + int(res.nfev), njev + int(res.njev or 0)
+            note = "continued once after an xtol stop in the first step; "
+            ev = obj.evaluate(res.x, reuse=True)
     r.record(res.x, ev.cost)
-    out = verdict(r, res.x, ev.residual, res.jac, res.status, res.message)
+    out = verdict(r, res.x, ev.residual, res.jac, res.status, note + res.message)
     out.n_iterations = n_jac[0]
-    out.extra.update({"library_nfev": int(res.nfev), "library_njev": int(res.njev or 0)})
+    out.extra.update({"library_nfev": nfev, "library_njev": njev})
     return out
 
 
