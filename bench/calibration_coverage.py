@@ -153,13 +153,25 @@ class CoverageSettings:
         body |= {"spacing_mm": d["spacing_mm"], "index": i}
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
-    def key(self, i: int) -> str:
+    def calibration_key(self, i: int) -> str:
         """Hash of what makes experiment ``i`` and its calibration (``n`` excluded: a study
-        extended to more experiments keeps the ones done)."""
+        extended to more experiments keeps the ones done): names its calibration folder."""
         body = {k: v for k, v in self.to_dict().items() if k != "n"} | {"index": i}
         if self.correction == "none":  # no band without a correction: studies before it resume
             body.pop("error_band")
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
+    def key(self, i: int) -> str:
+        """Hash of what makes experiment ``i``'s record: :meth:`calibration_key`, and with a
+        discretisation band its orders and safety factor (records scored with other constants
+        are rescored from the calibration folder, without new runs)."""
+        from problems.analysis.convergence import GCI_ORDERS, GCI_SAFETY
+
+        key = self.calibration_key(i)
+        if self.correction == "none" or self.error_band == "none":
+            return key
+        band = json.dumps({"key": key, "orders": GCI_ORDERS, "safety": GCI_SAFETY}, sort_keys=True)
+        return hashlib.sha256(band.encode()).hexdigest()[:16]
 
 
 def draw_test(s: CoverageSettings, i: int):
@@ -264,7 +276,7 @@ def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) 
         write_virtual_experiment(test, data_folder, name)
     report = calibrate(
         exp,
-        work / "calibration" / f"e{i:03d}-{key}",
+        work / "calibration" / f"e{i:03d}-{s.calibration_key(i)}",
         models=list(s.models),
         settings=s.calibration_settings(),
         progress=lambda m: progress(f"experiment {i}: {m}"),
@@ -348,6 +360,15 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
     }
 
 
+def _check_mesh(s: dict) -> str:
+    """The study's check mesh as named, ``auto`` with the mesh it stands for."""
+    if s["check_mesh"] != "auto":
+        return s["check_mesh"]
+    from problems.inverse.build import hifi_mesh_for
+
+    return f"auto = {hifi_mesh_for(s['inverse_mesh'])}"
+
+
 def render_summary(summary: dict) -> str:
     """The summary as Markdown."""
     s = summary["settings"]
@@ -357,7 +378,7 @@ def render_summary(summary: dict) -> str:
         "",
         f"Data made on mesh `{s['data_mesh']}`, calibrated on the inverse mesh "
         f"`{s['inverse_mesh']}` (correction {s['correction']}"
-        + (f", check mesh `{s['check_mesh']}`" if s["check_mesh"] else "")
+        + (f", check mesh `{_check_mesh(s)}`" if s["check_mesh"] else "")
         + f"), `lm` with {s['budget']} evaluations per variant from the test's start; models "
         f"{', '.join(s['models'])}. Specimens (width x depth x height, mm) drawn from "
         + ", ".join("x".join(f"{v:g}" for v in sp) for sp in s["specimens"])
