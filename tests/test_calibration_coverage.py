@@ -64,6 +64,17 @@ def test_tiny_study_scores_resumes_and_summarises(tmp_path, capsys, monkeypatch)
     argv[argv.index("--budget") + 1] = "6"
     assert main(["calibrate-coverage", *argv]) == 0
 
+    # a record scored otherwise (e.g. other band constants) is rescored from the calibration
+    # folder, no variant rerun, its wall time carried over
+    rec0 = out / "experiments" / "e000.json"
+    stale = json.loads(rec0.read_text()) | {"key": "stale", "wall_s": 1000.0}
+    rec0.write_text(json.dumps(stale))
+    said = []
+    run_coverage(s, out, work=work, progress=said.append)
+    again = json.loads(rec0.read_text())
+    assert again["key"] == s.key(0) and 1000.0 <= again["wall_s"] < 1100.0
+    assert sum("identifying" in m for m in said) == 0 and sum("done before" in m for m in said) == 3
+
 
 def test_draws_differ_and_stay_in_the_middle_of_the_box():
     s = CoverageSettings(n=3)
