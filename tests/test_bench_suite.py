@@ -259,10 +259,9 @@ def test_default_and_paper_suites_have_the_documented_shape():
     assert d.starts == ("default",) and d.mesh == "coarse"
     runs = d.runs()
     # the local methods on FE: consistent data on coarse (9 x 2); model-error data on the tier's
-    # default inverse model, untreated and LM with the one-point correction, this release on the
-    # five cases whose runs were made (5 x 2 + 5)
+    # default inverse model, untreated (9 x 2) and LM with the one-point correction (9)
     local = [r for r in runs if r.method in ("lm", "gauss-newton")]
-    assert len(local) == 33 and {
+    assert len(local) == 45 and {
         (r.data.tier, r.treatment.name, r.track, r.mesh, r.method) for r in local
     } == {
         ("consistent", "none", "fe", "coarse", "lm"),
