@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.store import atomic_write_text
 from problems.inverse import layout
 from problems.inverse.data import Dataset
+from problems.io.atomic import atomic_write_text
 
 FORMAT = "femubench-calibration/1"
 #: condition number of the Fisher information (in z = x / start) above which a warning is given

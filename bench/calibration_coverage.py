@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.store import atomic_write_text
+from problems.io.atomic import atomic_write_text
 
 FORMAT = "femubench-calibration-coverage/1"
 #: specimens drawn from (width, depth, height), mm

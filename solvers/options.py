@@ -3,9 +3,9 @@
 Each adapter declares its options next to its code as ``{name: Option(...)}`` and passes them to
 :func:`solvers.base.register`. The declaration is the one source of the option's type, default,
 allowed range or names and help text: :func:`solvers.base.resolve_options` validates with it,
-suites (bench/suite.py) check ``[options.<method>]`` with it, ``femubench solvers`` lists it and
-docs/solver_options.md is generated from it (:func:`markdown`, ``femubench solvers --markdown``;
-a test keeps the file current).
+suites (bench/experiment/suite.py) check ``[options.<method>]`` with it, ``femubench solvers``
+lists it and docs/solver_options.md is generated from it (:func:`markdown`, ``femubench solvers
+--markdown``; a test keeps the file current).
 """
 
 from __future__ import annotations

@@ -286,6 +286,39 @@ def test_every_floor_imports_only_the_floors_below():
     assert floor_breaches(_sources()) == []
 
 
+#: the bench modules outside bench/experiment/ that the experiment side may use (helpers with no
+#: run logic of their own)
+EXPERIMENT_HELPERS = ("bench.paths", "bench.parallel", "bench.resources", "bench.artefacts")
+
+
+def experiment_breaches(sources: dict[str, str]) -> list[str]:
+    """``"module imports name"`` for every import (module level or in a function) by which
+    bench/experiment/ reaches a bench module other than itself and :data:`EXPERIMENT_HELPERS`,
+    or by which the report reaches the experiment side other than through its store."""
+    graph = import_graph(sources, deferred=True)
+    out = []
+    for mod, deps in sorted(graph.items()):
+        for d in sorted(deps):
+            if d == "bench.experiment" or not d.startswith("bench."):
+                continue
+            if mod.startswith("bench.experiment."):
+                bad = not d.startswith("bench.experiment.") and d not in EXPERIMENT_HELPERS
+            elif mod == "bench.report" or mod.startswith("bench.report."):
+                bad = d.startswith("bench.experiment.") and d != "bench.experiment.store"
+            else:
+                bad = False
+            if bad:
+                out.append(f"{mod} imports {d}")
+    return out
+
+
+def test_the_experiment_side_is_one_group():
+    """bench/experiment/ (spec, objective, identify, suite, runner, store, surrogate track, user
+    problems) imports itself and a few helpers, never a study, a calibration or the report; the
+    report reaches it only through the store (reading records)."""
+    assert experiment_breaches(_sources()) == []
+
+
 # --- the checks themselves --------------------------------------------------------------------
 
 _KERNELS = """
@@ -335,14 +368,29 @@ def test_cross_file_calls_found_through_names_and_module_aliases():
 
 def test_floor_breaches_are_found():
     sources = {
-        "problems.a": "def f():\n    from bench.store import x\n",
-        "bench.runner": "import bench.report.tables\n",
+        "problems.a": "def f():\n    from bench.experiment.store import x\n",
+        "bench.experiment.runner": "import bench.report.tables\n",
         "bench.commands.run": "import bench.report\n",  # the top may
-        "bench.store": "from bench.reporting import y\n",  # only a prefix of a name
+        "bench.experiment.store": "from bench.reporting import y\n",  # only a prefix of a name
     }
     assert floor_breaches(sources) == [
-        "problems.a imports bench.store",
-        "bench.runner imports bench.report.tables",
+        "problems.a imports bench.experiment.store",
+        "bench.experiment.runner imports bench.report.tables",
+    ]
+
+
+def test_experiment_breaches_are_found():
+    sources = {
+        "bench.paths": "",
+        "bench.studies.x": "",
+        "bench.experiment.store": "",
+        "bench.experiment.runner": "from bench import paths\ndef f():\n import bench.studies.x\n",
+        "bench.report.tables": "from bench.experiment import store\nimport bench.experiment.runner",
+        "bench.commands.run": "import bench.experiment.runner\n",  # the top may
+    }
+    assert experiment_breaches(sources) == [
+        "bench.experiment.runner imports bench.studies.x",
+        "bench.report.tables imports bench.experiment.runner",
     ]
 
 

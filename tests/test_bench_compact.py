@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import store
 from bench.cli import main as cli
-from bench.runner import run_suite
-from bench.suite import parse_suite
+from bench.experiment import store
+from bench.experiment.runner import run_suite
+from bench.experiment.suite import parse_suite
 
 SHIPPED = Path(__file__).resolve().parents[1] / "results" / "default" / "runs"
 SUITE = {

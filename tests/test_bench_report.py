@@ -7,12 +7,12 @@ import math
 import pandas as pd
 import pytest
 
-from bench import store
+from bench.experiment import store
+from bench.experiment.runner import make_record, run_suite
 from bench.experiment.spec import RunSpec
+from bench.experiment.suite import parse_suite
 from bench.report import write_report
 from bench.report.tables import DASH, comparison, table1
-from bench.runner import make_record, run_suite
-from bench.suite import parse_suite
 
 SMOOTH = ["E", "sigma0", "H", "psi"]
 SMOOTH_REF = [30_000.0, 20.0, 1_500.0, 15.0]

@@ -10,11 +10,11 @@ import sys
 import time
 from pathlib import Path
 
-from bench import store
+from bench.experiment import store
+from bench.experiment.runner import run_suite
 from bench.experiment.spec import config_hash
+from bench.experiment.suite import load_suite
 from bench.report import write_report
-from bench.runner import run_suite
-from bench.suite import load_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,5 +1,6 @@
 """The run hashes of the shipped suites are the names of their shipped records: the run spec
-(bench.suite.RunConfig) and its hash must not drift, or every shipped record is orphaned."""
+(bench.experiment.spec.RunSpec) and its hash must not drift, or every shipped record is
+orphaned."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.suite import load_suite
+from bench.experiment.suite import load_suite
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -7,10 +7,10 @@ import os
 
 import pytest
 
-from bench import store
+from bench.experiment import store
+from bench.experiment.runner import run_one, run_suite
 from bench.experiment.spec import RunSpec, config_hash
-from bench.runner import run_one, run_suite
-from bench.suite import parse_suite
+from bench.experiment.suite import parse_suite
 
 SUITE = {
     "suite": {
@@ -179,7 +179,7 @@ def test_frames_are_tidy(tmp_path):
 
 
 def test_two_runners_cannot_share_a_directory(tmp_path):
-    from bench.runner import _dir_lock
+    from bench.experiment.runner import _dir_lock
 
     with _dir_lock(tmp_path):
         with pytest.raises(ValueError, match="another 'femubench run' is writing"):
@@ -187,7 +187,7 @@ def test_two_runners_cannot_share_a_directory(tmp_path):
 
 
 def test_a_data_set_that_cannot_be_made_fails_its_runs_only(tmp_path, monkeypatch):
-    import bench.runner as runner
+    import bench.experiment.runner as runner
 
     def broken(cfg, **kw):
         raise RuntimeError(f"data model of {cfg.case} did not converge")

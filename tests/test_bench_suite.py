@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from bench.experiment.spec import DataSpec, RunSpec, Treatment, config_hash
-from bench.suite import load_suite, parse_suite
+from bench.experiment.suite import load_suite, parse_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -309,7 +309,7 @@ def test_tiers_and_treatments_span_the_suite_without_correcting_consistent_data(
 
 
 def test_runs_of_different_tiers_never_share_a_data_set():
-    from bench.runner import data_key, dataset_for
+    from bench.experiment.runner import data_key, dataset_for
 
     s = parse_suite(
         {

@@ -11,11 +11,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import store
+from bench.experiment import store
+from bench.experiment.runner import run_suite
+from bench.experiment.suite import parse_suite
 from bench.report import statistics as S
 from bench.report.export import export_runs, write_coco, write_ioh
-from bench.runner import run_suite
-from bench.suite import parse_suite
 
 
 @pytest.fixture(scope="module")

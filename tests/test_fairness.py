@@ -189,9 +189,9 @@ def test_minpack_keeps_the_budget_and_counts_match(budget):
 def test_a_suite_sets_free_repeats_and_its_records_say_so():
     """``free_repeats = true`` in a suite reaches the evaluator and the record; left at its
     default it changes no run's hash (records of earlier suites stay valid)."""
+    from bench.experiment.runner import run_one
     from bench.experiment.spec import config_hash
-    from bench.runner import run_one
-    from bench.suite import parse_suite
+    from bench.experiment.suite import parse_suite
 
     raw = {"suite": {"name": "t", "cases": ["analytic-smooth"], "methods": ["nlopt:ESCH"],
                      "budgets": [120], "seeds": [0]}}  # fmt: skip

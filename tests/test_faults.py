@@ -10,10 +10,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from bench import store
 from bench.cli import main as cli
+from bench.experiment import store
+from bench.experiment.runner import run_one
 from bench.experiment.spec import RunSpec
-from bench.runner import run_one
 from problems.io import atomic
 
 

@@ -133,7 +133,7 @@ def test_a_suite_that_cannot_run_is_refused_before_any_work(
 
 
 def test_every_bad_data_value_of_a_suite_is_reported_at_once(tmp_path):
-    from bench.suite import load_suite
+    from bench.experiment.suite import load_suite
 
     text = SUITE.format(case="linear-compression") + (
         "[data]\nresolution_um = -1.0\nnoise_um = -2.0\nsnapshots = 0\nmargin_mm = 40.0\n"
@@ -148,7 +148,7 @@ def test_every_bad_data_value_of_a_suite_is_reported_at_once(tmp_path):
 
 
 def test_a_suite_with_a_byte_order_mark_is_read(tmp_path):
-    from bench.suite import load_suite
+    from bench.experiment.suite import load_suite
 
     path = write_suite(tmp_path, b"\xef\xbb\xbf" + SUITE.format(case="analytic-linear").encode())
     assert len(load_suite(path)) == 1
@@ -300,9 +300,9 @@ def test_identify_prints_and_writes_the_plausibility_warnings(capsys, tmp_path, 
 
 
 def test_a_suite_run_keeps_the_warnings_in_its_record_and_the_report_lists_them(force_in_newton):
+    from bench.experiment.runner import run_one
     from bench.experiment.spec import DataSpec, RunSpec
     from bench.report.warnings import warnings_section
-    from bench.runner import run_one
 
     ds, _ = force_in_newton
     config = RunSpec(

@@ -14,10 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from bench import store
 from bench.cli import main as cli
-from bench.experiment.spec import DataSpec, RunSpec, config_hash
-from bench.runner import (
+from bench.experiment import store
+from bench.experiment.runner import (
     current_data_hash,
     default_workers,
     failed_result,
@@ -25,7 +24,8 @@ from bench.runner import (
     pending_runs,
     worker_count,
 )
-from bench.suite import load_suite
+from bench.experiment.spec import DataSpec, RunSpec, config_hash
+from bench.experiment.suite import load_suite
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -135,7 +135,7 @@ def test_records_made_on_other_data_are_set_aside_and_rerun(tmp_path, monkeypatc
     monkeypatch.setenv(D.DATA_DIR_ENV, str(tmp_path / "data"))
     assert current_data_hash(cfg) == other.hash != shipped
     assert len(pending_runs(suite, out)[1]) == 1
-    from bench.runner import set_aside_stale
+    from bench.experiment.runner import set_aside_stale
 
     moved = set_aside_stale(suite.runs(), out, store.scan_records(out)[0])
     assert [p.parent.name for p in moved] == ["stale"] and not store.has_record(out, cfg.hash)

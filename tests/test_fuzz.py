@@ -4,8 +4,8 @@ one line.
 * evaluators: >= 1000 random parameter vectors inside and outside the box (NaN, inf, huge,
   negative) through an FE objective on a tiny mesh and through every analytic objective: no
   exception, every failed or infeasible point a flagged result (ok/feasible False, FAILURE_COST);
-* suite files: random and mutated TOML through :func:`bench.suite.load_suite`: a Suite or one
-  ValueError/OSError, nothing else;
+* suite files: random and mutated TOML through :func:`bench.experiment.suite.load_suite`: a Suite
+  or one ValueError/OSError, nothing else;
 * data files: byte-garbled and structurally mutated (hash recomputed) data sets through
   :func:`problems.inverse.data.load`: a consistent Dataset or one ValueError/OSError;
 * the command line: every option of every command with each value its type rejects (exit 2, one
@@ -264,7 +264,7 @@ def _mutate_suite(rng: random.Random) -> dict:
 
 
 def test_random_suite_files_are_a_suite_or_one_clear_error(tmp_path):
-    from bench.suite import Suite, load_suite
+    from bench.experiment.suite import Suite, load_suite
 
     rng = random.Random(SEED)
     base = _toml(VALID_SUITE)

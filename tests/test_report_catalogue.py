@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench import store
+from bench.experiment import store
 from bench.report import catalogue as C
 from problems.inverse import cases
 from solvers import METHODS

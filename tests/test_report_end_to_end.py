@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import store
+from bench.experiment import store
+from bench.experiment.runner import make_record
 from bench.experiment.spec import DataSpec, RunSpec
 from bench.report import write_report
-from bench.runner import make_record
 from problems.inverse.cases import get_case
 
 EXP = "exponent-tension"

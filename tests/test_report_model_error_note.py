@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 
-from bench import store
+from bench.experiment import store
+from bench.experiment.runner import make_record
 from bench.experiment.spec import RunSpec, Treatment
 from bench.report import metrics as M
 from bench.report import model_error_note as N
 from bench.report import tables as T
 from bench.report import write_report
-from bench.runner import make_record
 from problems.inverse.cases import get_case
 from tests.test_report_metrics import frame, run_row
 

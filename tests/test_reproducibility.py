@@ -58,9 +58,9 @@ def _label(pick) -> str:
 
 @pytest.mark.parametrize("folder, want", PICKS, ids=[_label(p) for p in PICKS])
 def test_a_shipped_record_is_reproduced_bit_for_bit(folder, want, tmp_path):
-    from bench import store
-    from bench.runner import run_one
-    from bench.suite import missing_surrogates
+    from bench.experiment import store
+    from bench.experiment.runner import run_one
+    from bench.experiment.suite import missing_surrogates
 
     shipped = _record(folder, want)
     if want.get("track") == "surrogate":

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench import store
-from bench.runner import run_suite
-from bench.suite import load_suite, parse_suite
+from bench.experiment import store
+from bench.experiment.runner import run_suite
+from bench.experiment.suite import load_suite, parse_suite
 from problems.inverse.evaluator import Evaluator
 from problems.user import ScalarProblem, UserProblem, correct_digits, least_squares, load_problem
 from solvers import solve

@@ -399,7 +399,7 @@ def identify_problem(args, spec: dict) -> int:
     import json
 
     from bench.experiment.spec import RunSpec
-    from bench.user_problems import run_user
+    from bench.experiment.user_problems import run_user
     from problems.io.atomic import atomic_write_text
 
     entry = spec["entry"]

@@ -42,7 +42,7 @@ def main(args) -> int:
     import sys
     from pathlib import Path
 
-    from bench import store
+    from bench.experiment import store
 
     if not store.runs_dir(args.dir).is_dir():
         print(f"femubench records: DIR {args.dir!r} has no runs/ folder", file=sys.stderr)

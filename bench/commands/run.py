@@ -48,10 +48,10 @@ def main(args) -> int:
     from pathlib import Path
 
     from bench.commands.identify import problem_spec
+    from bench.experiment.runner import default_workers, pending_runs, worker_count
+    from bench.experiment.suite import load_suite, missing_surrogates
     from bench.paths import results_root
     from bench.progress import enabled, warn_if_long
-    from bench.runner import default_workers, pending_runs, worker_count
-    from bench.suite import load_suite, missing_surrogates
     from problems.inverse.cases import get_case
 
     suite = load_suite(args.suite)  # ValueError -> message + exit 2 (bench.cli)
@@ -103,7 +103,7 @@ def main(args) -> int:
         )
         return 0
 
-    from bench.runner import run_suite
+    from bench.experiment.runner import run_suite
 
     try:
         summary = run_suite(

@@ -4,9 +4,10 @@ A :class:`RunSpec` says everything that decides a run's answer: the case (or a u
 solver with its options, budget and seed, the start, the inverse mesh, the measured data
 (:class:`DataSpec`), the model-error treatment (:class:`Treatment`), the track (the FE model, or a
 stored surrogate and an FE polish) and the Jacobian and budget rules. ``femubench identify`` builds
-one from its arguments, a suite (:mod:`bench.suite`) expands into a list of them, the runner
-(:mod:`bench.runner`) runs them through :func:`bench.experiment.identify.identify`, the studies
-build theirs, and the store (:mod:`bench.store`) keys each record by :func:`config_hash` of
+one from its arguments, a suite (:mod:`bench.experiment.suite`) expands into a list of them,
+the runner (:mod:`bench.experiment.runner`) runs them through
+:func:`bench.experiment.identify.identify`, the studies build theirs, and the store
+(:mod:`bench.experiment.store`) keys each record by :func:`config_hash` of
 :meth:`RunSpec.to_dict`.
 
 The record form is flat (``tier``, ``data``, ``treatment``, ``plate_margin_mm``, ``track``, ...)

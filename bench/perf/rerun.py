@@ -52,7 +52,7 @@ def sample(folder: Path, where: dict, per_method: int, seed: int) -> list[dict]:
 
 
 def compare(rec: dict) -> dict:
-    from bench.runner import run_one
+    from bench.experiment.runner import run_one
 
     t0 = time.perf_counter()
     again = run_one(rec["config"], suite=rec.get("suite"))

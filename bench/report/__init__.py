@@ -1,10 +1,10 @@
 """The report of a results directory: tables, figures and ``report.md`` in ``DIR/report/``.
 
-The report reads only the records on disk (through :func:`bench.store.to_frames`); it knows
-nothing of how the runs were executed. Record files it cannot read (and those ``femubench run``
-moved into ``DIR/runs/corrupt/``) are listed in report.md and on stderr. It is rebuilt from scratch
-each time in a temporary directory that then replaces ``DIR/report`` (so no stale table or figure
-survives).
+The report reads only the records on disk (through :func:`bench.experiment.store.to_frames`); it
+knows nothing of how the runs were executed. Record files it cannot read (and those ``femubench
+run`` moved into ``DIR/runs/corrupt/``) are listed in report.md and on stderr. It is rebuilt from
+scratch each time in a temporary directory that then replaces ``DIR/report`` (so no stale table or
+figure survives).
 
 Layout (see docs/reports.md)::
 
@@ -75,7 +75,7 @@ def write_report(
     could not be read is named on stderr and in report.md. ``progress``: a progress bar (stderr)
     over the figures.
     """
-    from bench import store
+    from bench.experiment import store
     from bench.report.catalogue import case_facts
     from bench.report.tables import SUCCESS_TOL
 

@@ -76,7 +76,7 @@ def is_analytic(name: str) -> bool:
 
 def case_facts(name: str) -> tuple[bool, str, float] | None:
     """``(analytic, default treatment, its plate margin in mm)`` of case ``name`` (what
-    :func:`bench.store.method_label` needs), None when the table does not know it."""
+    :func:`bench.experiment.store.method_label` needs), None when the table does not know it."""
     info = case_info(name)
     if info is None:
         return None

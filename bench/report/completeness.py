@@ -56,7 +56,7 @@ def section_completeness(rep) -> list[str]:
     plans = read_plans(rep.source)
     if not plans:
         return []
-    from bench import store
+    from bench.experiment import store
 
     stale = store.set_aside_files(rep.source, store.STALE)
     records = store.scan_records(rep.source)[0]  # user problems' records too

@@ -17,8 +17,8 @@ import math
 import numpy as np
 import pandas as pd
 
+from bench.experiment.store import parameter_order
 from bench.report.catalogue import case_info
-from bench.store import parameter_order
 
 
 def derived_names(case: str) -> tuple[str, ...]:

@@ -159,7 +159,7 @@ def _safe(name: str) -> str:
 
 
 def _atomic(path: Path, text: str) -> None:
-    from bench.store import atomic_write_text  # the one atomic writer
+    from bench.experiment.store import atomic_write_text  # the one atomic writer
 
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, text)

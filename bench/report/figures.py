@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.experiment.store import parameter_order
 from bench.plotting import (
     DOUBLE,
     LABELS,
@@ -59,7 +60,6 @@ from bench.report.tables import (
     method_order,
     normalised_box,
 )
-from bench.store import parameter_order
 
 COST_LABEL = "cost $J$ (-)"
 

@@ -1,4 +1,5 @@
-"""Comparison metrics on the tidy frames of :func:`bench.store.to_frames` (no I/O, no plotting).
+"""Comparison metrics on the tidy frames of :func:`bench.experiment.store.to_frames` (no I/O, no
+plotting).
 
 * :func:`prepare` — the frames the report works on: run-config columns that older records lack get
   their defaults (:data:`DEFAULTS`: ``track`` "fe", ``jacobian`` "exact", ``polish`` False, ...),

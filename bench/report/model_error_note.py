@@ -47,8 +47,8 @@ class Setting(NamedTuple):
     data_hash: str | None = None
 
     def tag(self) -> str:
-        """The treatment as the method label names it (:func:`bench.store.method_label`), e.g.
-        ``default bae 30 mm``."""
+        """The treatment as the method label names it
+        (:func:`bench.experiment.store.method_label`), e.g. ``default bae 30 mm``."""
         margin = f" {self.margin:g} mm" if self.margin else ""
         return (
             f"default {self.treatment}{margin}" if self.requested == "default" else self.requested

@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.experiment.store import parameter_order
 from bench.report.catalogue import PAPER_A_ERROR, case_info, is_analytic
 from bench.report.derived import derive_points, derived_reference
-from bench.store import parameter_order
 
 MAX_SAMPLES = 20_000
 SUMMARY = "summary.json"

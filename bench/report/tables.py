@@ -1,4 +1,4 @@
-"""Report tables computed from the tidy run DataFrame of :func:`bench.store.to_frames`.
+"""Report tables computed from the tidy run DataFrame of :func:`bench.experiment.store.to_frames`.
 
 * :func:`table1` — the paper's Table 1 for one method: signed residual error of every
   identified parameter with respect to its reference, in percent (median over seeds and
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bench.experiment.store import PARAMETER_ORDER, parameter_order
 from bench.plotting import LABELS
 from bench.report.catalogue import CASE_ORDER, METHOD_FAMILIES, case_info
-from bench.store import PARAMETER_ORDER, parameter_order
 
 DASH = "–"  # en dash: inactive parameter
 BOUND_MARK = "†"  # a final parameter on a bound of its box

@@ -37,12 +37,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from bench import store
+from bench.experiment import store
 from bench.experiment.spec import RunSpec, canonical_json, config_hash
+from bench.experiment.suite import Suite
 
 # thread pinning for every worker process
 from bench.parallel import SINGLE_THREAD_ENV, WorkerClientMapper, cap_workers, sigint_ignored
-from bench.suite import Suite
 
 log = logging.getLogger("femubench.runner")
 
@@ -230,8 +230,8 @@ def run_one(
     suite: str | None = None,
     dataset=None,
 ) -> dict[str, Any]:
-    """Run one identification and return its record (see :mod:`bench.store`); never raises
-    (except KeyboardInterrupt/SystemExit).
+    """Run one identification and return its record (see :mod:`bench.experiment.store`); never
+    raises (except KeyboardInterrupt/SystemExit).
 
     ``dataset``: the run's measured data (a problems.inverse.data.Dataset) when the caller prepared
     it; by default the objective assembly loads (or makes) it (:meth:`DataSpec.load
@@ -267,8 +267,8 @@ def _run_guarded(config: RunSpec, mapper, dataset, t0):
     error = data_hash = None
     evaluations = [0]  # the objective's counter, kept for a crash report
     try:
-        if config.problem:  # a user problem (an entry point): bench.user_problems
-            from bench.user_problems import run_user
+        if config.problem:  # a user problem (an entry point): .user_problems
+            from bench.experiment.user_problems import run_user
 
             count = [lambda ev, _: evaluations.__setitem__(0, ev.n_evals)]
             return run_user(config, mapper=mapper, observers=count), None, None
@@ -514,8 +514,8 @@ def worker_count(workers: int | None, n_pending: int) -> int:
 
 def set_aside_unreadable(out_dir: Path, unreadable=None) -> list[Path]:
     """Move the unreadable records of ``out_dir`` (``unreadable``: ``(path, reason)`` found by
-    :func:`bench.store.scan_records`, default: scanned now) aside (logged); return their new
-    paths."""
+    :func:`bench.experiment.store.scan_records`, default: scanned now) aside (logged); return
+    their new paths."""
     moved = []
     for old, new, why in store.set_aside_unreadable(out_dir, unreadable):
         log.warning(
