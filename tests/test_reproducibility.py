@@ -28,7 +28,10 @@ PICKS = [
         {"case": "linear-shear", "method": "cma", "track": "surrogate"},
         marks=pytest.mark.slow,
     ),
-    ("results/default", {"case": "exponent-tension", "method": "lm", "tier": "model-error"}),
+    (
+        "results/default",
+        {"case": "exponent-tension", "method": "lm", "tier": "model-error", "treatment": "none"},
+    ),
     # the shipped comparison (suites/comparison.toml): an FE-track run from a seeded random start
     (
         "results/comparison",
