@@ -27,12 +27,25 @@ SUITE = {
 }
 
 
-def _largest_shipped(k=1):
-    return sorted(SHIPPED.glob("*.json"), key=lambda p: -p.stat().st_size)[:k]
+def _largest_shipped(where: Path, k: int = 1):
+    """The ``k`` shipped records with the longest histories, rewritten in the one-file form
+    (history inline, as every record was before format 2) under ``where``: the shipped folders
+    are compact, the conversion is what these tests exercise."""
+    where.mkdir(parents=True, exist_ok=True)
+    comps = sorted(SHIPPED.glob(f"*{store.HISTORY_SUFFIX}"), key=lambda p: -p.stat().st_size)
+    out = []
+    for comp in comps[:k]:
+        src = comp.with_name(comp.name.replace(store.HISTORY_SUFFIX, ".json"))
+        rec = store.read_record(src)  # the stored JSON, its history put back
+        rec.pop(store.HISTORY_FILE, None)
+        dest = where / src.name
+        dest.write_text(json.dumps(rec, sort_keys=True, separators=(",", ":")) + "\n")
+        out.append(dest)
+    return out
 
 
 def test_a_shipped_record_round_trips_compact_bit_for_bit(tmp_path):
-    src = _largest_shipped()[0]
+    src = _largest_shipped(tmp_path / "one-file")[0]
     original = store.load_record(src)
     dest = tmp_path / src.name
     assert store.write_encoded(dest, json.loads(src.read_text())) is True
@@ -48,7 +61,7 @@ def test_a_shipped_record_round_trips_compact_bit_for_bit(tmp_path):
 
 @pytest.mark.parametrize("damage", ["torn", "edited", "missing"])
 def test_a_damaged_companion_makes_the_record_unreadable(tmp_path, damage):
-    src = _largest_shipped()[0]
+    src = _largest_shipped(tmp_path / "one-file")[0]
     runs = tmp_path / "runs"
     dest = runs / src.name
     store.write_encoded(dest, json.loads(src.read_text()))
@@ -90,7 +103,7 @@ def test_runs_are_written_compact_resume_finds_them_done_and_report_renders(tmp_
 def test_records_compact_cli_converts_verifies_and_reports_sizes(tmp_path, capsys):
     runs = tmp_path / "runs"
     runs.mkdir()
-    srcs = _largest_shipped(3)
+    srcs = _largest_shipped(tmp_path / "one-file", 3)
     for p in srcs:
         shutil.copy(p, runs / p.name)
     before = {r["config_hash"]: r for r in store.load_records(tmp_path)}

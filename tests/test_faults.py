@@ -92,7 +92,11 @@ def test_torn_bae_statistics_are_named_set_aside_and_recomputed(tmp_path, monkey
         me.Correction.load(path)
 
     calls = []
+    from bench import artefacts
+
     monkeypatch.setattr(ident, "bae_path", lambda *a: path)
+    # where the statistics are looked up (results root, artefact directory): here
+    monkeypatch.setattr(artefacts, "locate", lambda rel: path if path.exists() else None)
     monkeypatch.setattr(me, "bae_statistics", lambda *a, **k: calls.append(1) or _correction())
     spec = SimpleNamespace(
         case="linear-shear", mesh="coarse", treatment=SimpleNamespace(bae_samples=3, bae_seed=0)
