@@ -135,3 +135,50 @@ def test_report_puts_the_note_under_the_model_error_table1(tmp_path):
     note = table.split("\n**Model-error tier", 1)[1].split("Files:", 1)[0]
     assert "**1 of 2 cases**" in note
     assert f"- {LIN}: beta 3.1 % (bias 3.07 %; floor 4.18 % on H)" in note
+
+
+def _write_convergence(root, case=LIN):
+    """A fake ``<case>/convergence.json`` of the hex27 convergence study: the inverse mesh
+    ``6,6,12:g8:hex27`` and the high-fidelity mesh ``9,9,18:g8:hex27``."""
+    d = root / case
+    d.mkdir(parents=True)
+    meshes = [
+        {"mesh": "6,6,12:g8:hex27", "data_bias_pct": {"H": 1.2, "beta": 3.04}},
+        {"mesh": "9,9,18:g8:hex27", "data_bias_pct": {"H": -0.61, "beta": 0.25}},
+        {"mesh": "12,12,24:g8:hex27"},  # the data mesh: no bias
+    ]
+    conv = {"case": case, "data_mesh": "12,12,24:g8:hex27", "meshes": meshes}
+    (d / "convergence.json").write_text(json.dumps(conv))
+    return root
+
+
+def test_note_takes_bias_and_floor_from_the_convergence_study_for_other_meshes(tmp_path):
+    runs, t = _table()
+    studies = tmp_path / "studies"
+    _write_study(studies / "model_error")  # rows for `coarse` only
+    written = _write_convergence(studies / "convergence" / "hex27-g8")
+    # a study's own report (studies/<study>) finds its sibling studies/model_error
+    assert N.default_model_error_dirs(studies / "table1") == [studies / "model_error"]
+    conv = N.convergence_dirs([studies / "model_error"])
+    assert conv == [written]
+    hex27 = {"mesh": "6,6,12:g8:hex27", "hifi_mesh": "9,9,18:g8:hex27"}
+    for treatment, floor in (("one-point", ("H", 0.61)), ("none", None)):
+        s = N.run_settings(runs)[LIN]._replace(treatment=treatment, margin=0.0, **hex27)
+        if treatment == "none":
+            s = s._replace(hifi_mesh="")
+        settings = {LIN: s}
+        assert N.load_study([studies / "model_error"], settings) == {}
+        study = N.load_convergence(conv, settings)
+        assert study[LIN]["bias"] == ({"H": 1.2, "beta": 3.04} if floor is None else {})
+        assert study[LIN]["floor"] == floor
+        note = N.model_error_note(t, settings, study, tol=2.0, convergence_name="CONV")
+        assert "from the hex27 convergence study (CONV;" in note
+        assert "mesh `12,12,24:g8:hex27`" in note and "not in the study" not in note
+        if treatment == "none":
+            assert f"- {LIN}: beta 3.1 % (bias 3.04 %)" in note
+            assert "within 0.06 points" in note
+            assert "floor" not in note and "high-fidelity" not in note
+        else:  # a correction: the floor only (the study has no bias of the treated objective)
+            assert f"- {LIN}: beta 3.1 % (floor 0.61 % on H)" in note and "bias 3" not in note
+            assert "high-fidelity model `9,9,18:g8:hex27`" in note
+            assert "The floor is within 2 % on all 1 case (0.61–0.61 %)" in note

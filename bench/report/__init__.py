@@ -106,8 +106,10 @@ def write_report(
 
         model_error_dirs = default_model_error_dirs(out_dir)
     from bench.report import dest as report_dest
+    from bench.report.model_error_note import convergence_dirs
 
-    report_dest.check_dest(out_dir, final, [*posterior_dirs, *model_error_dirs])
+    inputs = [*posterior_dirs, *model_error_dirs, *convergence_dirs(model_error_dirs)]
+    report_dest.check_dest(out_dir, final, inputs)
     lock = report_dest.lock(final.parent)  # held until the report is in place
     tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=report_dest.TMP_PREFIX))
     report_dest.mark(tmp)

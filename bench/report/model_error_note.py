@@ -12,6 +12,11 @@ data hash when both sides have one):
   reference* with the high-fidelity mesh, i.e. what that mesh's own error against the model-error
   data leaves: the floor of every correction that subtracts a discretisation error computed on it.
 
+A case the study has no rows for (another inverse mesh) takes both from the shipped hex27
+convergence study instead (:func:`load_convergence`, ``results/studies/convergence/hex27-g8``):
+the bias is the ``data_bias_pct`` of the inverse mesh's entry, the floor the worst
+``data_bias_pct`` of the high-fidelity mesh's entry (no floor for treatment ``none``).
+
 :func:`model_error_note` is pure; :func:`run_settings` and :func:`load_study` gather its inputs.
 """
 
@@ -28,6 +33,9 @@ from bench.report import tables as T
 
 #: the diagnostic row of the study (``bench.studies.model_error.HIFI_LIMIT``)
 FLOOR_TREATMENT = "hifi-at-reference"
+#: the convergence study quoted for inverse meshes the model-error study does not cover, as a
+#: folder next to the model-error study's (``studies/convergence/hex27-g8``)
+CONVERGENCE_STUDY = ("convergence", "hex27-g8")
 DOC_ANCHORS = {
     "the model-error study": "measured-the-model-error-study-resultsstudiesmodel_error",
     "where the 2 % target is not reached": (
@@ -66,10 +74,22 @@ class Setting(NamedTuple):
 def default_model_error_dirs(out_dir: Path) -> list[Path]:
     """Where the model-error study's ``<case>/*.json`` rows are looked for, like the posterior
     study: :func:`bench.report.study_dirs` without ``DIR/model_error``, which at the results root
-    holds the BAE statistics, not the study."""
+    holds the BAE statistics, not the study; for a study's own report
+    (``results/studies/<study>``) also the sibling ``results/studies/model_error``."""
     from bench.report import study_dirs
 
-    return study_dirs(out_dir, "model_error", direct=False)
+    dirs = study_dirs(out_dir, "model_error", direct=False)
+    parent = Path(out_dir).resolve().parent
+    if parent.name == "studies" and (parent / "model_error").is_dir():
+        dirs = list(dict.fromkeys([*dirs, parent / "model_error"]))
+    return dirs
+
+
+def convergence_dirs(model_error_dirs) -> list[Path]:
+    """The hex27 convergence study's folders (:data:`CONVERGENCE_STUDY`) next to the existing
+    model-error study folders ``model_error_dirs`` (both under the results root's studies)."""
+    out = [Path(d).parent.joinpath(*CONVERGENCE_STUDY) for d in model_error_dirs or ()]
+    return [p for p in dict.fromkeys(out) if p.is_dir()]
 
 
 def run_settings(runs: pd.DataFrame, records=()) -> dict[str, Setting]:
@@ -116,9 +136,9 @@ def _read(path: Path) -> dict | None:
     return row if isinstance(row, dict) else None
 
 
-def _biases(row: dict | None) -> dict[str, float]:
+def _biases(row: dict | None, key: str = "linearised_bias_percent") -> dict[str, float]:
     out = {}
-    for p, v in ((row or {}).get("linearised_bias_percent") or {}).items():
+    for p, v in ((row or {}).get(key) or {}).items():
         try:
             v = float(v)
         except (TypeError, ValueError):
@@ -156,6 +176,40 @@ def load_study(dirs, settings: dict[str, Setting]) -> dict[str, dict] | None:
                 "floor": None if stale or worst is None else (worst[0], abs(worst[1])),
                 "hifi_mesh": str(((floor or {}).get("provenance") or {}).get("hifi_mesh") or ""),
                 "stale": stale,
+                "source": "model_error",
+            }
+            break
+    return out
+
+
+def load_convergence(dirs, settings: dict[str, Setting]) -> dict[str, dict]:
+    """Per case of ``settings``, like :func:`load_study` from the first folder of ``dirs``
+    holding ``<case>/convergence.json`` with the entry needed: for treatment ``none``, ``bias``
+    the ``data_bias_pct`` of the inverse mesh's entry (linearised bias against the model-error
+    data mesh's response, %) and no floor; for a correction, no bias (the study has no treated
+    objective) and ``floor`` the worst ``data_bias_pct`` (parameter, |%|) of the high-fidelity
+    mesh's entry. ``data_mesh``: the study's data mesh. Cases without that entry are left out."""
+    out: dict[str, dict] = {}
+    for case, s in settings.items():
+        for d in dirs or ():
+            conv = _read(Path(d) / case / "convergence.json") or {}
+            meshes = {
+                str(m.get("mesh")): m for m in conv.get("meshes") or () if isinstance(m, dict)
+            }
+            none = s.treatment == "none"
+            own = _biases(meshes.get(s.mesh), "data_bias_pct") if none else {}
+            hifi = "" if none else s.hifi_mesh
+            fb = _biases(meshes.get(hifi), "data_bias_pct") if hifi else {}
+            if not (own or fb):
+                continue
+            worst = max(fb.items(), key=lambda kv: abs(kv[1])) if fb else None
+            out[case] = {
+                "bias": own,
+                "floor": None if worst is None else (worst[0], abs(worst[1])),
+                "hifi_mesh": hifi,
+                "stale": False,
+                "source": "convergence",
+                "data_mesh": str(conv.get("data_mesh") or ""),
             }
             break
     return out
@@ -193,12 +247,15 @@ def model_error_note(
     derived_tol: dict | None = None,
     doc: str | None = None,
     study_name: str = "`results/studies/model_error`",
+    convergence_name: str = "`results/studies/convergence/hex27-g8`",
 ) -> str:
     """The Markdown note under a model-error Table 1 ``t`` (:func:`bench.report.tables.table1`).
 
     ``settings``: case -> :class:`Setting` of the table's runs; ``study``: :func:`load_study`
-    (None: the study was not found); ``doc``: the link to docs/objective.md (plain text when
-    None); ``study_name``: the study folder as Markdown (name or link). The success criterion is
+    (None: the study was not found; rows of :func:`load_convergence` may stand in for cases it
+    lacks); ``doc``: the link to docs/objective.md (plain text when None); ``study_name``,
+    ``convergence_name``: the model-error and convergence study folders as Markdown (name or
+    link). The success criterion is
     :func:`bench.report.tables.success` applied to the table's medians."""
     dt = dict(T.DERIVED_TOL if derived_tol is None else derived_tol)
     med = _case_frame(t)
@@ -226,7 +283,13 @@ def model_error_note(
         errs = {p: v for p, v in errs.items() if math.isfinite(v)}
         return max(errs.items(), key=lambda kv: abs(kv[1]) / dt.get(kv[0], tol))
 
-    hifi = next((r["hifi_mesh"] for r in (study or {}).values() if r.get("hifi_mesh")), "")
+    def floored(c):  # treatment none has no high-fidelity model, hence no floor
+        return c not in settings or settings[c].treatment != "none"
+
+    rows = [r for r in ((study or {}).get(c) for c in miss) if r]
+    conv = [r for r in rows if r.get("source") == "convergence"]
+    mixed = bool(conv) and len(conv) < len(rows)
+    hifi = next((r["hifi_mesh"] for r in rows if r.get("hifi_mesh")), "")
     hifi = hifi or next((s.hifi_mesh for s in sets if s.hifi_mesh), "") or "high-fidelity"
     if study is None:
         head += (
@@ -234,15 +297,47 @@ def model_error_note(
             "tolerance):"
         )
     else:
+        src_old = f"the model-error study ({study_name}; same case, data and treatment)"
+        dm = next((r["data_mesh"] for r in conv if r.get("data_mesh")), "")
+        conv_bias = any(r["bias"] for r in conv)
+        src_conv = (
+            f"the hex27 convergence study ({convergence_name}; "
+            + ("the `data_bias_pct` of the inverse mesh's entry, " if conv_bias else "")
+            + "against the model-error data"
+            + (f" mesh `{dm}`)" if dm else ")")
+        )
+        how_old = (
+            f"the study's `{FLOOR_TREATMENT}` row: the one-point correction made at the "
+            "reference, the limit of the iterated correction"
+        )
+        how_conv = "the worst `data_bias_pct` of its entry in the convergence study"
+        if mixed:
+            src = f"{src_old} or, for the cases marked *convergence*, {src_conv}"
+            how = f"{how_old}; or {how_conv}"
+        elif conv:
+            src, how = src_conv, how_conv + ": the limit of the iterated correction"
+        else:
+            src, how = src_old, how_old
         head += (
             " The cases that miss, with their worst parameter (the largest error against its "
-            "tolerance) and, from the model-error study "
-            f"({study_name}; same case, data and treatment), the *bias*: the linearised bias of "
-            "the same objective, i.e. the error of a perfect optimiser; and the *floor*: the "
-            f"largest error the high-fidelity model `{hifi}` itself leaves against the "
-            f"model-error data (the study's `{FLOOR_TREATMENT}` row: the one-point correction "
-            "made at the reference, the limit of the iterated correction), which limits "
-            f"every correction that subtracts a discretisation error computed on `{hifi}`:"
+            f"tolerance) and, from {src}, "
+        )
+        if conv and not conv_bias and not mixed:  # corrections: no treated objective's bias
+            head += "the *floor*"
+        else:
+            head += (
+                "the *bias*: the linearised bias of the same objective, i.e. the error of a "
+                "perfect optimiser"
+            )
+        head += (
+            (
+                ("; and the *floor*" if conv_bias or not conv or mixed else "")
+                + ": the largest error the high-fidelity model "
+                f"`{hifi}` itself leaves against the model-error data ({how}), which limits "
+                f"every correction that subtracts a discretisation error computed on `{hifi}`:"
+            )
+            if any(floored(c) for c in miss)
+            else ":"
         )
     items, diffs, below, floors = [], [], [], []
     for c in miss:
@@ -258,9 +353,13 @@ def model_error_note(
         else:
             b = row["bias"].get(p)
             parts = [f"bias {T.fmt_pct(b)} %" if b is not None else f"bias {T.DASH}"]
+            if row.get("source") == "convergence" and not row["bias"]:
+                parts = []  # a correction: the convergence study gives only its floor
+            if mixed and row.get("source") == "convergence":
+                parts.insert(0, "*convergence*")
             if b is not None:
                 diffs.append(abs(b - e))
-            if row["floor"] is not None:
+            if row["floor"] is not None and floored(c):
                 fp, fv = row["floor"]
                 parts.append(f"floor {T.fmt_pct(fv)} % on {fp}")
                 floors.append(fv)
@@ -288,7 +387,14 @@ def model_error_note(
                 else "."
             )
         )
-    if floors:
+    if floors and max(floors) <= tol:
+        why.append(
+            f"The floor is within {tol:g} % on all {_cases(len(floors))} "
+            f"({T.fmt_pct(min(floors))}–{T.fmt_pct(max(floors))} %): the error `{hifi}` itself "
+            "leaves does not keep these cases from the target; the rest of the miss is the "
+            "correction's or the optimiser's."
+        )
+    elif floors:
         bae = any(s.treatment == "bae" for c, s in settings.items() if c in miss)
         why.append(
             f"The floor is above {tol:g} % on {sum(f > tol for f in floors)} of these "

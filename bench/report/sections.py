@@ -606,9 +606,12 @@ def _model_error_note(rep: Report, t, sel) -> str:
     dest, dirs = rep.dest, rep.model_error_dirs
     settings = N.run_settings(sel, rep.records)
     study = N.load_study(dirs, settings)
+    found = [Path(d) for d in dirs or () if Path(d).is_dir()]
+    conv_dirs = N.convergence_dirs(found)
+    if study is not None:  # the convergence study for the inverse meshes it does not cover
+        study = {**N.load_convergence(conv_dirs, settings), **study}
     doc = Path(__file__).resolve().parents[2] / "docs" / "objective.md"
     name = "`results/studies/model_error`"
-    found = [Path(d) for d in dirs or () if Path(d).is_dir()]
     if found:
         d = found[0]
         shown = (
@@ -618,6 +621,16 @@ def _model_error_note(rep: Report, t, sel) -> str:
         )
         target = d / "overview.md" if (d / "overview.md").is_file() else d
         name = f"[`{shown}`]({_rel(target, dest)})"
+    conv_name = "`results/studies/convergence/hex27-g8`"
+    if conv_dirs:  # linked to the study's overview (one level up) when there is one
+        c = conv_dirs[0]
+        shown = (
+            "results/studies/" + "/".join(N.CONVERGENCE_STUDY)
+            if c.resolve() == results_root().joinpath("studies", *N.CONVERGENCE_STUDY).resolve()
+            else _rel(c, dest)
+        )
+        target = c.parent / "overview.md" if (c.parent / "overview.md").is_file() else c
+        conv_name = f"[`{shown}`]({_rel(target, dest)})"
     return N.model_error_note(
         t,
         settings,
@@ -626,6 +639,7 @@ def _model_error_note(rep: Report, t, sel) -> str:
         derived_tol=rep.dtol,
         doc=_rel(doc, dest) if doc.is_file() else None,
         study_name=name,
+        convergence_name=conv_name,
     )
 
 
