@@ -16,7 +16,10 @@ default ``~/.cache/femubench/artefacts``). A listed artefact found with other by
 manifest's is used with a one-line warning naming both hashes (a rebuild need not be bit-identical);
 a missing one is named with its rebuild command by :func:`missing`. :func:`pack` writes the
 listed artefacts into one ``.tar.xz`` (attached to a release), :func:`unpack` verifies every file
-of such an archive against the manifest before anything is put in place.
+of such an archive against the manifest before anything is put in place; :func:`unpack_from_git`
+does the same from a commit of the repository's own history (the manifest's ``git_commit``, the
+last commit whose tree holds them: a clone always has them, its history is the source that
+cannot be lost).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import hashlib
 import json
 import os
 import shutil
+import subprocess
 import tarfile
 import tempfile
 import warnings
@@ -44,9 +48,9 @@ def manifest_path(root: str | Path | None = None) -> Path:
     return Path(root if root is not None else results_root()) / MANIFEST
 
 
-def read_manifest(root: str | Path | None = None) -> dict[str, dict]:
-    """``{relative path: entry}`` of the manifest of ``root`` ({} when it has none); ValueError
-    naming the file when it is not a manifest."""
+def read_doc(root: str | Path | None = None) -> dict:
+    """The whole manifest of ``root`` (``{"format", "artefacts", "git_commit"?}``; {} when it has
+    none); ValueError naming the file when it is not a manifest."""
     path = manifest_path(root)
     if not path.is_file():
         return {}
@@ -56,14 +60,26 @@ def read_manifest(root: str | Path | None = None) -> dict[str, dict]:
         raise ValueError(f"{path} is not valid JSON: {exc}") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ValueError(f"{path} is not an artefact manifest (format {FORMAT})")
-    return doc.get("artefacts", {})
+    return doc
 
 
-def write_manifest(entries: dict[str, dict], root: str | Path | None = None) -> Path:
-    """Write the manifest of ``root`` (atomically, sorted, one key per line)."""
+def read_manifest(root: str | Path | None = None) -> dict[str, dict]:
+    """``{relative path: entry}`` of the manifest of ``root`` ({} when it has none); ValueError
+    naming the file when it is not a manifest."""
+    return read_doc(root).get("artefacts", {})
+
+
+def write_manifest(
+    entries: dict[str, dict], root: str | Path | None = None, git_commit: str | None = None
+) -> Path:
+    """Write the manifest of ``root`` (atomically, sorted, one key per line), keeping its
+    ``git_commit`` unless ``git_commit`` gives a new one."""
     from problems.io.atomic import atomic_write_text
 
     doc = {"format": FORMAT, "artefacts": dict(sorted(entries.items()))}
+    commit = git_commit or read_doc(root).get("git_commit")
+    if commit:
+        doc["git_commit"] = commit
     return atomic_write_text(manifest_path(root), json.dumps(doc, indent=1, sort_keys=True) + "\n")
 
 
@@ -177,8 +193,9 @@ def missing(rel: str) -> str:
     if entry is None:
         return f"{rel} is neither in {roots}"
     return (
-        f"{rel} is neither in {roots}: unpack the release archive "
-        f"(`femubench artefacts unpack FILE.tar.xz`) or rebuild it with `{entry['rebuild']}` "
+        f"{rel} is neither in {roots}: restore it from the git history "
+        f"(`femubench artefacts unpack --from-git`) or the release archive "
+        f"(`femubench artefacts unpack FILE.tar.xz`), or rebuild it with `{entry['rebuild']}` "
         f"({duration(entry['rebuild_s'])})"
     )
 
@@ -257,6 +274,43 @@ def _owner(member: str, entries: dict[str, dict]) -> tuple[str, str] | None:
     return None
 
 
+def members(rel: str, entry: dict) -> dict[str, str]:
+    """``{file path relative to the results root: sha256}`` of the files of artefact ``rel``."""
+    if "files" in entry:
+        return {f"{rel}/{name}": f["sha256"] for name, f in sorted(entry["files"].items())}
+    return {rel: entry["sha256"]}
+
+
+def _place(tmp: Path, got: list[str], entries: dict[str, dict], dest: Path, source: str) -> None:
+    """Check the artefacts ``got`` staged under ``tmp`` (laid out like the results root) against
+    the manifest ``entries`` (ValueError naming ``source`` and every problem, nothing placed),
+    then put each into ``dest``, a folder replacing its old copy as a unit."""
+    from problems.io.atomic import atomic_dir
+
+    if not got:
+        raise ValueError(f"{source} holds no artefact")
+    problems = [line for rel in sorted(got) for line in mismatches(tmp / rel, entries[rel])]
+    if problems:
+        raise ValueError(f"{source}: " + "; ".join(problems))
+    for rel in sorted(got):
+        final = dest / rel
+        if "files" in entries[rel]:
+            with atomic_dir(final) as staged:
+                for name in entries[rel]["files"]:
+                    (staged / name).parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(tmp / rel / name, staged / name)
+        else:
+            final.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(tmp / rel, final)
+
+
+def _manifest_entries() -> dict[str, dict]:
+    entries = read_manifest()
+    if not entries:
+        raise ValueError(f"{manifest_path()} lists no artefacts: nothing to check them by")
+    return entries
+
+
 def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
     """Put the artefacts of ``archive`` (written by :func:`pack`) into ``dest`` (default the
     artefact directory). Every member is checked first: it must be a regular file the manifest
@@ -264,27 +318,24 @@ def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
     ValueError naming it (both hashes for a mismatch) and nothing is put in place. Each artefact
     then replaces its old copy in ``dest`` as a unit. Returns the artefacts unpacked."""
     from problems.inverse.user_cache import artefact_dir
-    from problems.io.atomic import atomic_dir
 
     archive = Path(archive)
     dest = Path(dest) if dest is not None else artefact_dir()
-    entries = read_manifest()
-    if not entries:
-        raise ValueError(f"{manifest_path()} lists no artefacts: nothing to check the archive by")
+    entries = _manifest_entries()
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=dest, prefix=".unpack.") as tmp:
         tmp = Path(tmp)
-        got: dict[str, set] = {}
+        got: set[str] = set()
         try:
             tar = tarfile.open(archive, mode="r:xz")
         except (tarfile.TarError, EOFError, OSError) as exc:
             raise ValueError(f"ARCHIVE {archive} is not a .tar.xz ({exc})") from None
         with tar:
             try:
-                members = tar.getmembers()
+                listing = tar.getmembers()
             except (tarfile.TarError, EOFError, OSError) as exc:
                 raise ValueError(f"ARCHIVE {archive} is torn ({exc})") from None
-            for m in members:
+            for m in listing:
                 if m.isdir():
                     continue
                 owner = _owner(m.name, entries)
@@ -297,20 +348,76 @@ def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
                 target.parent.mkdir(parents=True, exist_ok=True)
                 with tar.extractfile(m) as src, open(target, "wb") as out:
                     shutil.copyfileobj(src, out)
-                got.setdefault(owner[0], set()).add(owner[1])
-        if not got:
-            raise ValueError(f"ARCHIVE {archive} holds no artefact")
-        problems = [line for rel in sorted(got) for line in mismatches(tmp / rel, entries[rel])]
-        if problems:
-            raise ValueError(f"ARCHIVE {archive}: " + "; ".join(problems))
-        for rel in sorted(got):
-            final = dest / rel
-            if "files" in entries[rel]:
-                with atomic_dir(final) as staged:
-                    for name in entries[rel]["files"]:
-                        (staged / name).parent.mkdir(parents=True, exist_ok=True)
-                        os.replace(tmp / rel / name, staged / name)
-            else:
-                final.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(tmp / rel, final)
+                got.add(owner[0])
+        _place(tmp, sorted(got), entries, dest, f"ARCHIVE {archive}")
     return sorted(got)
+
+
+def _git(root: Path, *args: str, data: bytes | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        ["git", "-C", str(root), *args], input=data, capture_output=True, check=False
+    )
+
+
+def unpack_from_git(
+    rev: str | None = None, dest: str | Path | None = None
+) -> tuple[str, list[str]]:
+    """Put every listed artefact, read from commit ``rev`` of the git repository holding the
+    results root (default: the manifest's ``git_commit``, the last commit whose tree holds them),
+    into ``dest`` (default the artefact directory), with the checks and the placing of
+    :func:`unpack`: every file's sha256 against the manifest before anything is put in place.
+    ValueError (one line naming the way out) when the results root is not in a git checkout, the
+    commit is not in this clone (a shallow clone) or lacks a file. Returns ``(full commit hash,
+    the artefacts unpacked)``."""
+    from bench.paths import results_root
+    from problems.inverse.user_cache import artefact_dir
+
+    root = results_root()
+    dest = Path(dest) if dest is not None else artefact_dir()
+    entries = _manifest_entries()
+    rev = rev or read_doc().get("git_commit")
+    other = (
+        "unpack the release archive (`femubench artefacts unpack FILE.tar.xz`) or rebuild each "
+        "with the command `femubench artefacts list` names"
+    )
+    if not rev:
+        raise ValueError(f"--from-git: give REV ({manifest_path()} records no git_commit)")
+    try:
+        top = _git(root, "rev-parse", "--show-toplevel")
+    except OSError as exc:
+        raise ValueError(f"--from-git: git cannot be run ({exc.strerror}): {other}") from None
+    if top.returncode != 0:
+        raise ValueError(f"--from-git: the results root {root} is not in a git checkout: {other}")
+    prefix = root.resolve().relative_to(Path(top.stdout.decode().strip()).resolve()).as_posix()
+    commit = _git(root, "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}")
+    if commit.returncode != 0:
+        raise ValueError(
+            f"--from-git: commit {rev} is not in this clone (a shallow clone? "
+            f"`git fetch --unshallow`): {other}"
+        )
+    commit_hash = commit.stdout.decode().strip()
+    wanted = [(rel, m) for rel, e in sorted(entries.items()) for m in members(rel, e)]
+    paths = [
+        f"{commit_hash}:{m}" if prefix == "." else f"{commit_hash}:{prefix}/{m}" for _, m in wanted
+    ]
+    out = _git(root, "cat-file", "--batch", data="".join(p + "\n" for p in paths).encode())
+    if out.returncode != 0:
+        raise ValueError(f"--from-git: git cat-file failed ({out.stderr.decode().strip()})")
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=dest, prefix=".unpack.") as tmp:
+        tmp, buf, pos = Path(tmp), out.stdout, 0
+        for (_, m), spec in zip(wanted, paths):
+            end = buf.index(b"\n", pos)
+            header = buf[pos:end].decode().split()
+            if header[-1] == "missing" or len(header) != 3 or header[1] != "blob":
+                raise ValueError(
+                    f"--from-git: commit {rev} holds no file {spec.split(':', 1)[1]}: {other}"
+                )
+            size = int(header[2])
+            target = tmp / m
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(buf[end + 1 : end + 1 + size])
+            pos = end + 2 + size
+        got = sorted({rel for rel, _ in wanted})
+        _place(tmp, got, entries, dest, f"commit {commit_hash[:12]}")
+    return commit_hash, got

@@ -162,6 +162,8 @@ def test_unpack_refuses_an_archive_that_is_not_the_manifest(
         (["add", "/etc/hostname", "--rebuild", BAE_CMD, "--rebuild-s", "1"], "not inside"),
         (["verify", "--rebuild-s", "3"], "with 'add' only"),
         (["unpack", "missing.tar.xz"], "is not a .tar.xz"),
+        (["pack", "a.tar.xz", "--from-git"], "with 'unpack' only"),
+        (["unpack", "a.tar.xz", "--from-git", "HEAD"], "give ARCHIVE a.tar.xz or --from-git"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(roots, capsys, argv, needle):
@@ -238,3 +240,65 @@ def test_missing_bae_statistics_are_named_before_they_are_computed(roots, monkey
         with pytest.raises(RuntimeError, match="computing"):
             prepare(spec).correction()
     assert BAE_CMD in str(caught[0].message)
+
+
+def _commit(repo: Path, message: str) -> str:
+    import subprocess
+
+    def git(*args):
+        return subprocess.run(
+            ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t", *args],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+
+    git("add", "-A")
+    git("commit", "-q", "--allow-empty", "-m", message)
+    return git("rev-parse", "HEAD")
+
+
+def test_unpack_from_git_restores_the_artefacts_of_an_older_commit(roots, tmp_path, capsys):
+    """The artefacts committed once and deleted in a later commit come back from the history,
+    checked against the manifest; other bytes in that commit are refused, nothing placed."""
+    import subprocess
+
+    results, cache = roots
+    assert main(["artefacts", "unpack", "--from-git"]) == 2  # no git_commit, no REV
+    assert "give REV" in capsys.readouterr().err
+    assert main(["artefacts", "unpack", "--from-git", "HEAD"]) == 2
+    err = capsys.readouterr().err
+    assert "is not in a git checkout" in err and "artefacts unpack FILE.tar.xz" in err
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    first = _commit(tmp_path, "artefacts in the tree")
+    A.write_manifest(A.read_manifest(), git_commit=first)
+    files = ("model_error/x.npz", "surrogates/s__coarse/a.json", "surrogates/s__coarse/b.npz")
+    before = {rel: (results / rel).read_bytes() for rel in files}
+    shutil.rmtree(results / "surrogates")
+    (results / "model_error" / "x.npz").unlink()
+    _commit(tmp_path, "artefacts out of the tree")
+    assert "--from-git" in A.missing("model_error/x.npz")
+    assert main(["artefacts", "unpack", "--from-git"]) == 0  # the manifest's commit
+    assert f"of commit {first[:12]}" in capsys.readouterr().out
+    for rel, data in before.items():
+        assert (cache / rel).read_bytes() == data
+    assert sorted(p.name for p in cache.iterdir()) == ["model_error", "surrogates"]  # no temp
+    assert main(["artefacts", "verify"]) == 0
+    # a commit whose bytes are not the manifest's: refused, nothing put in place
+    shutil.rmtree(cache)
+    (results / "model_error" / "x.npz").write_bytes(b"tampered")
+    (results / "surrogates" / "s__coarse").mkdir(parents=True)
+    for rel in files[1:]:
+        (results / rel).write_bytes(before[rel])
+    bad = _commit(tmp_path, "other bytes")
+    shutil.rmtree(results / "surrogates")
+    (results / "model_error" / "x.npz").unlink()
+    assert main(["artefacts", "unpack", "--from-git", bad]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "is not the release's" in err
+    assert hashlib.sha256(b"tampered").hexdigest()[:16] in err
+    assert not cache.exists() or not any(p.is_file() for p in cache.rglob("*"))
+    # a commit this clone does not hold (a shallow clone)
+    assert main(["artefacts", "unpack", "--from-git", "0" * 40]) == 2
+    err = capsys.readouterr().err
+    assert "is not in this clone" in err and len(err.strip().splitlines()) == 1

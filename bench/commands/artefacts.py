@@ -6,7 +6,7 @@ from __future__ import annotations
 NAME = "artefacts"
 HELP = (
     "release artefacts kept outside the tree (surrogates, BAE statistics): list, verify, "
-    "pack into / unpack from a .tar.xz, add to the manifest"
+    "pack into / unpack from a .tar.xz or the git history, add to the manifest"
 )
 
 
@@ -17,7 +17,8 @@ def add_arguments(p) -> None:
         help="list: each artefact, its size, where it is and its rebuild command; verify: check "
         "the sha256 of every artefact present (exit 1 on a mismatch); pack ARCHIVE: write them "
         "all into a .tar.xz; unpack ARCHIVE: check an archive against the manifest and put its "
-        "artefacts in place; add PATH: list PATH in the manifest with --rebuild and --rebuild-s",
+        "artefacts in place (or, with --from-git, take them from a commit of this repository); add "
+        "PATH: list PATH in the manifest with --rebuild and --rebuild-s",
     )
     p.add_argument("path", nargs="?", metavar="ARCHIVE|PATH", help="for pack, unpack and add")
     p.add_argument(
@@ -25,6 +26,15 @@ def add_arguments(p) -> None:
         metavar="DIR",
         help="unpack into DIR (default: the artefact directory, $FEMUBENCH_ARTEFACT_DIR, else "
         "~/.cache/femubench/artefacts; give the results root to put them back in the tree)",
+    )
+    p.add_argument(
+        "--from-git",
+        nargs="?",
+        const="",
+        metavar="REV",
+        help="unpack: read the artefacts from commit REV of the git history of this checkout "
+        "(default: the manifest's git_commit, the last commit that holds them) instead of an "
+        "archive; every sha256 is checked against the manifest before anything is put in place",
     )
     p.add_argument("--rebuild", metavar="CMD", help="add: the femubench command that rebuilds it")
     p.add_argument("--rebuild-s", type=float, metavar="S", help="add: wall time of that command, s")
@@ -35,7 +45,12 @@ def main(args) -> int:
 
     from bench import artefacts as A
 
-    if args.action in ("pack", "unpack", "add") and not args.path:
+    from_git = args.from_git is not None
+    if from_git and args.action != "unpack":
+        raise ValueError("--from-git goes with 'unpack' only")
+    if from_git and args.path:
+        raise ValueError(f"femubench artefacts unpack: give ARCHIVE {args.path} or --from-git")
+    if args.action in ("pack", "unpack", "add") and not args.path and not from_git:
         raise ValueError(f"femubench artefacts {args.action}: give the ARCHIVE or PATH")
     if args.action != "add" and (args.rebuild or args.rebuild_s is not None):
         raise ValueError("--rebuild and --rebuild-s go with 'add' only")
@@ -55,8 +70,15 @@ def main(args) -> int:
         )
         return 0
     if args.action == "unpack":
-        done = A.unpack(args.path, args.to)
         where = args.to or A.search_roots()[1]
+        if from_git:
+            commit, done = A.unpack_from_git(args.from_git or None, args.to)
+            print(
+                f"unpacked {len(done)} artefacts of commit {commit[:12]} (sha256 checked) "
+                f"into {where}"
+            )
+            return 0
+        done = A.unpack(args.path, args.to)
         print(f"unpacked {len(done)} artefacts (sha256 checked) into {where}")
         return 0
 
