@@ -11,6 +11,7 @@ resolution in dots per inch.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -71,16 +72,125 @@ def pyplot():
     return plt
 
 
-def save(fig, path, *, pdf: bool = False) -> Path:
-    """Write ``fig`` to ``path`` (the suffix picks the format; PNG at :data:`DPI`), and a PDF beside
-    it with ``pdf``; no time stamps or software names in the files; close the figure."""
+def save(
+    fig,
+    path,
+    *,
+    pdf: bool = False,
+    dpi: float = DPI,
+    tight: bool = True,
+    palette: bool = True,
+) -> Path:
+    """Write ``fig`` to ``path`` atomically (temporary file + rename) and close the figure: the
+    one way femubench writes a figure. The suffix picks the format; a PNG is rendered at ``dpi``
+    (dots per inch) and written as :func:`palette_png` of matplotlib's 8-bit RGBA PNG (plain RGBA
+    with ``palette=False``); with ``pdf`` a PDF is written beside it. ``tight`` crops to the drawn
+    area (``bbox_inches="tight"``; many-panel report figures with fixed margins skip it: one draw
+    instead of two). No time stamps or software names in the files. Returns ``path``."""
+    from matplotlib import pyplot as plt
+
+    from bench.experiment.store import atomic_write  # the one atomic writer
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI, bbox_inches="tight", metadata=_metadata(path.suffix))
+    bbox = "tight" if tight else None
+    if path.suffix == ".png":
+        data = rgba_png(fig, dpi=dpi, tight=tight)
+        if palette:
+            data = palette_png(data)
+        atomic_write(path, lambda fh: fh.write(data))
+    else:
+        atomic_write(
+            path,
+            lambda fh: fig.savefig(
+                fh,
+                format=path.suffix[1:],
+                dpi=dpi,
+                bbox_inches=bbox,
+                metadata=_metadata(path.suffix),
+            ),
+        )
     if pdf and path.suffix != ".pdf":
-        fig.savefig(path.with_suffix(".pdf"), bbox_inches="tight", metadata=_metadata(".pdf"))
-    pyplot().close(fig)
+        atomic_write(
+            path.with_suffix(".pdf"),
+            lambda fh: fig.savefig(fh, format="pdf", bbox_inches=bbox, metadata=_metadata(".pdf")),
+        )
+    plt.close(fig)
     return path
+
+
+def rgba_png(fig, *, dpi: float = DPI, tight: bool = True) -> bytes:
+    """matplotlib's 8-bit RGBA PNG of ``fig`` at ``dpi`` (dots per inch), in memory, without a
+    software name (see :func:`save`)."""
+    buf = io.BytesIO()
+    fig.savefig(
+        buf,
+        format="png",
+        dpi=dpi,
+        bbox_inches="tight" if tight else None,
+        metadata=_metadata(".png"),
+    )
+    return buf.getvalue()
+
+
+#: the PNG colour types :func:`palette_png` reads: 6 = RGBA (matplotlib, 8 bits per channel),
+#: 3 = palette (a figure already converted)
+_RGBA, _PALETTE = 6, 3
+
+
+def palette_png(data: bytes) -> bytes:
+    """The palette form of a femubench figure: ``data`` (the bytes of an opaque PNG as matplotlib
+    writes it, 8-bit RGBA, or of one already in palette form) as an 8-bit-or-less palette PNG,
+    optimised (zlib level 9, the fewest bits per pixel), with the resolution (``pHYs``) of
+    ``data`` and no other metadata. A figure of at most 256 colours (every grey-only figure)
+    keeps every pixel exactly; one of more colours is reduced to 256 by Pillow's
+    maximum-coverage quantizer without dithering (on the shipped figures: every colour channel
+    within 10 of 255, white kept white). The palette is ordered by frequency (ties by colour), so
+    the bytes depend only on the pixels and the resolution: the same figure always gives the same
+    bytes, a figure rendered straight to palette form equals its RGBA PNG converted, and
+    converting a palette figure again changes nothing. A PNG that is not such a figure (other
+    colour type or bit depth, transparent pixels, not a PNG, corrupt) raises ``ValueError``."""
+    from PIL import Image
+
+    if len(data) < 26 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        raise ValueError("not a PNG file")
+    depth, colour = data[24], data[25]
+    if not ((colour == _RGBA and depth == 8) or colour == _PALETTE):
+        raise ValueError(
+            f"not a femubench figure: PNG colour type {colour} with {depth} bits per sample "
+            "(allowed: 8-bit RGBA as matplotlib writes it, or a palette PNG)"
+        )
+    try:
+        with Image.open(io.BytesIO(data)) as im:
+            im.load()
+            dpi = im.info.get("dpi")
+            rgba = np.asarray(im.convert("RGBA"))
+    except (OSError, SyntaxError, ValueError, EOFError) as exc:
+        raise ValueError(f"corrupt PNG ({' '.join(str(exc).split())})") from None
+    if not (rgba[..., 3] == 255).all():
+        raise ValueError("not a femubench figure: it has transparent pixels (figures are opaque)")
+    rgb = np.ascontiguousarray(rgba[..., :3])
+    colours = _packed(rgb)
+    if len(np.unique(colours)) > 256:
+        quantized = Image.fromarray(rgb).quantize(
+            256, method=Image.Quantize.MAXCOVERAGE, dither=Image.Dither.NONE
+        )
+        colours = _packed(np.asarray(quantized.convert("RGB")))
+    table, index, counts = np.unique(colours, return_inverse=True, return_counts=True)
+    order = np.lexsort((table, -counts))  # most frequent first, then by colour
+    rank = np.empty(len(order), np.uint8)
+    rank[order] = np.arange(len(order))
+    out = Image.frombytes("P", (rgb.shape[1], rgb.shape[0]), rank[index].tobytes())
+    table = table[order]
+    out.putpalette(np.stack([table >> 16, table >> 8, table], -1).astype(np.uint8).tobytes())
+    buf = io.BytesIO()
+    out.save(buf, format="PNG", optimize=True, **({"dpi": dpi} if dpi else {}))
+    return buf.getvalue()
+
+
+def _packed(rgb: np.ndarray) -> np.ndarray:
+    """``(rows, cols, 3)`` uint8 colours as one flat ``0xRRGGBB`` uint32 array."""
+    c = rgb.reshape(-1, 3).astype(np.uint32)
+    return (c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]
 
 
 def _metadata(suffix: str) -> dict:

@@ -64,8 +64,10 @@ from bench.report.tables import (
 COST_LABEL = "cost $J$ (-)"
 
 
-def _save(fig, path: Path, pdf: bool) -> list[Path]:
-    png = save(fig, path.with_suffix(".png"), pdf=pdf)
+def _save(fig, path: Path, pdf: bool, **kw) -> list[Path]:
+    """Save ``fig`` as ``path`` with the suffix ``.png`` (and a PDF with ``pdf``; ``kw``: see
+    :func:`bench.plotting.save`); return the files written."""
+    png = save(fig, Path(path).with_suffix(".png"), pdf=pdf, **kw)
     return [png] + ([png.with_suffix(".pdf")] if pdf else [])
 
 
@@ -106,19 +108,7 @@ def grid(
 
 def _save_fast(fig, path: Path, pdf: bool) -> list[Path]:
     """Save a :func:`grid` figure: PNG at :data:`REPORT_DPI` (and PDF), one draw, no tight box."""
-    plt = pyplot()
-    png = Path(path).with_suffix(".png")
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=REPORT_DPI, metadata={"Software": None})
-    out = [png]
-    if pdf:
-        fig.savefig(
-            png.with_suffix(".pdf"),
-            metadata={"Creator": None, "Producer": None, "CreationDate": None},
-        )
-        out.append(png.with_suffix(".pdf"))
-    plt.close(fig)
-    return out
+    return _save(fig, path, pdf, dpi=REPORT_DPI, tight=False)
 
 
 def light_log(ax, axis: str = "y") -> None:

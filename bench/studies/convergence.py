@@ -33,7 +33,7 @@ from bench.studies import markdown_table, output_dir, read_json
 from problems.analysis import convergence as conv
 from problems.fe.mesh import SIZE_MM, discretisation_key, parse_mesh_spec
 from problems.io import jsonio
-from problems.io.atomic import atomic_write, atomic_write_text
+from problems.io.atomic import atomic_write_text
 
 STUDY = "convergence"
 SCHEMA = 1
@@ -394,7 +394,7 @@ def render_convergence(folder: str | Path) -> Path:
     """Draw ``convergence.png`` from ``convergence.json``: RMS front-face error (sigma), force
     error (%) and worst |bias| (%) against solved dofs, one line per family, markers for the
     comparison meshes."""
-    from bench.plotting import DPI, pyplot, row
+    from bench.plotting import pyplot, row, save
 
     folder = Path(folder)
     summary = read_json(folder / "convergence.json")
@@ -431,15 +431,7 @@ def render_convergence(folder: str | Path) -> Path:
         f"{summary['case']}: errors against the extrapolated {summary['reference_family']}",
         fontsize=10,
     )
-    path = folder / "convergence.png"
-    atomic_write(
-        path,
-        lambda fh: fig.savefig(
-            fh, format="png", dpi=DPI, bbox_inches="tight", metadata={"Software": None}
-        ),
-    )
-    plt.close(fig)
-    return path
+    return save(fig, folder / "convergence.png")
 
 
 def render_overview(root: str | Path) -> Path:

@@ -433,6 +433,7 @@ def render_posterior(folder) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from bench.plotting import save
     from bench.studies import read_json
 
     folder = Path(folder)
@@ -463,15 +464,11 @@ def render_posterior(folder) -> list[Path]:
         "optimum",
         y=1.01,
     )
-    out = [folder / "corner.png"]
-    fig.savefig(out[0], dpi=80, bbox_inches="tight")
-    plt.close(fig)
+    out = [save(fig, folder / "corner.png", dpi=80)]
     fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.4 * len(names)), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
         ax.plot(chain[:, :, i], lw=0.3, alpha=0.5)
         ax.set_ylabel(names[i], fontsize=8)
     np.atleast_1d(axes)[-1].set_xlabel(f"kept step / {s.get('thin', 1)}")
-    out.append(folder / "trace.png")
-    fig.savefig(out[1], dpi=80, bbox_inches="tight")
-    plt.close(fig)
+    out.append(save(fig, folder / "trace.png", dpi=80))
     return out
