@@ -420,17 +420,16 @@ def face_pattern(speckle: SpeckleConfig, camera: CameraConfig, seed: int) -> Spe
     return px.blurred(speckle.blur_mm / p)
 
 
-def render_face(
+def render_face_intensity(
     camera: CameraConfig,
     speckle: SpeckleConfig,
     pattern: SpecklePattern,
     displacement_px=None,
-    noise_rng: np.random.Generator | int | None = None,
 ) -> np.ndarray:
-    """One camera image of the face (``uint8``/``uint16``), reference if ``displacement_px`` is
-    None."""
+    """The noise-free image of the face as full-scale fractions (float, rows x cols), the
+    reference if ``displacement_px`` is None; :func:`acquire` makes the camera's image of it."""
     dark = speckle.bright * (1.0 - speckle.contrast)
-    img = render(
+    return render(
         pattern,
         camera.shape,
         displacement=displacement_px,
@@ -441,6 +440,18 @@ def render_face(
         face_box=camera.face_box_px,
         map_step=camera.map_step,
     )
+
+
+def render_face(
+    camera: CameraConfig,
+    speckle: SpeckleConfig,
+    pattern: SpecklePattern,
+    displacement_px=None,
+    noise_rng: np.random.Generator | int | None = None,
+) -> np.ndarray:
+    """One camera image of the face (``uint8``/``uint16``), reference if ``displacement_px`` is
+    None."""
+    img = render_face_intensity(camera, speckle, pattern, displacement_px)
     return acquire(img, camera.bit_depth, camera.noise_sigma, noise_rng)
 
 
@@ -453,4 +464,5 @@ __all__ = [
     "acquire",
     "face_pattern",
     "render_face",
+    "render_face_intensity",
 ]

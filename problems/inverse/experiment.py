@@ -858,26 +858,15 @@ def face_to_image(exp: Experiment, face_mm) -> np.ndarray:
     return (np.asarray(face_mm, float) - c) @ np.linalg.inv(A).T
 
 
-def correlate_images(exp: Experiment):
-    """The ``[images]`` route: the deformed images correlated against the reference by
-    femubench's IC-GN DIC (:class:`~problems.dic.correlate.Correlator`, each image started from
-    the previous one's solution), in the form of :func:`read_dic`.
-
-    Subset centres lie on a grid (``step`` px) in the ROI (default: the face's bounding box in
-    the image, from the calibration); subsets not entirely on the face, ``roi_margin_mm`` inside
-    its edges, are not correlated (counted). Returns ``(per_image, n_failed, info)``: per image
-    (centres (m_k, 2) px, u (m_k, 2) px, sigma (m_k, 2) px from the IC-GN covariance) of the
-    converged points, the number of (image, point) pairs that did not converge, and ``info``
-    (settings, counts, the images' grey-level noise) for the provenance. ValueError (one line
-    naming the file or field) for unreadable, blank or differently sized images.
-    """
-    from problems.dic.correlate import Correlator, as_grey, check_not_blank, grid_points
-    from problems.dic.imageio import read_image
+def subset_grid(exp: Experiment, shape: tuple[int, int], step: int | None = None):
+    """The ``[images]`` route's subset centres in a reference image of ``shape`` (rows, cols):
+    ``(points (n, 2) px, on (n,) bool, roi)``, the grid of ``step`` px (default ``[images]
+    step``) centred in the ROI and which subsets lie entirely on the face, ``roi_margin_mm``
+    inside its edges. ValueError (one line) for a ROI off the image or fewer than 4 subsets."""
+    from problems.dic.correlate import grid_points
 
     cfg = exp.correlation
-    ref = as_grey(read_image(exp.reference_image), f"reference image {exp.reference_image}")
-    check_not_blank(ref, f"reference image {exp.reference_image}")
-    rows, cols = ref.shape
+    rows, cols = shape
     W, H, mrg = exp.width_mm, exp.height_mm, exp.roi_margin_mm
     if exp.roi_px is None:
         box = face_to_image(exp, [[0.0, 0.0], [W, 0.0], [W, H], [0.0, H]])
@@ -887,7 +876,7 @@ def correlate_images(exp: Experiment):
     else:
         roi, where = exp.roi_px, f"[images] roi = {list(exp.roi_px)}"
     try:
-        pts = grid_points(ref.shape, cfg.subset, cfg.step, roi)
+        pts = grid_points(shape, cfg.subset, step or cfg.step, roi)
     except ValueError as exc:
         raise ValueError(f"{where} in {exp.reference_image.name}: {exc}") from None
     # a subset (pixels c - h - 1/2 .. c + h + 1/2) must lie on the face, mrg inside its edges
@@ -902,6 +891,30 @@ def correlate_images(exp: Experiment):
             f"{where}: only {int(on.sum())} subsets of {cfg.subset} px lie on the face; check "
             "[camera] and [images]"
         )
+    return pts, on, roi
+
+
+def correlate_images(exp: Experiment):
+    """The ``[images]`` route: the deformed images correlated against the reference by
+    femubench's IC-GN DIC (:class:`~problems.dic.correlate.Correlator`, each image started from
+    the previous one's solution), in the form of :func:`read_dic`.
+
+    Subset centres lie on a grid (``step`` px) in the ROI (default: the face's bounding box in
+    the image, from the calibration); subsets not entirely on the face, ``roi_margin_mm`` inside
+    its edges, are not correlated (counted). Returns ``(per_image, n_failed, info)``: per image
+    (centres (m_k, 2) px, u (m_k, 2) px, sigma (m_k, 2) px from the IC-GN covariance) of the
+    converged points, the number of (image, point) pairs that did not converge, and ``info``
+    (settings, counts, the images' grey-level noise) for the provenance. ValueError (one line
+    naming the file or field) for unreadable, blank or differently sized images.
+    """
+    from problems.dic.correlate import Correlator, as_grey, check_not_blank
+    from problems.dic.imageio import read_image
+
+    cfg = exp.correlation
+    ref = as_grey(read_image(exp.reference_image), f"reference image {exp.reference_image}")
+    check_not_blank(ref, f"reference image {exp.reference_image}")
+    rows, cols = ref.shape
+    pts, on, roi = subset_grid(exp, ref.shape)
     corr = Correlator(ref, pts[on], cfg)
     per_image, failed, noise, prev = [], [], [], None
     for path in exp.dic_files:

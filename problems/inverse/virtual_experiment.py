@@ -236,27 +236,15 @@ class VirtualImages:
     step: int = 21
 
 
-def write_virtual_images(
-    test: VirtualTest, out_dir: str | Path, name: str, images: VirtualImages | None = None
-) -> Path:
-    """Run the FE model of ``test`` and write ``experiment.toml`` (the ``[images]`` route),
-    ``machine_log.csv`` and ``images/reference.png``, ``images/image_NN.png``: speckle images of
-    the face (:class:`VirtualImages`) deformed by the FE field of each image plus ``test``'s
-    rigid drift, with camera noise; returns the experiment file. The calibration is the face's
-    bottom-left corner in the image and the scale (``test``'s camera rotation, corner and DIC
-    noise are those of the CSV route and not used here)."""
-    from problems.dic.imageio import write_image
-    from problems.dic.pipeline import pixel_displacement
-    from problems.dic.speckle import CameraConfig, SpeckleConfig, face_pattern, render_face
+def _camera(test: VirtualTest, images: VirtualImages):
+    """The camera of ``test``'s images (ValueError when the face is not whole pixels)."""
+    from problems.dic.speckle import CameraConfig
 
-    images = images or VirtualImages()
-    out = Path(out_dir)
-    (out / "images").mkdir(parents=True, exist_ok=True)
     W, H, p = test.width_mm, test.height_mm, images.mm_per_px
     pixels = (round(W / p), round(H / p))
     if not (abs(pixels[0] * p - W) < 1e-9 * W and abs(pixels[1] * p - H) < 1e-9 * H):
         raise ValueError(f"mm_per_px = {p:g}: the {W:g} x {H:g} mm face is not whole pixels")
-    camera = CameraConfig(
+    return CameraConfig(
         pixels=pixels,
         face_mm=(W, H),
         margin_px=images.margin_px,
@@ -265,8 +253,21 @@ def write_virtual_images(
         supersample=images.supersample,
         map_step=images.map_step,
     )
+
+
+def render_virtual_images(test: VirtualTest, images: VirtualImages | None = None, resp=None):
+    """The noise-free images of ``test`` (:func:`write_virtual_images` before the camera's noise):
+    ``(camera, intensities)``, the reference's then each image's full-scale fractions (float
+    arrays, rows x cols) of the face deformed by the FE field plus ``test``'s rigid drift.
+    ``resp``: the data model's response when already computed (else it is run)."""
+    from problems.dic.pipeline import pixel_displacement
+    from problems.dic.speckle import SpeckleConfig, face_pattern, render_face_intensity
+
+    images = images or VirtualImages()
+    W, p = test.width_mm, images.mm_per_px
+    camera = _camera(test, images)
     speckle = SpeckleConfig(size_mm=images.speckle_mm)
-    resp = _data_response(test, name)
+    resp = resp if resp is not None else _data_response(test, "the virtual images")
 
     def snapshot(k: int):
         def field(y, z):  # the quarter face (y >= 0, mm) of snapshot k
@@ -285,15 +286,36 @@ def write_virtual_images(
         return disp
 
     pattern = face_pattern(speckle, camera, test.seed)
+    intensities = [
+        render_face_intensity(camera, speckle, pattern, None if k == 0 else snapshot(k - 1))
+        for k in range(len(test.levels_mm) + 1)
+    ]
+    return camera, intensities
+
+
+def write_virtual_images(
+    test: VirtualTest, out_dir: str | Path, name: str, images: VirtualImages | None = None
+) -> Path:
+    """Run the FE model of ``test`` and write ``experiment.toml`` (the ``[images]`` route),
+    ``machine_log.csv`` and ``images/reference.png``, ``images/image_NN.png``: speckle images of
+    the face (:class:`VirtualImages`) deformed by the FE field of each image plus ``test``'s
+    rigid drift, with camera noise; returns the experiment file. The calibration is the face's
+    bottom-left corner in the image and the scale (``test``'s camera rotation, corner and DIC
+    noise are those of the CSV route and not used here)."""
+    from problems.dic.imageio import write_image
+    from problems.dic.speckle import acquire
+
+    images = images or VirtualImages()
+    out = Path(out_dir)
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    W, p = test.width_mm, images.mm_per_px
+    _camera(test, images)  # a bad scale is refused before the FE run
+    resp = _data_response(test, name)
+    camera, intensities = render_virtual_images(test, images, resp)
     names = ["reference.png"] + [f"image_{k:02d}.png" for k in range(1, len(test.levels_mm) + 1)]
     for k, fname in enumerate(names):
-        img = render_face(
-            camera,
-            speckle,
-            pattern,
-            None if k == 0 else snapshot(k - 1),
-            np.random.default_rng([test.seed, 1, k]),
-        )
+        rng = np.random.default_rng([test.seed, 1, k])
+        img = acquire(intensities[k], camera.bit_depth, camera.noise_sigma, rng)
         tmp = out / "images" / f".{fname}.tmp.png"  # written whole, then renamed
         os.replace(write_image(tmp, img), out / "images" / fname)
     _write_log(test, resp.reaction_kN, out, np.random.default_rng(test.seed))
