@@ -108,3 +108,27 @@ def test_figures_compact_rejects_a_png_that_is_not_ours_before_writing_anything(
         assert good.read_bytes() == before  # nothing written
     assert cli(["figures", "compact", str(tmp_path / "none.png")]) == 2
     assert "neither a file nor a folder" in capsys.readouterr().err
+
+
+def test_figures_compact_dry_run_predicts_the_diff_text_of_its_commit(tmp_path, capsys):
+    import re
+    import subprocess
+
+    folder = tmp_path / "results" / "default" / "report" / "figures"  # shipped path lengths
+    for i in range(4):
+        save(_colour_figure() if i % 2 else _grey_figure(), folder / f"f{i}.png", palette=False)
+
+    def git(*a):
+        cmd = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-C", str(tmp_path), *a]
+        return subprocess.run(cmd, check=True, capture_output=True).stdout
+
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "rgba")
+    assert cli(["figures", "compact", str(folder), "--dry-run"]) == 0
+    predicted = int(re.search(r"diff text ~([0-9]+) bytes", capsys.readouterr().out).group(1))
+    assert cli(["figures", "compact", str(folder)]) == 0
+    git("add", "-A")
+    git("commit", "-qm", "palette")
+    actual = len(git("show", "--binary", "HEAD"))
+    assert predicted == pytest.approx(actual, rel=0.1), (predicted, actual)
