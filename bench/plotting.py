@@ -3,10 +3,11 @@ parameter labels, axis helpers and :func:`save`.
 
 Every figure module (:mod:`bench.report.figures`, :mod:`bench.studies.figures`,
 :mod:`bench.crosscheck.figures`, :mod:`bench.dic_figures`) draws through :func:`pyplot` and
-writes through :func:`save`. Figures are meant to survive black-and-white printing: lines differ
-by line style *and* marker (:func:`line_style`), bars by grey *and* hatch; colour
-(:data:`COLOURS`) is only used where a series also differs otherwise. Sizes are in inches,
-resolution in dots per inch.
+writes through :func:`save` (atomically; a PNG as the palette PNG of :func:`palette_png`, which
+``femubench figures compact`` also applies to existing files). Figures are meant to survive
+black-and-white printing: lines differ by line style *and* marker (:func:`line_style`), bars by
+grey *and* hatch; colour (:data:`COLOURS`) is only used where a series also differs otherwise.
+Sizes are in inches, resolution in dots per inch.
 """
 
 from __future__ import annotations
