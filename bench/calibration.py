@@ -132,7 +132,8 @@ def model_for(data: Dataset, case, mesh: str):
 
 def objective_for(data: Dataset, case, mesh: str, correction=None):
     """The evaluator of ``case`` (a lab case) on the imported ``data``: :func:`model_for`, the
-    data's per-point and per-force standard deviations; with a ``correction``
+    data's noise model (:meth:`Dataset.noise`: per-point and per-force standard deviations, the
+    points' correlation between snapshots); with a ``correction``
     (problems/inverse/model_error.py) its shift subtracted from the data and its runs charged."""
     from problems.inverse.evaluator import Evaluator
     from problems.inverse.problem import LeastSquaresProblem
@@ -145,7 +146,7 @@ def objective_for(data: Dataset, case, mesh: str, correction=None):
         case.lower,
         case.upper,
         case.reference,
-        sigma=data.sigma(),
+        **data.noise(),
         blocks=layout.blocks(len(data.snapshots_mm), len(data.points)),
         provenance={
             "case": case.name,
@@ -735,7 +736,11 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
             )
             if k in meta
         }
-        | {"points_used": len(data.points), "images": len(data.snapshots_mm)},
+        | {
+            "points_used": len(data.points),
+            "images": len(data.snapshots_mm),
+            "snapshot_rho": data.snapshot_rho,
+        },
         "test": summary,
         "displacement_mm": data.snapshots_mm.tolist(),
         "force_kN": data.reaction_kN.tolist(),
@@ -856,6 +861,15 @@ def render_markdown(report: dict) -> str:
             "(all in report.json)"
         ),
         *_correlation_lines(imp.get("correlation")),
+        *(
+            [
+                f"- noise model: a point's errors correlated between two images, rho = "
+                f"{imp['snapshot_rho']:g} (the reference's share); the residuals in sigma units "
+                "are whitened by the correlation (R^-1/2 D^-1 per point)"
+            ]
+            if imp.get("snapshot_rho")
+            else []
+        ),
         "",
         "## What the test says (start and bounds, never a reference)",
         f"- E {_fmt(t['E_MPa'])} MPa (DIC strain; from the force curve {_fmt(t['E_force_MPa'])}), "

@@ -52,3 +52,33 @@ def test_analyse_recovers_the_shared_reference_term_and_overlap():
     assert abs(res["sigma_ratio"]["u"]["median"] - 1.0) < 0.03
     assert abs(res["sigma_ratio"]["v"]["median"] - 1.25) < 0.04
     assert f"| u | {a['u']['mean']:.3f} |" in markdown(res)
+
+
+def test_noise_model_summary_scores_the_intervals():
+    from bench.perf.dic_noise_model import markdown as nm_markdown
+    from bench.perf.dic_noise_model import summarise
+
+    truth = [10.0, 2.0]
+    rng = np.random.default_rng(4)
+    recs = []
+    for r in range(200):
+        rec = {"realisation": r, "names": ["a", "b"]}
+        for rho, sd in ((0.5, [0.1, 0.02]), (0.0, [0.05, 0.02])):
+            # a is biased by 1 sd (a systematic part), its spread is 0.1 with either model
+            x = [10.1 + 0.1 * rng.standard_normal(), 2.0 + 0.02 * rng.standard_normal()]
+            rec[str(rho)] = {"x": x, "std": sd, "chi2": 110.0, "n_data": 100}
+        recs.append(rec)
+    noise_free = {"0.5": {"x": [10.1, 2.0]}, "0.0": {"x": [10.1, 2.0]}}
+    res = summarise(recs, truth, noise_free)
+    a, b = res["parameters"]["a"], res["parameters"]["b"]
+    assert a["sd_ratio_rho05_over_rho0"] == 2.0 and b["sd_ratio_rho05_over_rho0"] == 1.0
+    assert abs(a["rho=0.5"]["empirical_sd_over_laplace_sd"] - 1.0) < 0.15
+    assert abs(a["rho=0"]["empirical_sd_over_laplace_sd"] - 2.0) < 0.3
+    assert a["rho=0.5"]["noise_free_error_in_sd"] == 1.0
+    # around the truth the bias costs coverage; around the noise-free estimate it is ~95 %
+    assert 150 < a["rho=0.5"]["covered_95"] < 185
+    assert 180 < a["rho=0.5"]["covered_95_noise_free"] < 198
+    assert a["rho=0"]["covered_95_noise_free"] < 150  # half the true sd: too narrow
+    assert res["chi2_per_datum_rho=0.5"] == 1.1
+    assert abs(a["spread_ratio_rho05_over_rho0"] - 1.0) < 0.2
+    assert "| a | 2.000 |" in nm_markdown(res, "m")

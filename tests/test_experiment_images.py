@@ -46,6 +46,8 @@ def test_images_route_gives_the_fe_field(tiny):
     exp = load_experiment(tiny)
     assert exp.route == "images" and exp.correlation.subset == 21 and exp.correlation.step == 21
     ds = import_experiment(exp)
+    # one reference for every image: a point's errors correlated by 1/2 between images
+    assert exp.snapshot_rho == 0.5 and ds.snapshot_rho == 0.5 and ds.noise()["group_rho"] == 0.5
     meta = ds.meta
     c = meta["correlation"]
     assert c["subsets_correlated"] == 81 and c["not_converged_per_image"] == [0, 0]
@@ -143,12 +145,13 @@ def test_shipped_images_example_imports_and_starts_the_calibration():
     case = lab_case("linear-compression", ds, s)
     truth = np.array([34000.0, 38.0, 0.9, 12.0, 24.0, 1500.0])
     assert np.all(case.lower <= truth) and np.all(truth <= case.upper)
-    # results/calibration/cube100-images is keyed by the example as it imports today
+    # results/calibration/cube100-images-correlated is keyed by the example as it imports today
+    # (cube100-images: the same calibration before the snapshot correlation, rho = 0)
     import json
 
     from bench import calibration as cal
 
-    out = folder.parents[2] / "results" / "calibration" / "cube100-images"
+    out = folder.parents[2] / "results" / "calibration" / "cube100-images-correlated"
     assert json.loads((out / "report.json").read_text())["data_hash"] == ds.hash
     done = json.loads((out / "variants" / "linear-compression.json").read_text())
     exp = load_experiment(folder / "experiment.toml")
@@ -174,3 +177,4 @@ def test_calibration_report_of_the_images_route(tiny, tmp_path):
     assert len(rep["import"]["files_sha256"]["images"]) == 3
     md = (out / "report.md").read_text()
     assert "3 images, the reference included" in md and "not converged per image [0, 0]" in md
+    assert "correlated between two images, rho = 0.5" in md and rep["import"]["snapshot_rho"] == 0.5

@@ -197,6 +197,10 @@ class Dataset:
 
     std_force_kN : (N,) standard deviation of each force, kN, when the data say it (an
                    experiment's load-cell accuracy); None: the objective's ``sigma_force_kN``
+    snapshot_rho : correlation of one point's displacement errors between two snapshots (u_h
+                   and u_v alike; points and the force independent): each point's covariance
+                   across the snapshots is ``D [(1 - rho) I + rho 1 1^T] D``, D its sigmas. 0
+                   (every data set but the images route's): the diagonal covariance
     """
 
     case: str
@@ -210,6 +214,7 @@ class Dataset:
     std_u_mm: np.ndarray  # (2, N, m) standard deviation of u_h and u_v, mm
     meta: dict = field(default_factory=dict)
     std_force_kN: np.ndarray | None = None
+    snapshot_rho: float = 0.0
 
     @property
     def values(self) -> np.ndarray:
@@ -224,6 +229,18 @@ class Dataset:
         if not force_kN > 0:
             raise ValueError(f"sigma_force_kN = {force_kN!r} is out of range: must be > 0 kN")
         return np.concatenate([self.std_u_mm.ravel(), np.full(len(self.reaction_kN), force_kN)])
+
+    def noise(self, force_kN: float = 1.0) -> dict:
+        """The noise model as keywords of
+        :class:`~problems.inverse.problem.LeastSquaresProblem`: ``sigma`` (:meth:`sigma`) and,
+        when :attr:`snapshot_rho` is not 0, the points' groups across the snapshots and rho."""
+        out = {"sigma": self.sigma(force_kN)}
+        if self.snapshot_rho != 0.0 and len(self.snapshots_mm) > 1:
+            from problems.inverse import layout
+
+            out["groups"] = layout.point_groups(len(self.snapshots_mm), len(self.points))
+            out["group_rho"] = float(self.snapshot_rho)
+        return out
 
     def to_json(self) -> str:
         doc = self._doc()
@@ -250,6 +267,8 @@ class Dataset:
         }
         if self.std_force_kN is not None:
             doc["std_force_kN"] = np.asarray(self.std_force_kN, float).tolist()
+        if self.snapshot_rho != 0.0:  # absent when 0: every other data set keeps its hash
+            doc["snapshot_rho"] = float(self.snapshot_rho)
         return doc
 
 
@@ -499,6 +518,14 @@ def _dataset_from_doc(doc: dict) -> Dataset:
         std_force = _array(doc, "std_force_kN")
         if std_force.shape != (n,) or not np.all(np.isfinite(std_force) & (std_force > 0)):
             raise ValueError(f"field std_force_kN must hold {n} standard deviations > 0 kN")
+    rho = doc.get("snapshot_rho", 0.0)
+    if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not (
+        n < 2 or -1.0 / (n - 1) < rho < 1.0
+    ):
+        raise ValueError(
+            f"field snapshot_rho = {rho!r} is out of range: allowed -1/(N-1) < rho < 1 "
+            f"(N = {n} snapshots)"
+        )
     return Dataset(
         doc["case"],
         settings,
@@ -511,6 +538,7 @@ def _dataset_from_doc(doc: dict) -> Dataset:
         arrays["std_u_mm"],
         meta,
         std_force,
+        float(rho),
     )
 
 

@@ -102,6 +102,8 @@ SECTIONS = {
         "columns": "table role -> header: x, y, u, v, sigma (or sigma_u, sigma_v)",
         "sigma": "standard deviation of u and v in the export's units when no sigma column",
         "images": "folder of the images (recorded, optional)",
+        "snapshot_correlation": "correlation of a point's errors between two images, 0 <= rho "
+        "< 1 (default 0: independent; 0.5 when every image was correlated against one reference)",
     },
     "images": {
         "reference": "the reference (undeformed) image: TIFF, PNG or BMP, 8 or 16 bit",
@@ -114,6 +116,9 @@ SECTIONS = {
         "order": "B-spline interpolation of the deformed images: 3 | 5 (default 3)",
         "zncc_min": "points whose final ZNCC is lower are dropped, in [-1, 1] (default 0.9)",
         "search_radius": "integer search radius of the FFT seed guess, px (default 32)",
+        "snapshot_correlation": "correlation of a point's errors between two images, 0 <= rho "
+        "< 1 (default 0.5: the reference's noise, equal to an image's, is half of each error "
+        "variance; 1/(n + 1) for a reference averaged over n images; 0: independent)",
     },
     "calibration": {
         "mesh": "inverse mesh spec (default coarse)",
@@ -182,6 +187,7 @@ class Experiment:
     budget: int = 80
     use_images: tuple[int, ...] = ()
     plate_margin_mm: float = 0.0
+    snapshot_rho: float = 0.0  # correlation of a point's errors between two images
     data_mesh: str = ""  # a virtual experiment's data mesh ("" for a real test)
 
     @property
@@ -558,6 +564,11 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
                 errors.append(f"[dic] images = {images!r}: no such folder {images_path}")
     else:
         reference, dic_files, correlation, roi_px = _parse_images(sec["images"], base, errors)
+    table = "images" if route == "images" else "dic"
+    rho = sec[table].get("snapshot_correlation", 0.5 if route == "images" else 0.0)
+    if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not 0.0 <= rho < 1.0:
+        errors.append(f"[{table}] snapshot_correlation = {rho!r}: must be in [0, 1)")
+        rho = 0.0
 
     c = sec["calibration"]
     mesh = c.get("mesh", "coarse")
@@ -631,6 +642,7 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
         budget=int(budget),
         use_images=tuple(use),
         plate_margin_mm=margin,
+        snapshot_rho=float(rho),
         route=route,
         reference_image=reference,
         correlation=correlation,
@@ -1076,6 +1088,7 @@ def import_experiment(exp: Experiment) -> Dataset:
         std,
         meta,
         force_sigma_kN(force, exp.force_accuracy_percent, exp.force_resolution_kN),
+        exp.snapshot_rho,
     )
 
 

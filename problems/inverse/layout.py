@@ -29,6 +29,15 @@ def blocks(n_snapshots: int, n_points: int) -> dict[str, slice]:
     }
 
 
+def point_groups(n_snapshots: int, n_points: int) -> np.ndarray:
+    """(2 m, N) indices into the measurement vector: each point's ``u_h`` across the N
+    snapshots (rows 0 .. m-1), then its ``u_v`` (rows m .. 2m-1)."""
+    nm = n_snapshots * n_points
+    k = np.arange(n_snapshots)[None, :] * n_points
+    p = np.arange(n_points)[:, None]
+    return np.concatenate([p + k, nm + p + k])
+
+
 def stack(u_h, u_v, force_kN) -> np.ndarray:
     """The measurement vector from ``u_h`` (N, m) mm, ``u_v`` (N, m) mm and ``force_kN`` (N,)."""
     return np.concatenate([np.ravel(u_h), np.ravel(u_v), np.ravel(force_kN)])

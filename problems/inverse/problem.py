@@ -7,11 +7,14 @@ It knows nothing of FE and nothing of counting (that is the evaluator's job)::
 with ``C`` diagonal (``sigma``: scalar or vector of standard deviations), diagonal plus low rank
 (``sigma`` and ``covariance_factor`` V: ``C = diag(sigma^2) + V V^T``, e.g. a model-error
 covariance; whitened with the symmetric square root of the Woodbury form, O(m k)) or full
-(``covariance``; its lower Cholesky factor ``L`` is used, ``R = L^-1 (U_E - U_N)``). In every
-case ``R^T R = d^T C^-1 d``. ``blocks`` names slices of the measurement vector so that the cost can
-be split; with a full covariance the split is that of the Cholesky-whitened residual
-(it still sums to the total). Solvers work in the *scaled* space ``z = x / reference``
-(the reference is z = 1).
+(``covariance``; its lower Cholesky factor ``L`` is used, ``R = L^-1 (U_E - U_N)``), or
+diagonal with equicorrelated groups (``sigma``, ``groups`` and ``group_rho``: within each group of
+values, e.g. one DIC point across the snapshots all correlated against one reference image,
+``C_g = D_g R D_g`` with ``R = (1 - rho) I + rho 1 1^T``; whitened group by group with the closed
+form of ``R^(-1/2)``, O(m)). In every case ``R^T R = d^T C^-1 d``. ``blocks`` names slices of
+the measurement vector so that the cost can be split; with a full covariance (or correlated
+groups) the split is that of the whitened residual (it still sums to the total). Solvers work
+in the *scaled* space ``z = x / reference`` (the reference is z = 1).
 """
 
 from __future__ import annotations
@@ -53,6 +56,10 @@ class LeastSquaresProblem:
                  subset)
     covariance : (m, m) full covariance (exclusive with ``sigma``)
     covariance_factor : (m, k) V of an added low-rank covariance ``V V^T`` (with ``sigma``)
+    groups     : (g, n) indices of g disjoint groups of n values each whose errors are correlated
+                 with coefficient ``group_rho`` (with ``sigma``, finite on them)
+    group_rho  : the correlation within a group, -1/(n-1) < rho < 1 (0: independent, the
+                 diagonal covariance exactly)
     blocks     : names of slices of the measurement vector, for :meth:`split`
     provenance : where the data and the model come from (case, tier, hashes, meshes), reported
     """
@@ -65,6 +72,8 @@ class LeastSquaresProblem:
     sigma: np.ndarray | float | None = None
     covariance: np.ndarray | None = None
     covariance_factor: np.ndarray | None = None
+    groups: np.ndarray | None = None
+    group_rho: float = 0.0
     blocks: dict[str, slice] | None = None
     provenance: dict = field(default_factory=dict)
 
@@ -122,6 +131,9 @@ class LeastSquaresProblem:
             Q, S, _ = np.linalg.svd(V / self._sigma[:, None], full_matrices=False)
             # (I + U U^T)^(-1/2) = I - Q c Q^T
             self._lowrank = (Q, 1.0 - 1.0 / np.sqrt(1.0 + S * S))
+        self._groups = None
+        if self.groups is not None and self.group_rho != 0.0:
+            self._groups = self._equicorrelation(m)
         self.blocks = dict(self.blocks) if self.blocks else {"all": slice(0, m)}
         for name, sl in self.blocks.items():
             if not isinstance(sl, slice) or len(range(m)[sl]) == 0:
@@ -129,6 +141,27 @@ class LeastSquaresProblem:
                     f"block {name!r} must be a non-empty slice of the {m} measurements"
                 )
         self.failure_residual = np.full(m, math.sqrt(FAILURE_COST / m))
+
+    def _equicorrelation(self, m: int):
+        """Checked ``groups`` and the coefficients ``(a, b)`` of ``R^(-1/2) = a I + (b - a) P``
+        (P the mean over a group): ``a = (1 - rho)^-1/2``, ``b = (1 + (n - 1) rho)^-1/2``."""
+        if self.covariance is not None or self.covariance_factor is not None:
+            raise ValueError("groups go with a diagonal sigma, not with a (low-rank) covariance")
+        G = np.asarray(self.groups)
+        rho = float(self.group_rho)
+        if G.ndim != 2 or G.shape[1] < 2 or not np.issubdtype(G.dtype, np.integer):
+            raise ValueError(f"groups must be (g, n) integer indices with n >= 2, got {G.shape}")
+        n = G.shape[1]
+        if not (-1.0 / (n - 1) < rho < 1.0):
+            raise ValueError(
+                f"group correlation rho = {rho!r} is out of range: allowed "
+                f"{-1.0 / (n - 1):.6g} < rho < 1 for groups of n = {n} (-1/(n-1) < rho < 1)"
+            )
+        if G.min() < 0 or G.max() >= m or len(np.unique(G)) != G.size:
+            raise ValueError(f"groups must be disjoint indices in [0, {m})")
+        if not np.all(np.isfinite(self._sigma[G])):
+            raise ValueError("groups: a value of a correlated group has an infinite sigma")
+        return G, 1.0 / math.sqrt(1.0 - rho), 1.0 / math.sqrt(1.0 + (n - 1) * rho)
 
     # --- shape and scaling ---------------------------------------------------------------------
     @property
@@ -146,11 +179,17 @@ class LeastSquaresProblem:
         return np.asarray(x, dtype=float) / self.reference
 
     def whiten(self, d) -> np.ndarray:
-        """``C^(-1/2) d`` (``L^-1 d`` for a full covariance); ``d`` is (m,) or (m, k)."""
+        """``C^(-1/2) d`` (``L^-1 d`` for a full covariance; ``R^(-1/2) D^-1 d`` on correlated
+        groups, the symmetric root: no snapshot is singled out); ``d`` is (m,) or (m, k)."""
         d = np.asarray(d, dtype=float)
         if self._chol is not None:
             return solve_triangular(self._chol, d, lower=True)
         w = d / (self._sigma[:, None] if d.ndim == 2 else self._sigma)
+        if self._groups is not None:
+            G, a, b = self._groups
+            wg = w[G]  # (g, n) or (g, n, k)
+            w = w.copy()
+            w[G] = a * wg + (b - a) * wg.mean(axis=1, keepdims=True)
         if self._lowrank is not None:
             Q, c = self._lowrank
             w = w - Q @ ((c[:, None] if d.ndim == 2 else c) * (Q.T @ w))
