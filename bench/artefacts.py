@@ -7,7 +7,13 @@ artefact by its path relative to the results root with its size (``bytes``), its
 ``femubench`` command that rebuilds it (``rebuild``) and how long that took (``rebuild_s``, s of
 wall time). A file artefact's ``sha256`` is that of its bytes; a folder's is that of the lines
 ``<sha256>  <name>\\n`` of its files in name order (as ``sha256sum`` prints them), each file also
-listed under ``files`` with its own ``sha256`` and ``bytes``.
+listed under ``files`` with its own ``sha256`` and ``bytes``. A *group* (key
+``<folder>/*.history.xz``, field ``group: {"track": T}``) is the history companions that the
+records ``<folder>/*.json`` of track ``T`` name: each record holds its companion's sha256
+(``history_file``), so the records in the tree are the group's index; the manifest keeps their
+``count``, ``bytes`` and the ``sha256`` of the index lines (as for a folder, names relative to
+``<folder>``). A group's files are looked for one by one (results root, then artefact directory);
+:func:`find_companion` is the store's lookup of one of them.
 
 :func:`locate` is the one lookup of every loader (:func:`bench.experiment.surrogate_track.load_for`,
 :func:`bench.experiment.objective.bae_correction`): the artefact in the results root if it is
@@ -24,6 +30,7 @@ cannot be lost).
 
 from __future__ import annotations
 
+import fnmatch
 import hashlib
 import json
 import os
@@ -39,6 +46,10 @@ FORMAT = "femubench-artefacts/1"
 MANIFEST = "artefacts.json"
 
 _digests: dict[tuple, str] = {}
+
+
+class MissingArtefact(FileNotFoundError):
+    """A file of a listed artefact that is in neither place (one-line message with the way out)."""
 
 
 def manifest_path(root: str | Path | None = None) -> Path:
@@ -200,9 +211,13 @@ def missing(rel: str) -> str:
     )
 
 
-def add(path: str | Path, rebuild: str, rebuild_s: float) -> tuple[str, dict]:
+def add(
+    path: str | Path, rebuild: str, rebuild_s: float, track: str | None = None
+) -> tuple[str, dict]:
     """List (or re-list) the artefact ``path`` (inside the results root) in its manifest with
-    its sizes and hashes of now, the command ``rebuild`` and its duration ``rebuild_s`` (s)."""
+    its sizes and hashes of now, the command ``rebuild`` and its duration ``rebuild_s`` (s).
+    With ``track``, ``path`` is a folder of records and the artefact the group of the
+    ``.history.xz`` companions its records of that track name (all present beside them)."""
     from bench.paths import results_root
 
     root = results_root()
@@ -216,6 +231,23 @@ def add(path: str | Path, rebuild: str, rebuild_s: float) -> tuple[str, dict]:
     if not rebuild_s > 0:
         raise ValueError(f"--rebuild-s {rebuild_s}: must be > 0 (s of wall time)")
     entries = read_manifest(root)
+    if track is not None:
+        rel, entry = f"{rel}/*.history.xz", {"group": {"track": track}}
+        index = group_index(rel, entry, root)
+        if not index:
+            raise ValueError(f"--track {track}: no record of {path} of that track has a companion")
+        found = {m: root / m for m in index}
+        bad = check(found, index)
+        if bad:
+            raise ValueError(f"PATH {path}: " + bad[0])
+        entry |= {
+            "count": len(index),
+            "bytes": sum(p.stat().st_size for p in found.values()),
+            "sha256": index_sha256(index),
+        }
+        entries[rel] = {**entry, "rebuild": rebuild, "rebuild_s": float(rebuild_s)}
+        write_manifest(entries, root)
+        return rel, entries[rel]
     entries[rel] = {**describe(path), "rebuild": rebuild, "rebuild_s": float(rebuild_s)}
     write_manifest(entries, root)
     return rel, entries[rel]
@@ -234,24 +266,22 @@ def pack(archive: str | Path) -> tuple[Path, list[str]]:
     entries = read_manifest()
     if not entries:
         raise ValueError(f"{manifest_path()} lists no artefacts")
-    found, problems = {}, []
+    found: dict[str, dict[str, Path]] = {}
+    problems = [p for rel, e in sorted(entries.items()) if (p := index_problem(rel, e))]
     for rel, entry in sorted(entries.items()):
-        path = next((r / rel for r in search_roots() if (r / rel).exists()), None)
-        if path is None:
+        paths = found_members(rel, entry)
+        if paths is None:
             problems.append(missing(rel))
             continue
-        problems += mismatches(path, entry)
-        found[rel] = path
+        problems += check(paths, members(rel, entry))
+        found[rel] = paths
     if problems:
         raise ValueError("cannot pack: " + "; ".join(problems))
 
     def write(fh):
         with tarfile.open(fileobj=fh, mode="w:xz", preset=6) as tar:
-            for rel, path in found.items():
-                names = sorted(entries[rel]["files"]) if "files" in entries[rel] else [""]
-                for name in names:
-                    member = f"{rel}/{name}" if name else rel
-                    src = path / name if name else path
+            for paths in found.values():
+                for member, src in sorted(paths.items()):
                     info = tar.gettarinfo(str(src), arcname=member)
                     info.uid = info.gid = 0
                     info.uname = info.gname = ""
@@ -264,21 +294,88 @@ def pack(archive: str | Path) -> tuple[Path, list[str]]:
     return archive, list(found)
 
 
-def _owner(member: str, entries: dict[str, dict]) -> tuple[str, str] | None:
-    """``(artefact, file name inside it or "")`` of an archive member, None when not listed."""
-    if member in entries and "files" not in entries[member]:
-        return member, ""
-    for rel, entry in entries.items():
-        if member.startswith(rel + "/") and member[len(rel) + 1 :] in entry.get("files", {}):
-            return rel, member[len(rel) + 1 :]
-    return None
+def is_group(entry: dict) -> bool:
+    """Whether the manifest ``entry`` is a group of history companions (see the module doc)."""
+    return "group" in entry
+
+
+def group_index(rel: str, entry: dict, root: str | Path | None = None) -> dict[str, str]:
+    """``{path relative to the results root: sha256}`` of the members of the group ``rel``
+    (``<folder>/<pattern>``): the companions matching ``pattern`` named in ``history_file`` by
+    the records ``<folder>/*.json`` of the results root ``root`` (default the results root) whose
+    ``config.track`` is the group's ``track``; unreadable records are left out."""
+    from bench.paths import results_root
+
+    root = Path(root) if root is not None else results_root()
+    folder, pattern = rel.rsplit("/", 1)
+    out = {}
+    for path in sorted((root / folder).glob("*.json")):
+        try:
+            rec = json.loads(path.read_text(encoding="utf-8"))
+            ref, track = rec.get("history_file"), rec["config"].get("track")
+            name, sha = ref["name"], ref["sha256"]
+        except (ValueError, OSError, TypeError, KeyError, AttributeError):
+            continue
+        if track == entry["group"]["track"] and fnmatch.fnmatchcase(str(name), pattern):
+            out[f"{folder}/{name}"] = str(sha)
+    return out
+
+
+def index_sha256(index: dict[str, str]) -> str:
+    """SHA-256 of a group's index (:func:`group_index`): its ``sha256sum`` lines, as a folder's
+    (:func:`folder_sha256`), names relative to the group's folder."""
+    return folder_sha256({m.rsplit("/", 1)[1]: {"sha256": h} for m, h in index.items()})
+
+
+def index_problem(rel: str, entry: dict) -> str | None:
+    """One line when the records of the tree name other companions than the manifest's group
+    ``rel`` (a rerun record: re-list it with ``femubench artefacts add``), else None."""
+    if not is_group(entry):
+        return None
+    index = group_index(rel, entry)
+    got = index_sha256(index)
+    if got == entry["sha256"] and len(index) == entry["count"]:
+        return None
+    return (
+        f"{rel}: the records name {len(index)} companions (index sha256 {got[:16]}), not the "
+        f"release's {entry['count']} ({entry['sha256'][:16]}, {MANIFEST})"
+    )
 
 
 def members(rel: str, entry: dict) -> dict[str, str]:
     """``{file path relative to the results root: sha256}`` of the files of artefact ``rel``."""
+    if is_group(entry):
+        return group_index(rel, entry)
     if "files" in entry:
         return {f"{rel}/{name}": f["sha256"] for name, f in sorted(entry["files"].items())}
     return {rel: entry["sha256"]}
+
+
+def found_members(rel: str, entry: dict) -> dict[str, Path] | None:
+    """Where each file of artefact ``rel`` is: a file or folder artefact as a whole in the first
+    root of :func:`search_roots` holding ``rel`` (its files' paths there, present or not); each
+    file of a group in the first root holding it (the artefact directory's path when in
+    neither). None when no file of it is in any root."""
+    roots, want = search_roots(), members(rel, entry)
+    if not is_group(entry):
+        root = next((r for r in roots if (r / rel).exists()), None)
+        return None if root is None else {m: root / m for m in want}
+    found = {m: next((r / m for r in roots if (r / m).is_file()), None) for m in want}
+    if not any(found.values()):
+        return None
+    return {m: p if p is not None else roots[-1] / m for m, p in found.items()}
+
+
+def check(found: dict[str, Path], want: dict[str, str]) -> list[str]:
+    """One line per file of ``want`` (``{member: sha256}``) whose path in ``found`` is missing or
+    holds other bytes (both hashes named)."""
+    out = []
+    for m, sha in want.items():
+        path = found[m]
+        got = file_sha256(path) if path.is_file() else None
+        if got != sha:
+            out.append(_mismatch(path, got, sha))
+    return out
 
 
 def _place(tmp: Path, got: list[str], entries: dict[str, dict], dest: Path, source: str) -> None:
@@ -289,12 +386,19 @@ def _place(tmp: Path, got: list[str], entries: dict[str, dict], dest: Path, sour
 
     if not got:
         raise ValueError(f"{source} holds no artefact")
-    problems = [line for rel in sorted(got) for line in mismatches(tmp / rel, entries[rel])]
+    problems = [p for rel in sorted(got) if (p := index_problem(rel, entries[rel]))]
+    for rel in sorted(got):
+        want = members(rel, entries[rel])
+        problems += check({m: tmp / m for m in want}, want)
     if problems:
         raise ValueError(f"{source}: " + "; ".join(problems))
     for rel in sorted(got):
         final = dest / rel
-        if "files" in entries[rel]:
+        if is_group(entries[rel]):
+            for m in members(rel, entries[rel]):
+                (dest / m).parent.mkdir(parents=True, exist_ok=True)
+                os.replace(tmp / m, dest / m)
+        elif "files" in entries[rel]:
             with atomic_dir(final) as staged:
                 for name in entries[rel]["files"]:
                     (staged / name).parent.mkdir(parents=True, exist_ok=True)
@@ -326,6 +430,7 @@ def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
     with tempfile.TemporaryDirectory(dir=dest, prefix=".unpack.") as tmp:
         tmp = Path(tmp)
         got: set[str] = set()
+        owners = {m: rel for rel, e in entries.items() for m in members(rel, e)}
         try:
             tar = tarfile.open(archive, mode="r:xz")
         except (tarfile.TarError, EOFError, OSError) as exc:
@@ -338,7 +443,7 @@ def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
             for m in listing:
                 if m.isdir():
                     continue
-                owner = _owner(m.name, entries)
+                owner = owners.get(m.name)
                 if not m.isfile() or owner is None:
                     raise ValueError(
                         f"ARCHIVE {archive}: member {m.name!r} is not a file of an artefact "
@@ -348,7 +453,7 @@ def unpack(archive: str | Path, dest: str | Path | None = None) -> list[str]:
                 target.parent.mkdir(parents=True, exist_ok=True)
                 with tar.extractfile(m) as src, open(target, "wb") as out:
                     shutil.copyfileobj(src, out)
-                got.add(owner[0])
+                got.add(owner)
         _place(tmp, sorted(got), entries, dest, f"ARCHIVE {archive}")
     return sorted(got)
 
@@ -421,3 +526,38 @@ def unpack_from_git(
         got = sorted({rel for rel, _ in wanted})
         _place(tmp, got, entries, dest, f"commit {commit_hash[:12]}")
     return commit_hash, got
+
+
+def find_companion(record: str | Path, track: str | None, name: str, sha256: str) -> Path | None:
+    """The history companion ``name`` (sha256 ``sha256``, from the record's ``history_file``) of
+    the record file ``record`` of track ``track`` when it is not beside the record: for each group
+    of that track whose pattern ``name`` matches, ``<folder>/name`` in the results root, then in
+    the artefact directory (the caller checks the sha256). None when it is not a listed group
+    member (the results root's record of that name must name the same companion); a listed one in
+    neither place is a :class:`MissingArtefact` naming the record and the restore commands."""
+    from bench.paths import results_root
+
+    record = Path(record)
+    for rel, entry in read_manifest().items():
+        if not is_group(entry) or entry["group"]["track"] != track:
+            continue
+        folder, pattern = rel.rsplit("/", 1)
+        if not fnmatch.fnmatchcase(name, pattern):
+            continue
+        roots = search_roots()
+        path = next((r / folder / name for r in roots if (r / folder / name).is_file()), None)
+        if path is not None:
+            return path
+        try:
+            twin = json.loads((results_root() / folder / record.name).read_text(encoding="utf-8"))
+            listed_member = twin["history_file"]["sha256"] == sha256
+        except (ValueError, OSError, TypeError, KeyError):
+            listed_member = False
+        if listed_member:
+            raise MissingArtefact(
+                f"record {record}: its history companion {name} (release artefact {rel}) is "
+                f"neither beside it nor in {roots[0] / folder} nor in {roots[1] / folder}: restore "
+                "it with `femubench artefacts unpack --from-git` (or `femubench artefacts unpack "
+                "FILE.tar.xz`)"
+            )
+    return None

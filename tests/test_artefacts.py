@@ -178,11 +178,16 @@ def test_the_shipped_manifest_lists_every_stored_surrogate_and_statistic():
     entries = A.read_manifest(ROOT / "results")
     sur = {k for k in entries if k.startswith("surrogates/")}
     bae = {k for k in entries if k.startswith("model_error/")}
-    assert len(sur) == 10 and len(bae) == 18 and len(entries) == 28
+    assert len(sur) == 10 and len(bae) == 18 and len(entries) == 29
     for rel, e in entries.items():
         assert e["rebuild"].startswith("femubench ") and e["rebuild_s"] > 60 and e["bytes"] > 1e5
         if (ROOT / "results" / rel).exists():
             assert A.mismatches(ROOT / "results" / rel, e) == [], rel
+    # the group: the comparison's surrogate-track companions, indexed by the records in the tree
+    group = entries["comparison/runs/*.history.xz"]
+    assert group["group"] == {"track": "surrogate"} and group["count"] == 828
+    index = A.group_index("comparison/runs/*.history.xz", group, ROOT / "results")
+    assert len(index) == 828 and A.index_sha256(index) == group["sha256"]
 
 
 def test_surrogates_are_loaded_from_the_artefact_directory(roots):
@@ -302,3 +307,98 @@ def test_unpack_from_git_restores_the_artefacts_of_an_older_commit(roots, tmp_pa
     assert main(["artefacts", "unpack", "--from-git", "0" * 40]) == 2
     err = capsys.readouterr().err
     assert "is not in this clone" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.fixture
+def runs(roots):
+    """``comparison/runs`` of the temporary results root with two compact records made from a
+    shipped FE-track record: that one and a copy on the surrogate track (its own hash), the
+    surrogate one's companion listed as the group ``comparison/runs/*.history.xz``. Returns
+    (results root, artefact directory, FE record path, surrogate record path)."""
+    import json
+
+    from bench.experiment import store
+    from bench.experiment.spec import RunSpec
+
+    results, cache = roots
+    shipped = ROOT / "results" / "comparison" / "runs"
+    path = next(
+        p
+        for p in sorted(shipped.glob("*.json"))
+        if "history_file" in (r := json.loads(p.read_text())) and not r["config"].get("track")
+    )
+    rec = store.load_record(path)
+    out = results / "comparison"
+    fe = store.write_record(out, {k: v for k, v in rec.items() if k != "digest"})
+    config = {**rec["config"], "track": "surrogate"}
+    sur = {**rec, "config": config, "config_hash": RunSpec.from_dict(config).hash}
+    sur = store.write_record(out, {k: v for k, v in sur.items() if k != "digest"})
+    argv = ["artefacts", "add", str(out / "runs"), "--track", "surrogate"]
+    assert main([*argv, "--rebuild", "femubench run S --out DIR", "--rebuild-s", "100"]) == 0
+    return results, cache, fe, sur
+
+
+def test_a_surrogate_track_companion_is_a_group_artefact_found_by_the_store(runs, capsys):
+    """The group lists the companion of the surrogate-track record only; the store reads a
+    record whose companion is in the artefact directory as before, refuses other bytes, and
+    stops with one line naming the record and the restore command when it is in neither place
+    (never skipping the record or using an empty history)."""
+    from bench.experiment import store
+
+    results, cache, fe, sur = runs
+    entry = A.read_manifest()["comparison/runs/*.history.xz"]
+    comp = store.companion_path(sur)
+    assert entry["count"] == 1 and entry["bytes"] == comp.stat().st_size
+    assert A.group_index("comparison/runs/*.history.xz", entry) == {
+        f"comparison/runs/{comp.name}": hashlib.sha256(comp.read_bytes()).hexdigest()
+    }
+    want = store.load_record(sur)
+    moved = cache / "comparison" / "runs" / comp.name
+    moved.parent.mkdir(parents=True)
+    comp.replace(moved)
+    assert store.load_record(sur) == want  # from the artefact directory
+    assert main(["artefacts", "verify"]) == 0
+    assert "comparison/runs/*.history.xz (1 cache of 1 files)" in capsys.readouterr().out
+    moved.write_bytes(moved.read_bytes()[:-1])
+    with pytest.raises(ValueError, match="hash mismatch"):
+        store.load_record(sur)
+    moved.unlink()
+    with pytest.raises(A.MissingArtefact) as caught:
+        store.scan_records(results / "comparison")  # not an unreadable record: a stop
+    msg = str(caught.value)
+    assert sur.name in msg and "femubench artefacts unpack --from-git" in msg and "\n" not in msg
+    assert main(["report", str(results / "comparison"), "--out", str(results / "r")]) == 2
+    err = capsys.readouterr().err
+    assert sur.name in err and len(err.strip().splitlines()) == 1
+    # an FE-track companion is no artefact: missing, its record is unreadable as before
+    store.companion_path(fe).unlink()
+    with pytest.raises(ValueError, match="cannot be read"):
+        store.load_record(fe)
+
+
+def test_pack_unpack_and_the_git_history_cover_the_group(runs, tmp_path, capsys):
+    import subprocess
+
+    from bench.experiment import store
+
+    results, cache, fe, sur = runs
+    comp = store.companion_path(sur)
+    data = comp.read_bytes()
+    archive = tmp_path / "a.tar.xz"
+    assert main(["artefacts", "pack", str(archive)]) == 0
+    with tarfile.open(archive) as tar:
+        assert f"comparison/runs/{comp.name}" in tar.getnames()
+        assert f"comparison/runs/{store.companion_path(fe).name}" not in tar.getnames()
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    first = _commit(tmp_path, "companions in the tree")
+    A.write_manifest(A.read_manifest(), git_commit=first)
+    comp.unlink()
+    _commit(tmp_path, "the surrogate-track companion out of the tree")
+    assert main(["artefacts", "verify"]) == 0
+    assert "missing  comparison/runs/*.history.xz" in capsys.readouterr().out
+    assert main(["artefacts", "unpack", "--from-git"]) == 0
+    assert (cache / "comparison" / "runs" / comp.name).read_bytes() == data
+    assert store.load_record(sur)["result"]["history"]
+    other = tmp_path / "other"
+    assert main(["artefacts", "unpack", str(archive), "--to", str(other)]) == 0
+    assert (other / "comparison" / "runs" / comp.name).read_bytes() == data

@@ -36,6 +36,12 @@ def add_arguments(p) -> None:
         "(default: the manifest's git_commit, the last commit that holds them) instead of an "
         "archive; every sha256 is checked against the manifest before anything is put in place",
     )
+    p.add_argument(
+        "--track",
+        metavar="T",
+        help="add: PATH is a folder of records; list the group of the .history.xz companions "
+        "its records of track T name (e.g. surrogate)",
+    )
     p.add_argument("--rebuild", metavar="CMD", help="add: the femubench command that rebuilds it")
     p.add_argument("--rebuild-s", type=float, metavar="S", help="add: wall time of that command, s")
 
@@ -52,14 +58,14 @@ def main(args) -> int:
         raise ValueError(f"femubench artefacts unpack: give ARCHIVE {args.path} or --from-git")
     if args.action in ("pack", "unpack", "add") and not args.path and not from_git:
         raise ValueError(f"femubench artefacts {args.action}: give the ARCHIVE or PATH")
-    if args.action != "add" and (args.rebuild or args.rebuild_s is not None):
-        raise ValueError("--rebuild and --rebuild-s go with 'add' only")
+    if args.action != "add" and (args.rebuild or args.rebuild_s is not None or args.track):
+        raise ValueError("--rebuild, --rebuild-s and --track go with 'add' only")
     if args.to and args.action != "unpack":
         raise ValueError("--to goes with 'unpack' only")
     if args.action == "add":
         if not args.rebuild or args.rebuild_s is None:
             raise ValueError("femubench artefacts add: give --rebuild CMD and --rebuild-s S")
-        rel, entry = A.add(args.path, args.rebuild, args.rebuild_s)
+        rel, entry = A.add(args.path, args.rebuild, args.rebuild_s, args.track)
         print(f"listed {rel}: {entry['bytes'] / 1e6:.2f} MB, sha256 {entry['sha256'][:16]}")
         return 0
     if args.action == "pack":
@@ -90,21 +96,26 @@ def main(args) -> int:
     bad, absent, total = 0, 0, 0.0
     for rel, entry in sorted(entries.items()):
         total += entry["bytes"]
-        where = next((r for r in roots if (r / rel).exists()), None)
+        found = A.found_members(rel, entry)
         if args.action == "list":
-            place = "missing" if where is None else ("tree" if where == roots[0] else "cache")
+            place = _place(found, roots, A.is_group(entry))
             print(
-                f"{rel}  {entry['bytes'] / 1e6:.2f} MB  {place}  rebuild: `{entry['rebuild']}` "
-                f"({A.duration(entry['rebuild_s'])})"
+                f"{rel}  {entry['bytes'] / 1e6:.2f} MB  {place}  rebuild: "
+                f"`{entry['rebuild']}` ({A.duration(entry['rebuild_s'])})"
             )
             continue
-        if where is None:
+        if found is None:
             absent += 1
             print(f"missing  {A.missing(rel)}")
             continue
-        problems = A.mismatches(where / rel, entry)
+        problems = [p for p in [A.index_problem(rel, entry)] if p]
+        problems += A.check(found, A.members(rel, entry))
         bad += bool(problems)
-        print(f"{'MISMATCH' if problems else 'ok'}  {where / rel}")
+        if A.is_group(entry):
+            where = f"{rel} ({_place(found, roots, True)})"
+        else:
+            where = next(r / rel for r in roots if (r / rel).exists())
+        print(f"{'MISMATCH' if problems else 'ok'}  {where}")
         for line in problems:
             print(f"  {line}", file=sys.stderr)
     rebuild_s = sum(e["rebuild_s"] for e in entries.values())
@@ -114,3 +125,18 @@ def main(args) -> int:
         + (f"; {bad} differ from the manifest, {absent} missing" if args.action == "verify" else "")
     )
     return 1 if bad else 0
+
+
+def _place(found, roots, group: bool) -> str:
+    """Where an artefact's files are: ``missing``, ``tree`` or ``cache``; for a group, the count
+    of its files in each (``N tree + M cache + K missing of T files``)."""
+    if found is None:
+        return "missing"
+    if not group:
+        return "tree" if next(iter(found.values())).is_relative_to(roots[0]) else "cache"
+    places = [
+        "missing" if not p.is_file() else "tree" if p.is_relative_to(roots[0]) else "cache"
+        for p in found.values()
+    ]
+    counts = {k: places.count(k) for k in ("tree", "cache", "missing") if k in places}
+    return " + ".join(f"{n} {k}" for k, n in counts.items()) + f" of {len(places)} files"

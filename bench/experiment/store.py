@@ -24,10 +24,12 @@ smallest of raw values in the narrowest dtype (``raw``/``f8``), float bytes regr
 (``rle.v``/``rle.n``), runs opening at another column's values (``rleref``); strings as a
 vocabulary and codes (``vocab`` + codes). ``_n`` is the number of evaluations, ``_format`` 2.
 The JSON names the companion in ``history_file`` (``{"name", "sha256", "n"}``, the sha256 of the
-companion's bytes). The companion is written first (atomically), then the JSON; a reader checks
-the companion's sha256 and rebuilds exactly the same in-memory record as from a one-file record
-(the writer decodes it before keeping it). Format-1 companions (``<hash>.history.npz``, plain
-``np.savez_compressed`` columns) are still read. ``digest`` always covers the whole in-memory
+companion's bytes); a companion that is a release artefact may live outside the folder
+(docs/artefacts.md, :func:`bench.artefacts.find_companion`). The companion is written first
+(atomically), then the JSON; a reader checks the companion's sha256 and rebuilds exactly the
+same in-memory record as from a one-file record (the writer decodes it before keeping it).
+Format-1 companions (``<hash>.history.npz``, plain ``np.savez_compressed`` columns) are still
+read. ``digest`` always covers the whole in-memory
 record, history included, ``history_file`` left out: a torn or edited companion fails its
 sha256, one that decodes to other values fails the digest; either way the record counts as
 unreadable. A history that the columns cannot hold exactly (mixed types per key, ragged ``x``,
@@ -482,7 +484,12 @@ def write_encoded(path: Path, encoded: dict[str, Any]) -> bool:
 
 def _inflate(rec, path: Path):
     """Put the companion's history back into a compact record ``rec`` read from ``path``
-    (ValueError when the companion is missing, torn or edited)."""
+    (ValueError when the companion is missing, torn or edited). A companion that is not beside
+    its record is looked for as a release artefact (:func:`bench.artefacts.find_companion`: the
+    surrogate-track companions of the shipped comparison); a listed one in neither place raises
+    :class:`bench.artefacts.MissingArtefact` (an OSError, not a ValueError: the record is not
+    unreadable, so the loaders stop with its one line rather than skip the record or set it
+    aside)."""
     if not isinstance(rec, dict) or HISTORY_FILE not in rec:
         return rec
     import numpy as np
@@ -492,6 +499,12 @@ def _inflate(rec, path: Path):
     if not isinstance(ref, dict) or ref.get("name") not in names:
         raise ValueError(f"{HISTORY_FILE} names neither of {', '.join(names)}")
     comp = companion_path(path, names[ref["name"]])
+    if not comp.is_file():  # a release artefact out of the tree? (MissingArtefact when listed)
+        from bench.artefacts import find_companion
+
+        config = rec.get("config")
+        track = config.get("track") if isinstance(config, dict) else None
+        comp = find_companion(path, track, comp.name, str(ref.get("sha256"))) or comp
     try:
         data = comp.read_bytes()
     except OSError as exc:
