@@ -1,4 +1,4 @@
-"""Exact Jacobians of the FE model by direct differentiation (problems/fe/sensitivity.py).
+"""Exact Jacobians of the FE model by direct differentiation (problems/fe/ddm.py).
 
 Every column is checked against central differences of plain runs with a step in their clean
 range (the columns of two steps a decade apart agree, so neither truncation nor the noise of the
@@ -13,11 +13,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import problems.fe.sensitivity as sensitivity
+import problems.fe.ddm as ddm
+from problems.fe.ddm import SensitivitySettings
 from problems.fe.linear_solver import superlu_factor
 from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Loading, NewtonSettings, discretise, run
-from problems.fe.sensitivity import SensitivitySettings
 from problems.inverse import layout
 from problems.inverse.cases import get_case
 from problems.inverse.forward import FORWARD_SETTINGS, FEForwardModel, case_material
@@ -151,8 +151,8 @@ def test_coarse_keeps_the_double_lu(monkeypatch):
         calls.append(A.shape[0])
         return superlu_factor(A)
 
-    monkeypatch.setattr(sensitivity, "mixed_superlu_factor", refuse)
-    monkeypatch.setattr(sensitivity, "superlu_factor", double)
+    monkeypatch.setattr(ddm, "mixed_superlu_factor", refuse)
+    monkeypatch.setattr(ddm, "superlu_factor", double)
     resp = model.response(x, sensitivities=model.material_chain(x)[0])
     s = resp.sensitivities
     assert s.ok and s.timing["mode"] == "direct"

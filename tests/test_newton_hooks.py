@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from problems.fe.ddm import SensitivitySettings
 from problems.fe.mesh import parse_mesh_spec
 from problems.fe.newton import Loading, NewtonSettings, discretise, run
-from problems.fe.sensitivity import SensitivitySettings
 from problems.inverse.cases import get_case
 from problems.inverse.forward import FORWARD_SETTINGS, case_material
 

@@ -1,7 +1,7 @@
 """``femubench jacobian``: the Jacobian dU/dx of the measurement vector of one case at one point.
 
 ``--method analytic`` (default) is one FE run with exact sensitivities by direct differentiation
-(problems/fe/sensitivity.py); ``forward`` (n + 1 runs) and ``central`` (2 n + 1 runs, the base run
+(problems/fe/ddm.py); ``forward`` (n + 1 runs) and ``central`` (2 n + 1 runs, the base run
 being the response) are finite differences of plain runs for comparison, with the FE model's
 relative steps (problems.inverse.forward.FD_REL_STEP, h_j = step * |x_j|). Every method's wall
 time (response included) is reported against one plain forward run of the same point timed in

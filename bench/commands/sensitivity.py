@@ -67,7 +67,7 @@ def main(args) -> int:
     from bench.parallel import mapper
     from bench.progress import enabled, warn_if_long
     from bench.studies import case_names, existing_dir, render_from
-    from bench.studies.sensitivity import render_sensitivity, run_sensitivity
+    from bench.studies.local_sensitivity import render_sensitivity, run_sensitivity
     from problems.inverse.cases import get_case
 
     cases = case_names(args.cases)

@@ -19,13 +19,13 @@ error of a Jacobian column against central differences of plain runs with relati
 smaller (``err/100``): where a Gauss point starts to yield within the first step of the reference
 (a kink of the discrete response: the one-sided differences converge to the DDM column from one
 side only), the smaller step is in the clean range again.
-``--modes direct,krylov`` times each sensitivity solve mode of problems/fe/sensitivity.py (the
+``--modes direct,krylov`` times each sensitivity solve mode of problems/fe/ddm.py (the
 measured choice behind ``auto``); ``--modes auto,auto-2pass`` the one material pass per increment
 against the two ``sensitivity`` calls of the first implementation; ``--modes auto,auto-f64`` the
 direct solves with a double LU at every size against the default (``-f32``: mixed precision at
 every size; the measured choice behind ``mixed_min_dofs``); ``--modes auto-keep,auto`` without
 and with the hand-over of that factorisation to the next increment's Newton predictor
-(``hand_over``). Each mode is a :class:`~problems.fe.sensitivity.SensitivitySettings` of the
+(``hand_over``). Each mode is a :class:`~problems.fe.ddm.SensitivitySettings` of the
 model's Newton settings. ``coarse`` runs all nine
 cases, ``paper`` only ``--paper-cases``.
 """
@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 from bench.perf.linear_solvers import split_specs
-from problems.fe.sensitivity import SOLVE_MODES, SensitivitySettings
+from problems.fe.ddm import SOLVE_MODES, SensitivitySettings
 from problems.inverse.cases import CASES
 from problems.inverse.forward import FEForwardModel, discretisation
 

@@ -1,6 +1,7 @@
-"""Sensitivity, identifiability, global-sensitivity and uncertainty studies (orchestration and I/O).
+"""Local-sensitivity, identifiability, global-sensitivity and uncertainty studies (orchestration
+and I/O).
 
-The mathematics lives in :mod:`problems.analysis.sensitivity`,
+The mathematics lives in :mod:`problems.analysis.local_sensitivity`,
 :mod:`problems.analysis.identifiability` and
 :mod:`problems.analysis.global_sensitivity`. Each study is two steps, as the suites and their
 reports:

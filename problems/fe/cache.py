@@ -1,6 +1,6 @@
 """Objects built once per discretisation and shared by every run on it (the fused assembler,
 linear solvers with their symbolic analysis, orderings): used by the Newton solver
-(:mod:`problems.fe.newton`) and the sensitivity solves (:mod:`problems.fe.sensitivity`)."""
+(:mod:`problems.fe.newton`) and the sensitivity solves (:mod:`problems.fe.ddm`)."""
 
 from __future__ import annotations
 

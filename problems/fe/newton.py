@@ -39,6 +39,12 @@ from problems.fe.assembly import (
     element_matrices,
 )
 from problems.fe.cache import shared
+from problems.fe.ddm import (
+    GlobalDDM,
+    Sensitivities,
+    SensitivitySettings,
+    select_parameters,
+)
 from problems.fe.element import element_mean, strain_operators
 from problems.fe.linear_solver import (
     LINEAR_SOLVERS,
@@ -55,12 +61,6 @@ from problems.fe.mesh import (
     lower_half,
     nested_dissection_order,
     unfold_mid_height,
-)
-from problems.fe.sensitivity import (
-    GlobalDDM,
-    Sensitivities,
-    SensitivitySettings,
-    select_parameters,
 )
 from problems.materials.base import Material
 
@@ -148,7 +148,7 @@ class NewtonSettings:
     assembly          : ``fused`` (compiled kernels straight into the free-free block) or ``numpy``
                         (the batched numpy reference and a full CSR matrix, the old path)
     sensitivity       : how a run with sensitivities solves them
-                        (:class:`problems.fe.sensitivity.SensitivitySettings`)
+                        (:class:`problems.fe.ddm.SensitivitySettings`)
     on_linear_solve   : None, or a callable ``f(kind, Kff, rhs)`` told of every linear system a
                         Newton iteration solves, before it is solved: ``kind`` is ``"predictor"``
                         (the first system of an increment) or ``"correction"``, ``Kff`` the free
@@ -317,7 +317,7 @@ class Response:
     state         : (N, n_elements, n_state) element-mean history variables (e.g. eqps)
     symmetry      : the model that was solved (``eighth``: fields above z = 75 mm are mirror images)
     sensitivities : derivatives of displacements and plate forces with respect to material
-                    parameters (:class:`problems.fe.sensitivity.Sensitivities`) when the run was
+                    parameters (:class:`problems.fe.ddm.Sensitivities`) when the run was
                     asked for them, else None
     """
 
@@ -366,7 +366,7 @@ def run(
     ``progress`` shows a progress bar over the snapshots (for long runs on fine meshes).
     ``sensitivities`` (True: all of ``material.parameter_names``; or a sequence of some of those
     names) also computes the exact derivatives of the displacements and plate forces with respect
-    to those parameters by direct differentiation (problems/fe/sensitivity.py) into
+    to those parameters by direct differentiation (problems/fe/ddm.py) into
     ``Response.sensitivities``; the response itself is the same as without them.
     ``predictor``: another predictor of each increment (:class:`Predictor`, for experiments;
     default the tangent predictor).

@@ -2,7 +2,7 @@
 
 The measurement vector of one run is laid out by :mod:`problems.inverse.layout`. With
 ``jacobian=True`` the same run also gives the exact Jacobian dU/dx by direct differentiation
-(problems/fe/sensitivity.py), chained from the material's parameters to the identified ones.
+(problems/fe/ddm.py), chained from the material's parameters to the identified ones.
 """
 
 from __future__ import annotations

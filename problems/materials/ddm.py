@@ -5,7 +5,7 @@ physical parameters to the kernel's, which both use, is :mod:`kernel_jacobian`):
 
 * :func:`affine_sensitivity`: the sensitivities of one update as an affine function of the
   unknown part of the strain-increment derivative (one kernel pass instead of two per increment
-  of the global DDM, problems/fe/sensitivity.py);
+  of the global DDM, problems/fe/ddm.py);
 * :func:`run_path_sensitivity`: a material-point DDM driver that takes points along prescribed
   strain paths through ``update`` and ``sensitivity``, carrying the derivatives of stress and
   state from increment to increment.

@@ -23,7 +23,7 @@ class SensitivityRun:
     case: str
     mesh: str
     delta: float  # relative perturbation (-)
-    result: object  # problems.analysis.sensitivity.LocalSensitivities
+    result: object  # problems.analysis.local_sensitivity.LocalSensitivities
     snapshots_mm: np.ndarray  # top-plate displacement of each snapshot (mm)
     wall_s: float  # wall time of the FE runs (s)
     dir: Path
@@ -33,9 +33,9 @@ class SensitivityRun:
 def fe_sensitivities(
     case_name: str, *, mesh: str = "coarse", delta: float = 0.01, mapper=None, loading=None
 ):
-    """:class:`~problems.analysis.sensitivity.LocalSensitivities` of the FE case at its reference
-    (1 + n runs)."""
-    from problems.analysis.sensitivity import ModelFields, local_sensitivities
+    """:class:`~problems.analysis.local_sensitivity.LocalSensitivities` of the FE case at its
+    reference (1 + n runs)."""
+    from problems.analysis.local_sensitivity import ModelFields, local_sensitivities
     from problems.fe.newton import Loading
     from problems.inverse.cases import get_case
     from problems.inverse.forward import FEForwardModel

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def both_sides():
-    from bench.studies.sensitivity import fe_sensitivities
+    from bench.studies.local_sensitivity import fe_sensitivities
 
     plus, _ = fe_sensitivities("exponent-compression", mesh="coarse", delta=0.01)
     minus, _ = fe_sensitivities("exponent-compression", mesh="coarse", delta=-0.01)

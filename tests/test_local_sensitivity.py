@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from problems.analysis.sensitivity import (
+from problems.analysis.local_sensitivity import (
     ModelFields,
     local_sensitivities,
     snapshot_sensitivities,
