@@ -22,8 +22,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -750,25 +748,10 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
     }
 
 
-def _atomic_figure(fig, path: Path) -> None:
-    """Save a figure atomically (temporary file in the same folder, then rename)."""
-    from bench.plotting import save
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        save(fig, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True) -> None:
     """``report.json``, ``report.md`` and (with ``figures``) the figures into ``out`` (atomic
     writes)."""
-    from bench.plotting import line_style, pyplot
+    from bench.plotting import line_style, pyplot, save
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "report.json", json.dumps(report, indent=1, allow_nan=True) + "\n")
@@ -795,7 +778,7 @@ def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True
     ax.set_xlabel("plate displacement (mm)")
     ax.set_ylabel("force (kN)")
     ax.legend(fontsize=7)
-    _atomic_figure(fig, out / "force_displacement.png")
+    save(fig, out / "force_displacement.png")
     if report["ranking"]:
         best = report["variants"][report["ranking"][0]["variant"]]
         s = np.array(data.meta["face_s_mm"])
@@ -808,7 +791,7 @@ def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True
             ax.set_aspect("equal")
         axes[0].set_ylabel("z (mm)")
         fig.colorbar(sc, ax=axes)
-        _atomic_figure(fig, out / "residuals.png")
+        save(fig, out / "residuals.png")
 
 
 def _correlation_lines(c: dict | None) -> list[str]:
