@@ -303,7 +303,8 @@ def group_index(rel: str, entry: dict, root: str | Path | None = None) -> dict[s
     """``{path relative to the results root: sha256}`` of the members of the group ``rel``
     (``<folder>/<pattern>``): the companions matching ``pattern`` named in ``history_file`` by
     the records ``<folder>/*.json`` of the results root ``root`` (default the results root) whose
-    ``config.track`` is the group's ``track``; unreadable records are left out."""
+    ``config.track`` is the group's ``track``; unreadable records, and names that are not a plain
+    file name of the folder (a ``/`` or ``\\``: a path out of it), are left out."""
     from bench.paths import results_root
 
     root = Path(root) if root is not None else results_root()
@@ -316,7 +317,9 @@ def group_index(rel: str, entry: dict, root: str | Path | None = None) -> dict[s
             name, sha = ref["name"], ref["sha256"]
         except (ValueError, OSError, TypeError, KeyError, AttributeError):
             continue
-        if track == entry["group"]["track"] and fnmatch.fnmatchcase(str(name), pattern):
+        name = str(name)
+        plain = "/" not in name and "\\" not in name
+        if plain and track == entry["group"]["track"] and fnmatch.fnmatchcase(name, pattern):
             out[f"{folder}/{name}"] = str(sha)
     return out
 
@@ -343,12 +346,22 @@ def index_problem(rel: str, entry: dict) -> str | None:
 
 
 def members(rel: str, entry: dict) -> dict[str, str]:
-    """``{file path relative to the results root: sha256}`` of the files of artefact ``rel``."""
+    """``{file path relative to the results root: sha256}`` of the files of artefact ``rel``;
+    ValueError (one line) when the manifest names a path that is not inside the results root
+    (absolute, or with a ``..``, ``.`` or empty part): nothing is ever read or written there."""
     if is_group(entry):
-        return group_index(rel, entry)
-    if "files" in entry:
-        return {f"{rel}/{name}": f["sha256"] for name, f in sorted(entry["files"].items())}
-    return {rel: entry["sha256"]}
+        out = group_index(rel, entry)
+    elif "files" in entry:
+        out = {f"{rel}/{name}": f["sha256"] for name, f in sorted(entry["files"].items())}
+    else:
+        out = {rel: entry["sha256"]}
+    for m in out:
+        if m.startswith("/") or "\\" in m or {"", ".", ".."} & set(m.split("/")):
+            raise ValueError(
+                f"{manifest_path()}: artefact {rel!r} names {m!r}, not a path inside the "
+                "results root"
+            )
+    return out
 
 
 def found_members(rel: str, entry: dict) -> dict[str, Path] | None:

@@ -402,3 +402,44 @@ def test_pack_unpack_and_the_git_history_cover_the_group(runs, tmp_path, capsys)
     other = tmp_path / "other"
     assert main(["artefacts", "unpack", str(archive), "--to", str(other)]) == 0
     assert (other / "comparison" / "runs" / comp.name).read_bytes() == data
+
+
+def test_a_record_naming_a_companion_outside_its_folder_is_no_group_member(runs, tmp_path):
+    """A record whose ``history_file`` name climbs out of its folder (``../``) is not indexed:
+    an archive member of that name is refused and nothing is written outside the destination."""
+    import json
+
+    results, cache, fe, sur = runs
+    evil = "../../../../escaped.history.xz"
+    payload = b"outside"
+    rec = {
+        "config": {"track": "surrogate"},
+        "history_file": {"name": evil, "sha256": hashlib.sha256(payload).hexdigest()},
+    }
+    (results / "comparison" / "runs" / "evil.json").write_text(json.dumps(rec))
+    entry = A.read_manifest()["comparison/runs/*.history.xz"]
+    assert all(
+        ".." not in m.split("/") for m in A.group_index("comparison/runs/*.history.xz", entry)
+    )
+    assert A.index_problem("comparison/runs/*.history.xz", entry) is None
+    archive = tmp_path / "evil.tar.xz"
+    with tarfile.open(archive, "w:xz") as tar:
+        info = tarfile.TarInfo(f"comparison/runs/{evil}")
+        info.size = len(payload)
+        tar.addfile(info, io.BytesIO(payload))
+    dest = tmp_path / "deep" / "er" / "dest"
+    assert main(["artefacts", "unpack", str(archive), "--to", str(dest)]) == 2
+    assert not list(tmp_path.rglob("escaped.history.xz"))
+
+
+def test_a_manifest_naming_a_path_outside_the_results_root_is_refused(roots, tmp_path, capsys):
+    entries = A.read_manifest()
+    entries["model_error/../../escaped.npz"] = entries.pop("model_error/x.npz")
+    A.write_manifest(entries)
+    with pytest.raises(ValueError, match=r"'model_error/../../escaped.npz', not a path inside"):
+        A.members("model_error/../../escaped.npz", entries["model_error/../../escaped.npz"])
+    assert (
+        main(["artefacts", "unpack", str(tmp_path / "a.tar.xz"), "--to", str(tmp_path / "d")]) == 2
+    )
+    err = capsys.readouterr().err
+    assert "not a path inside the results root" in err and len(err.strip().splitlines()) == 1
