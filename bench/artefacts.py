@@ -504,8 +504,12 @@ def unpack_from_git(
         top = _git(root, "rev-parse", "--show-toplevel")
     except OSError as exc:
         raise ValueError(f"--from-git: git cannot be run ({exc.strerror}): {other}") from None
-    if top.returncode != 0:
-        raise ValueError(f"--from-git: the results root {root} is not in a git checkout: {other}")
+    if top.returncode != 0:  # git's own first line: not a repository, dubious ownership, ...
+        why = (top.stderr.decode(errors="replace").strip().splitlines() or ["no message"])[0]
+        raise ValueError(
+            f"--from-git: the results root {root} is not in a git checkout git can read ({why}): "
+            f"{other}"
+        )
     prefix = root.resolve().relative_to(Path(top.stdout.decode().strip()).resolve()).as_posix()
     commit = _git(root, "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}")
     if commit.returncode != 0:

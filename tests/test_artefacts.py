@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 import shutil
 import tarfile
 import warnings
@@ -443,3 +444,18 @@ def test_a_manifest_naming_a_path_outside_the_results_root_is_refused(roots, tmp
     )
     err = capsys.readouterr().err
     assert "not a path inside the results root" in err and len(err.strip().splitlines()) == 1
+
+
+def test_unpack_from_git_names_what_git_said(roots, tmp_path, monkeypatch, capsys):
+    """A git that refuses the checkout (here: its ownership) is named in the one line, not
+    mistaken for a missing checkout without a reason."""
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "git").write_text(
+        "#!/bin/sh\necho 'fatal: detected dubious ownership in repository at /x' >&2\nexit 128\n"
+    )
+    (fake / "git").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake}:{os.environ['PATH']}")
+    assert main(["artefacts", "unpack", "--from-git", "HEAD"]) == 2
+    err = capsys.readouterr().err
+    assert "detected dubious ownership" in err and len(err.strip().splitlines()) == 1
