@@ -133,3 +133,16 @@ def test_experiment_file_snapshot_correlation(tmp_path):
     with pytest.raises(ExperimentFileError) as exc:
         load_experiment(f)
     assert exc.value.errors == ["[dic] snapshot_correlation = 1: must be in [0, 1)"]
+
+
+def test_the_benchmark_objective_refuses_a_correlation_it_would_drop():
+    """build_objective whitens by sigma alone: a data set with snapshot_rho is refused in one line
+    rather than fitted as if its snapshots were independent."""
+    from problems.inverse.build import build_objective
+
+    ds = load(default_path("linear-compression", "consistent"))
+    with pytest.raises(ValueError) as exc:
+        build_objective(
+            "linear-compression", mesh="coarse", data=dataclasses.replace(ds, snapshot_rho=0.3)
+        )
+    assert "snapshot_rho = 0.3" in str(exc.value) and "\n" not in str(exc.value)

@@ -218,6 +218,11 @@ def build_objective(
             free_repeats=free_repeats,
         )
     ds = resolve_data(case, mesh, tier, data)
+    if ds.snapshot_rho != 0.0:  # never dropped silently: this objective's noise is diagonal
+        raise ValueError(
+            f"data set {ds.case}: snapshot_rho = {ds.snapshot_rho:g} (errors correlated between "
+            "snapshots) is modelled by `femubench calibrate` only; allowed here: 0"
+        )
     tier = ds.settings.tier
     check_discretisations(
         case, ds, mesh, hifi_mesh=hifi_mesh if correction is not None else None, forward=forward
