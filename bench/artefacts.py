@@ -136,18 +136,12 @@ def describe(path: str | Path) -> dict:
 
 def mismatches(path: str | Path, entry: dict) -> list[str]:
     """One line per file of ``path`` whose bytes are not the manifest ``entry``'s (both hashes
-    named), or that is missing; [] when ``path`` is the listed artefact."""
+    named), or that is missing; [] when ``path`` is the listed artefact (:func:`check`)."""
     path = Path(path)
     if "files" not in entry:
-        got = file_sha256(path) if path.is_file() else None
-        return [] if got == entry["sha256"] else [_mismatch(path, got, entry["sha256"])]
-    out = []
-    for name, want in sorted(entry["files"].items()):
-        p = path / name
-        got = file_sha256(p) if p.is_file() else None
-        if got != want["sha256"]:
-            out.append(_mismatch(p, got, want["sha256"]))
-    return out
+        return check({"": path}, {"": entry["sha256"]})
+    want = {name: f["sha256"] for name, f in sorted(entry["files"].items())}
+    return check({name: path / name for name in want}, want)
 
 
 def _mismatch(path: Path, got: str | None, want: str) -> str:
