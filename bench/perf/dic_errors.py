@@ -44,17 +44,12 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from problems.io.atomic import atomic_savez, atomic_write_text  # noqa: E402
+
 EXAMPLE = ROOT / "suites" / "experiments" / "cube100-images" / "experiment.toml"
 #: the example's virtual test (docs/calibrating.md, "The images example")
 EXAMPLE_X = (34000.0, 38.0, 0.9, 12.0, 24.0, 1500.0)
 EXAMPLE_LEVELS = (0.05, 0.15, 0.3, 0.45, 0.6, 0.7)
-
-
-def _save(path: Path, **arrays) -> None:
-    """Atomic ``np.savez`` (temp + rename)."""
-    tmp = path.with_name(f".{path.name}.tmp.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
 
 
 def correlate(exp, points, images):
@@ -105,7 +100,7 @@ def truth(work: Path, step: int, mesh: str):
         "v": v,
         "converged": ok,
     }
-    _save(path, **t)
+    atomic_savez(path, compressed=False, **t)
     return exp, t
 
 
@@ -124,7 +119,7 @@ def realisation(work: Path, exp, t, r: int) -> dict:
     ]
     u, v, su, sv, ok, noise = correlate(exp, t["points"], images)
     rec = {"u": u, "v": v, "std_u": su, "std_v": sv, "converged": ok, "noise": noise}
-    _save(path, **rec)
+    atomic_savez(path, compressed=False, **rec)
     return rec
 
 
@@ -151,9 +146,7 @@ def analyse(t: dict, recs: list[dict], subset: int) -> dict:
     K = len(recs)
     ok = t["converged"].all(axis=0) & np.all([r["converged"].all(axis=0) for r in recs], axis=0)
     # errors (K, N, n, 2): u then v, px
-    E = np.stack(
-        [np.stack([r["u"] - t["u"], r["v"] - t["v"]], axis=-1) for r in recs]
-    )[:, :, ok]
+    E = np.stack([np.stack([r["u"] - t["u"], r["v"] - t["v"]], axis=-1) for r in recs])[:, :, ok]
     S = np.stack([np.stack([r["std_u"], r["std_v"]], axis=-1) for r in recs])[:, :, ok]
     _, N, n, _ = E.shape
     # (a) between snapshots, per point and direction
@@ -312,8 +305,6 @@ def main(argv=None) -> int:
     if args.step < 1:
         ap.error(f"--step {args.step}: must be >= 1 px")
     from threadpoolctl import threadpool_limits
-
-    from problems.io.atomic import atomic_write_text
 
     work, out = Path(args.work), Path(args.out)
     work.mkdir(parents=True, exist_ok=True)

@@ -43,6 +43,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from bench.perf.dic_errors import EXAMPLE_LEVELS, EXAMPLE_X  # noqa: E402
+from problems.io.atomic import atomic_savez, atomic_write_text  # noqa: E402
 
 RHOS = (0.5, 0.0)
 
@@ -61,10 +62,10 @@ def setup(work: Path, mesh: str):
     if not path.exists() or not (folder / "experiment.toml").exists():
         ve.write_virtual_images(test, folder, "noise-model")
         camera, intensities = ve.render_virtual_images(test, resp=resp)
-        tmp = work / ".truth.tmp.npz"
         bits, noise = camera.bit_depth, camera.noise_sigma
-        np.savez(tmp, intensity=np.array(intensities), bits=bits, noise=noise)
-        os.replace(tmp, path)
+        atomic_savez(
+            path, compressed=False, intensity=np.array(intensities), bits=bits, noise=noise
+        )
     return test, folder, resp, dict(np.load(path))
 
 
@@ -108,9 +109,7 @@ def realisation(work: Path, test, folder: Path, resp, truth: dict, r: int, mesh:
             "status": out["status"],
             "wall_s": round(time.perf_counter() - t0, 1),
         }
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(rec) + "\n")
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(rec) + "\n")
     return rec
 
 
@@ -210,8 +209,6 @@ def main(argv=None) -> int:
     if args.k < 3:
         ap.error(f"--k {args.k}: at least 3 realisations are needed")
     from threadpoolctl import threadpool_limits
-
-    from problems.io.atomic import atomic_write_text
 
     work = Path(args.work) / args.mesh.replace(":", "_").replace(",", "-")
     work.mkdir(parents=True, exist_ok=True)
