@@ -196,10 +196,11 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
 
     ev = objective_for(data, case, settings.mesh)
     result = solve(ev, "lm", budget=settings.budget, seed=settings.seed, x0=case.start)
-    rounds, first, untreated = [], 0, None
+    rounds, first, untreated, chi2_untreated = [], 0, None, None
     if settings.correction != "none" and result.cost < math.inf:
         first = result.n_evals  # the uncorrected run the rounds start from
         untreated = [float(v) for v in result.x]
+        chi2_untreated = float(result.cost)  # the evaluator's cost is R^T R = chi2 (no 1/2)
         from problems.inverse.model_error import one_point
         from solvers.corrected import solve_iterated
 
@@ -248,6 +249,8 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
         # the untreated optimum on the inverse mesh: the coarser estimate of the error band
         "x_untreated": untreated,
     }
+    if chi2_untreated is not None:  # its fit on the raw data: the ranking's coarser estimate
+        out |= untreated_fit(chi2_untreated, len(untreated))
     if not best.usable:
         return out | {"x": x.tolist(), "chi2": math.inf}
     ident = analyse_jacobian(J, ev.reference, x=x, names=case.names)
@@ -306,6 +309,29 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
             "u_v": layout.unstack(r, N, m)[1][-1].tolist(),
         },
     }
+
+
+def untreated_fit(chi2_untreated: float, k: int) -> dict:
+    """The untreated optimum's fit to the raw data: ``chi2_untreated`` and its AIC
+    (``chi2 + 2 k``, as the corrected fit's), the coarser estimate of :func:`ranking_band`."""
+    return {"chi2_untreated": chi2_untreated, "aic_untreated": chi2_untreated + 2 * k}
+
+
+def backfill_untreated(path: Path, result: dict, objective) -> dict:
+    """A stored variant ``result`` written before :func:`calibrate_variant` kept the untreated
+    fit (it holds ``x_untreated`` but no ``chi2_untreated``) gets it from one forward
+    evaluation of ``objective()`` (the variant's evaluator on the inverse mesh and the raw data,
+    :func:`objective_for`) at ``x_untreated``, written back atomically to ``path`` so that it
+    is done once. Any other result is returned unchanged, with no evaluation."""
+    untreated = result.get("x_untreated")
+    if not untreated or "chi2_untreated" in result or not result.get("ok"):
+        return result
+    ev = objective()
+    e = ev.evaluate(ev.to_scaled(np.asarray(untreated, float)))
+    chi2 = float(e.cost) if e.usable else math.inf
+    result = result | untreated_fit(chi2, len(untreated))
+    atomic_write_text(path, json.dumps(result, indent=1, allow_nan=True) + "\n")
+    return result
 
 
 def with_error_band(result: dict, settings: CalibrationSettings) -> dict:
@@ -402,7 +428,11 @@ def calibrate(
         old = done_before(path, key)
         if old is not None:
             progress(f"{name}: done before ({path})")
-            results[name] = old
+            if old.get("x_untreated") and "chi2_untreated" not in old and old.get("ok"):
+                progress(f"{name}: chi2 of the untreated optimum on the raw data (one run) ...")
+            results[name] = backfill_untreated(
+                path, old, lambda case=case: objective_for(data, case, settings.mesh)
+            )
             continue
         progress(f"{name}: identifying from the test's start on mesh {settings.mesh} ...")
         res = calibrate_variant(data, case, settings) | {"key": key}
@@ -414,6 +444,8 @@ def calibrate(
         )
     results = {name: with_error_band(res, settings) for name, res in results.items()}
     report = assemble(exp, data, summary, results, settings)
+    if report["ranking_band"].get("warning"):
+        progress(f"warning: {report['ranking_band']['warning']}")
     if mcmc is not None and report["ranking"]:
         ranked = [r["variant"] for r in report["ranking"]]
         chosen = (
@@ -708,6 +740,7 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
                     "rms_sigma": v["rms_sigma"],
                 }
             )
+    band = ranking_band(ranking, ok, settings)
     meta = data.meta
     return {
         "format": FORMAT,
@@ -745,7 +778,74 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
         "force_sigma_kN": np.asarray(data.std_force_kN).tolist(),
         "variants": results,
         "ranking": ranking,
+        "ranking_band": band,
     }
+
+
+def ranking_band(ranking: list[dict], results: dict, settings) -> dict:
+    """The discretisation band of the model ranking (docs/calibrating.md, "Reading the
+    report"), by the rule of the parameters' band (:func:`with_error_band`): a correction gives
+    two rankings, the corrected AICs (standing for the finer check mesh) and the untreated AICs
+    on the inverse mesh (``aic_untreated``). For each variant behind the first (by the
+    corrected AIC) its ``delta_aic`` and ``delta_aic_untreated`` (both against the first), the
+    band ``U = GCI_SAFETY |delta_aic - delta_aic_untreated| / (r^p - 1)`` with the parameters'
+    r and p (:func:`problems.analysis.convergence.gci_band`), and ``resolved``: ``delta_aic > U``.
+    The rows of ``ranking`` get ``delta_aic_untreated``, ``band_delta_aic`` and ``resolved``
+    (None for the first and without a band); returns the band's description, with a
+    ``warning`` when the first is not resolved from the second (the model probabilities are
+    then conditional on the inverse model: ``probabilities_conditional``). Without a
+    correction, one ranking only: no band (``reason`` says why). AIC units (chi2)."""
+    from problems.analysis.convergence import GCI_SAFETY, gci_band, gci_order, refinement_ratio
+
+    for row in ranking:
+        row |= {"delta_aic_untreated": None, "band_delta_aic": None, "resolved": None}
+    reason = ""
+    if settings.error_band == "none":
+        reason = "turned off (--error-band none)"
+    elif not ranking or any(not results[r["variant"]].get("fine_mesh") for r in ranking):
+        reason = "no correction ran: one estimate only"
+    else:
+        lacking = [
+            r["variant"]
+            for r in ranking
+            if not math.isfinite(results[r["variant"]].get("aic_untreated", math.nan))
+        ]
+        if lacking:
+            reason = f"no finite untreated fit of {', '.join(lacking)}"
+    if reason:
+        return {"method": "none", "reason": reason, "probabilities_conditional": False}
+    fine = results[ranking[0]["variant"]]["fine_mesh"]
+    r, p = refinement_ratio(settings.mesh, fine), gci_order(settings.mesh)
+    first = ranking[0]
+    first_u = results[first["variant"]]["aic_untreated"]
+    for row in ranking[1:]:
+        d_u = results[row["variant"]]["aic_untreated"] - first_u
+        u = float(gci_band(d_u, row["delta_aic"], r, p))
+        row |= {"delta_aic_untreated": d_u, "band_delta_aic": u, "resolved": row["delta_aic"] > u}
+    out = {
+        "method": "gci",
+        "order": p,
+        "safety": GCI_SAFETY,
+        "ratio": r,
+        "inverse_mesh": settings.mesh,
+        "fine_mesh": fine,
+        "warning": None,
+        "probabilities_conditional": False,
+    }
+    if len(ranking) > 1 and not ranking[1]["resolved"]:
+        second = ranking[1]
+        todo = (
+            "refine the inverse mesh"
+            if settings.correction == "iterated"
+            else "refine the inverse mesh or use --correction iterated"
+        )
+        out |= {
+            "warning": f"{first['variant']} vs {second['variant']}: dAIC "
+            f"{second['delta_aic']:.3g} within the discretisation band "
+            f"{second['band_delta_aic']:.3g}: not resolved by this inverse model; {todo}",
+            "probabilities_conditional": True,
+        }
+    return out
 
 
 def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True) -> None:
@@ -876,6 +976,7 @@ def render_markdown(report: dict) -> str:
             f"{r['akaike_weight']:.3g} | {r['log_evidence']:.6g} | "
             f"{r['delta_log_evidence']:.3g} | {r['model_probability']:.3g} |"
         )
+    lines += _ranking_band_lines(report)
     near = [r["variant"] for r in report["ranking"][1:] if r["delta_aic"] < 2.0]
     if near:
         lines += [
@@ -928,6 +1029,36 @@ def render_markdown(report: dict) -> str:
         " (residuals of the best variant on the face, last image, in sigma units).",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _ranking_band_lines(report: dict) -> list[str]:
+    """The report's lines on the ranking's discretisation band (:func:`ranking_band`): the rule,
+    per variant behind the first dAIC, the band and whether it is resolved, and the warning."""
+    band = report.get("ranking_band") or {}
+    if band.get("method") != "gci":
+        return ["", f"No discretisation band of the ranking: {band['reason']}."] if band else []
+    lines = [
+        "",
+        f"Discretisation band of the ranking (GCI, as the parameters'): U = {band['safety']:g} "
+        f"|dAIC - dAIC_untreated| / (r^p - 1), r = {band['ratio']:.3g} "
+        f"(`{band['inverse_mesh']}` -> `{band['fine_mesh']}`), p = {band['order']:g}; a variant "
+        "with dAIC <= U is not resolved from the first at this discretisation.",
+        "",
+        "| variant | dAIC | dAIC untreated | band U | resolved from the first |",
+        "|---|---|---|---|---|",
+    ]
+    for r in report["ranking"][1:]:
+        lines.append(
+            f"| {r['variant']} | {r['delta_aic']:.3g} | {r['delta_aic_untreated']:.3g} | "
+            f"{r['band_delta_aic']:.3g} | {'yes' if r['resolved'] else 'NO'} |"
+        )
+    if band.get("warning"):
+        lines += [
+            "",
+            f"**Warning: {band['warning']}.** The Akaike weights and p(M|D) above are "
+            "conditional on the inverse model.",
+        ]
+    return lines
 
 
 def _parameter_table(v: dict) -> list[str]:

@@ -13,7 +13,9 @@ in the truth's hardening test; the linear surface's three hardening tests are on
 cannot be told apart), and scored:
 
 * the relative error (%) of every identified parameter of the true variant;
-* whether the true variant ranks first by AIC, and by the Laplace evidence;
+* whether the true variant ranks first by AIC, and by the Laplace evidence; and (with a
+  correction) whether it is first or not resolved from the first by the ranking's
+  discretisation band (:func:`bench.calibration.ranking_band`);
 * whether each 95 % interval (Laplace, Birge-widened) covers the true value.
 
 Resumable: each experiment's record is written atomically to ``<out>/experiments/eNNN.json``
@@ -46,6 +48,9 @@ STRAINS = (4e-4, 8e-4, 1.5e-3, 2.5e-3, 3.5e-3, 4.5e-3, 5.5e-3, 7e-3)
 DRAW_LOW, DRAW_HIGH = 0.25, 0.75
 #: parameter targets of the issue: relative error (%) of every identified parameter
 TARGET_ERROR_PERCENT = 2.0
+#: revision of the scores of a study with a discretisation band, in its records' keys (2: the
+#: ranking's band); records scored by another are rescored from the calibrations, no new runs
+SCORING = 2
 
 
 @dataclass(frozen=True)
@@ -170,7 +175,10 @@ class CoverageSettings:
         key = self.calibration_key(i)
         if self.correction == "none" or self.error_band == "none":
             return key
-        band = json.dumps({"key": key, "orders": GCI_ORDERS, "safety": GCI_SAFETY}, sort_keys=True)
+        band = json.dumps(
+            {"key": key, "orders": GCI_ORDERS, "safety": GCI_SAFETY, "scoring": SCORING},
+            sort_keys=True,
+        )
         return hashlib.sha256(band.encode()).hexdigest()[:16]
 
 
@@ -214,7 +222,21 @@ def score(truth, variant: str, report: dict) -> dict:
     prob = {r["variant"]: r["model_probability"] for r in ranking}
     out = {"ok": bool(v.get("ok")), "ranking_aic": by_aic, "ranking_evidence": by_z}
     if not v.get("ok"):
-        return out | {"true_first_aic": False, "true_first_evidence": False}
+        return out | {
+            "true_first_aic": False,
+            "true_first_evidence": False,
+            "true_first_or_unresolved_aic": False,
+        }
+    row = next((r for r in ranking if r["variant"] == variant), {})
+    first = bool(by_aic and by_aic[0] == variant)
+    rank_band = {}
+    if (report.get("ranking_band") or {}).get("method") == "gci":
+        rank_band = {
+            "ranking_band": True,
+            "true_delta_aic": row.get("delta_aic"),
+            "true_band_delta_aic": row.get("band_delta_aic"),
+            "second_resolved": ranking[1]["resolved"] if len(ranking) > 1 else None,
+        }
     x = np.asarray(v["x"], float)
     lo, hi = np.asarray(v["ci95_lower"]), np.asarray(v["ci95_upper"])
     covered = (lo <= truth) & (truth <= hi)
@@ -244,10 +266,14 @@ def score(truth, variant: str, report: dict) -> dict:
             "birge_ratio": v["birge_ratio"],
             "rms_sigma": v["rms_sigma"],
             "n_evals": v["n_evals"],
-            "true_first_aic": bool(by_aic and by_aic[0] == variant),
+            "true_first_aic": first,
             "true_first_evidence": bool(by_z and by_z[0] == variant),
+            # first, or behind it within the ranking's discretisation band (without a band:
+            # first alone)
+            "true_first_or_unresolved_aic": first or row.get("resolved") is False,
             "model_probability": prob.get(variant, math.nan),
         }
+        | rank_band
     )
 
 
@@ -348,6 +374,10 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
         "parameters": per,
         "true_first_aic": sum(bool(r.get("true_first_aic")) for r in records),
         "true_first_evidence": sum(bool(r.get("true_first_evidence")) for r in records),
+        "true_first_or_unresolved_aic": sum(
+            bool(r.get("true_first_or_unresolved_aic", r.get("true_first_aic"))) for r in records
+        ),
+        "n_ranking_band": sum(bool(r.get("ranking_band")) for r in records),
         "all_covered": sum(bool(r.get("all_covered")) for r in records),
         "all_within_target": int(np.sum(np.all(np.abs(E) <= TARGET_ERROR_PERCENT, axis=1))),
         "wall_s": float(sum(r["wall_s"] for r in records)),
@@ -363,6 +393,8 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
                     "ranking_aic",
                     "ranking_evidence",
                     "model_probability",
+                    "true_delta_aic",
+                    "true_band_delta_aic",
                     "rms_sigma",
                     "birge_ratio",
                     "wall_s",
@@ -380,6 +412,15 @@ def _check_mesh(s: dict) -> str:
     from problems.inverse.build import hifi_mesh_for
 
     return f"auto = {hifi_mesh_for(s['inverse_mesh'])}"
+
+
+def _delta_cell(e: dict) -> str:
+    """An experiment's true-variant dAIC and the ranking's band U there (``-`` for the first
+    or without a band)."""
+    d, u = e.get("true_delta_aic"), e.get("true_band_delta_aic")
+    if d is None or u is None:
+        return "-"
+    return f"{d:.3g} ({u:.3g}{', not resolved' if d <= u else ''})"
 
 
 def render_summary(summary: dict) -> str:
@@ -403,6 +444,21 @@ def render_summary(summary: dict) -> str:
             f"{summary['true_first_evidence']} of {n} by the Laplace evidence"
             if len(s["models"]) > 1
             else "- model selection not assessed: the true variant alone was calibrated"
+        ),
+        *(
+            [
+                f"- true variant first, or not resolved from the first at this discretisation "
+                f"(the ranking's discretisation band, docs/calibrating.md): "
+                f"{summary['true_first_or_unresolved_aic']} of {n} by AIC"
+                + (
+                    ""
+                    if summary.get("n_ranking_band", 0) == n
+                    else f" ({summary.get('n_ranking_band', 0)} of {n} with a band; without "
+                    "one, first alone)"
+                )
+            ]
+            if len(s["models"]) > 1 and summary.get("n_ranking_band")
+            else []
         ),
         f"- every 95 % interval covers the truth: {summary['all_covered']} of {n}",
         f"- every parameter within {TARGET_ERROR_PERCENT:g} %: {summary['all_within_target']} "
@@ -441,8 +497,8 @@ def render_summary(summary: dict) -> str:
         "## Experiments",
         "",
         "| # | specimen mm | error % (" + ", ".join(names) + ") | covered | first (AIC) | "
-        "p(true\\|D) | rms sigma | wall s |",
-        "|---|---|---|---|---|---|---|---|",
+        "p(true\\|D) | dAIC true (band U) | rms sigma | wall s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for e in summary["experiments"]:
         err = e.get("error_percent")
@@ -451,7 +507,7 @@ def render_summary(summary: dict) -> str:
             + (", ".join(f"{v:+.2g}" for v in err) if err else "failed")
             + f" | {sum(e.get('covered') or [])} of {len(names)} | "
             f"{(e.get('ranking_aic') or ['-'])[0]} | {e.get('model_probability', math.nan):.3g} |"
-            f" {e.get('rms_sigma') or math.nan:.3g} | {e['wall_s']:.0f} |"
+            f" {_delta_cell(e)} | {e.get('rms_sigma') or math.nan:.3g} | {e['wall_s']:.0f} |"
         )
     return "\n".join(lines) + "\n"
 

@@ -164,6 +164,18 @@ def test_iterated_correction_removes_the_discretisation_bias(tmp_path):
     assert "band U" in (tmp_path / "iterated" / "report.md").read_text()
     saved = json.loads((tmp_path / "iterated" / "report.json").read_text())
     assert saved["variants"]["linear-compression"]["band_percent"] == v["band_percent"]
+    # the untreated fit is kept: the first identification's cost, chi2 on the raw data (no 1/2),
+    # as one evaluation of the objective there gives it; the ranking of one variant has a band
+    # and nothing behind the first
+    from problems.inverse.experiment import import_experiment, load_experiment
+    from problems.inverse.lab import curve_summary, lab_case
+
+    data = import_experiment(load_experiment(exp))
+    ev = cal.objective_for(data, lab_case("linear-compression", data, curve_summary(data)), "3,3,6")
+    chi2_u = ev.evaluate(ev.to_scaled(np.array(v["x_untreated"]))).cost
+    assert v["chi2_untreated"] == pytest.approx(chi2_u, rel=1e-9)
+    assert v["aic_untreated"] == pytest.approx(chi2_u + 12) and chi2_u > v["chi2"]
+    assert rep["ranking_band"]["method"] == "gci" and rep["ranking_band"]["warning"] is None
 
 
 def test_shipped_calibration_matches_the_example():

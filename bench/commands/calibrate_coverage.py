@@ -128,7 +128,13 @@ def main(args) -> int:
     n = summary["n_done"]
     print(
         f"coverage of {settings.variant}: true variant first {summary['true_first_aic']}/{n} "
-        f"(AIC), {summary['true_first_evidence']}/{n} (evidence); all 95 % intervals cover "
+        f"(AIC), {summary['true_first_evidence']}/{n} (evidence)"
+        + (
+            f", first or not resolved from the first {summary['true_first_or_unresolved_aic']}/{n}"
+            if summary["n_ranking_band"]
+            else ""
+        )
+        + f"; all 95 % intervals cover "
         f"{summary['all_covered']}/{n}; summary {args.out}/summary.md"
     )
     return 0
