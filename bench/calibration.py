@@ -12,8 +12,9 @@ start): a calibration interrupted resumes with the variants not done. The report
 variants by AIC and BIC (``chi2 + 2 k`` and ``chi2 + k ln n``; the noise model is known, so
 ``-2 ln L = chi2`` up to a constant common to all variants) with Akaike weights, and gives each
 variant's Laplace evidence and the posterior model probabilities
-(bench/calibration_evidence.py). A virtual experiment's data mesh is never a mesh of the
-calibration (:func:`check_meshes`).
+(bench/calibration_evidence.py); with a correction, the parameters and the ranking carry the
+inverse model's discretisation band (:func:`with_error_band`, :func:`ranking_band`). A virtual
+experiment's data mesh is never a mesh of the calibration (:func:`check_meshes`).
 """
 
 from __future__ import annotations
