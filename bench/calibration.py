@@ -883,11 +883,13 @@ def write_report(report: dict, data: Dataset, out: Path, *, figures: bool = True
     if report["ranking"]:
         best = report["variants"][report["ranking"][0]["variant"]]
         s = np.array(data.meta["face_s_mm"])
+        rho = report["import"].get("snapshot_rho")  # correlated: R^-1/2 D^-1, not r / sigma
+        what = f"whitened residual (rho {rho:g})" if rho else "residual / sigma"
         fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.6))
         for ax, comp in zip(axes, ("u_h", "u_v")):
             r = np.array(best["residual_last_sigma"][comp])
             sc = ax.scatter(s, data.points[:, 1], c=r, cmap="RdBu_r", vmin=-3, vmax=3, s=12)
-            ax.set_title(f"{comp} residual / sigma, last image")
+            ax.set_title(f"{comp} {what}, last image")
             ax.set_xlabel("s (mm)")
             ax.set_aspect("equal")
         axes[0].set_ylabel("z (mm)")

@@ -158,7 +158,7 @@ def test_shipped_images_example_imports_and_starts_the_calibration():
     assert done["key"] == cal.variant_key(ds, case, cal.CalibrationSettings(exp.mesh, exp.budget))
 
 
-def test_calibration_report_of_the_images_route(tiny, tmp_path):
+def test_calibration_report_of_the_images_route(tiny, tmp_path, monkeypatch):
     """`femubench calibrate` takes an images experiment: its report names the images and the
     correlation (a two-evaluation run on a one-element-thick mesh: the plumbing, not the fit)."""
     from bench.calibration import CalibrationSettings, calibrate
@@ -178,3 +178,16 @@ def test_calibration_report_of_the_images_route(tiny, tmp_path):
     md = (out / "report.md").read_text()
     assert "3 images, the reference included" in md and "not converged per image [0, 0]" in md
     assert "correlated between two images, rho = 0.5" in md and rep["import"]["snapshot_rho"] == 0.5
+    # the residual maps say what they show: whitened residuals, not r / sigma
+    import bench.plotting
+    from bench.calibration import write_report
+
+    titles = []
+
+    def keep_titles(fig, path, **kw):
+        titles.extend(ax.get_title() for ax in fig.axes)
+        bench.plotting.pyplot().close(fig)
+
+    monkeypatch.setattr(bench.plotting, "save", keep_titles)
+    write_report(rep, import_experiment(load_experiment(tiny)), out, figures=True)
+    assert "u_h whitened residual (rho 0.5), last image" in titles
