@@ -75,6 +75,20 @@ def test_tiny_study_scores_resumes_and_summarises(tmp_path, capsys, monkeypatch)
     assert again["key"] == s.key(0) and 1000.0 <= again["wall_s"] < 1100.0
     assert sum("identifying" in m for m in said) == 0 and sum("done before" in m for m in said) == 3
 
+    # a record older than the calibration key (none stored) on the same experiment: carried too
+    stale = json.loads(rec0.read_text()) | {"key": "older", "wall_s": 2000.0}
+    del stale["calibration_key"]
+    rec0.write_text(json.dumps(stale))
+    run_coverage(s, out, work=work, progress=said.append)
+    again = json.loads(rec0.read_text())
+    assert again["key"] == s.key(0) and 2000.0 <= again["wall_s"] < 2100.0
+    # ... but not when the record is of another experiment (another draw)
+    other = json.loads(rec0.read_text()) | {"key": "other", "seed": -1, "wall_s": 3000.0}
+    del other["calibration_key"]
+    rec0.write_text(json.dumps(other))
+    run_coverage(s, out, work=work, progress=said.append)
+    assert json.loads(rec0.read_text())["wall_s"] < 1000.0
+
 
 def test_draws_differ_and_stay_in_the_middle_of_the_box():
     s = CoverageSettings(n=3)
