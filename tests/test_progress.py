@@ -62,3 +62,22 @@ def test_run_time_estimate_and_the_one_line_warning():
     assert line.startswith("femubench identify: warning: budget 1000")
     assert "h" in line and "paper" in line
     assert P.format_duration(30) == "30 s" and P.format_duration(3 * 3600) == "3.0 h"
+
+
+def test_run_warns_per_mesh_with_that_mesh_s_own_run_count(tmp_path, capsys):
+    """A suite with parts on two meshes: each warning counts the pending runs on its mesh."""
+    from bench.cli import main
+
+    suite = tmp_path / "two.toml"
+    suite.write_text(
+        '[suite]\nname = "two"\ncases = ["linear-compression", "linear-shear"]\nseeds = [0]\n'
+        'mesh = "coarse"\n\n[[part]]\nmethods = ["lm"]\nbudgets = [20]\n\n'
+        '[[part]]\nmethods = ["lm", "gauss-newton"]\nbudgets = [2000]\ntiers = ["model-error"]\n'
+        'mesh = "9,9,18:g8:hex27"\n'
+    )
+    assert main(["run", str(suite), "--out", str(tmp_path / "o"), "--dry-run", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if "warning:" in line]
+    assert len(warned) == 1, err  # 40 coarse runs are short; 4 x 2000 hex27 runs are not
+    assert "4 pending runs on 9,9,18:g8:hex27 (their whole budgets)" in warned[0]
+    assert "up to 8000 forward run(s)" in warned[0]

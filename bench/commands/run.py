@@ -72,14 +72,17 @@ def main(args) -> int:
                 file=sys.stderr,
             )
     fe_by_mesh: dict[str, int] = {}  # FE evaluations per inverse mesh (parts may differ)
+    runs_by_mesh: dict[str, int] = {}
     for r in pending:
         if not r.problem and not get_case(r.case).is_analytic:
             n = r.polish_budget if r.track == "surrogate" else r.budget
             fe_by_mesh[r.mesh] = fe_by_mesh.get(r.mesh, 0) + n
+            runs_by_mesh[r.mesh] = runs_by_mesh.get(r.mesh, 0) + 1
     fe_evals = sum(fe_by_mesh.values())
     for mesh, n in fe_by_mesh.items():
         on = f" on {mesh}" if len(fe_by_mesh) > 1 else ""
-        warn_if_long(NAME, n, mesh, workers=args.workers, what=f"{len(pending)} pending runs{on}")
+        what = f"{runs_by_mesh[mesh]} pending runs{on} (their whole budgets)"
+        warn_if_long(NAME, n, mesh, workers=args.workers, what=what)
 
     if args.dry_run:
         for i, part in enumerate(suite.parts, 1):
