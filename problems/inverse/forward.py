@@ -8,14 +8,14 @@ The measurement vector of one run is laid out by :mod:`problems.inverse.layout`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import ClassVar
 
 import numpy as np
 
 from problems.fe.front_face import front_face_operator, measurement_grid
-from problems.fe.mesh import SPECIMEN_MM, parse_mesh_spec, quarter_size
+from problems.fe.mesh import SPECIMEN_MM, MeshSpec, parse_mesh_spec, quarter_size
 from problems.fe.newton import Discretisation, Loading, NewtonSettings, discretise, run
 from problems.inverse import layout
 from problems.inverse.case import Case
@@ -53,6 +53,11 @@ def discretisation(mesh: str, specimen_mm=SPECIMEN_MM) -> Discretisation:
 def _discretisation(canonical: str, size_mm: tuple[float, float, float]) -> Discretisation:
     spec = parse_mesh_spec(canonical)
     return discretise(spec.build(size_mm), symmetry=spec.symmetry)
+
+
+#: the kinds of FE run this process has warmed up (:meth:`FEForwardModel.warm_up`): (element,
+#: symmetry, plates, material form, hardening, sensitivity parameters or None)
+_WARMED: set[tuple] = set()
 
 
 def case_material(case: Case, x):
@@ -165,6 +170,7 @@ class FEForwardModel:
         :class:`~problems.fe.Response` it was taken from (None when the material was refused)."""
         from problems.inverse.protocol import ForwardResult
 
+        self.warm_up(x, jacobian)
         t0 = time.perf_counter()
         try:
             if jacobian:
@@ -191,6 +197,47 @@ class FEForwardModel:
             plain_s = t1 - t0 - sens.wall_s + sens.timing.get("reused_tangent_s", 0.0)
         wall = time.perf_counter() - t0
         return ForwardResult(True, values, message, wall, J, plain_s), resp
+
+    def warm_up(self, x, jacobian: bool = False) -> bool:
+        """Compile the numba kernels of this kind of run once per process, untimed: numba's JIT
+        (seconds; tens with a cold cache) is a one-off of the process, not a cost of the method,
+        and would otherwise be charged to the first evaluation's wall time (the measured
+        forward-equivalents). Runs ``x`` on the smallest mesh of the same element and symmetry
+        (1 x 1 x 2, two snapshots), same material, plates, settings and sensitivities, on its
+        own discretisation: nothing the real runs use is touched. Also builds this model's
+        discretisation. True when it ran (first call of its kind), False otherwise."""
+        spec = parse_mesh_spec(self.mesh)
+        discretisation(self.mesh, self.specimen_mm)
+        try:
+            names, chain = self.material_chain(x) if jacobian else (None, None)
+            key = (
+                spec.element,
+                spec.symmetry,
+                self.loading.plates,
+                self.case.form,
+                self.case.hardening,
+                names,
+            )
+            if key in _WARMED:
+                return False
+            tiny = MeshSpec((1, 1, 2), spec.symmetry, element=spec.element)
+            disc = discretise(tiny.build(quarter_size(self.specimen_mm)), symmetry=tiny.symmetry)
+            loading = replace(self.loading, snapshots=min(2, self.loading.snapshots))
+            resp = run(
+                disc,
+                case_material(self.case, x),
+                loading,
+                self.settings,
+                sensitivities=names or False,
+            )
+        except Exception:  # never changes a run's outcome: the real run reports what failed
+            return False
+        if resp.converged:
+            W = front_face_operator(resp.mesh, self.points)
+            if jacobian:
+                self.jacobian_from(resp, chain, W)
+        _WARMED.add(key)
+        return True
 
     def jacobian_from(self, resp, chain, operator=None) -> np.ndarray | None:
         """dU/dx (m, n) in the layout of the measurement vector from a response with sensitivities
