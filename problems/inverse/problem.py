@@ -187,8 +187,7 @@ class LeastSquaresProblem:
         w = d / (self._sigma[:, None] if d.ndim == 2 else self._sigma)
         if self._groups is not None:
             G, a, b = self._groups
-            wg = w[G]  # (g, n) or (g, n, k)
-            w = w.copy()
+            wg = w[G]  # (g, n) or (g, n, k); w is already a new array (d / sigma)
             w[G] = a * wg + (b - a) * wg.mean(axis=1, keepdims=True)
         if self._lowrank is not None:
             Q, c = self._lowrank
