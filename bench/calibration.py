@@ -393,6 +393,7 @@ def calibrate(
     figures: bool = True,
     mcmc: McmcSettings | None = None,
     mcmc_models="best",
+    plate_margin_mm=None,
 ) -> dict:
     """Calibrate every chosen variant of the experiment at ``experiment_path`` into ``out_dir``
     (module docstring); returns the report dict. ``models``: variant names (default: the
@@ -400,11 +401,25 @@ def calibrate(
     whose result is already in ``out_dir`` with the same key are read, not rerun. ``figures``:
     draw the figures (else report.md and report.json only). ``mcmc``: run
     :func:`mcmc_variant` on ``mcmc_models`` (``best``: the first by AIC, ``all``, or a list of
-    variants), each kept in ``<out>/variants/<variant>.mcmc.json`` keyed like the variant."""
+    variants), each kept in ``<out>/variants/<variant>.mcmc.json`` keyed like the variant.
+    ``plate_margin_mm``: the plate margin, mm, or ``"auto"``
+    (:func:`problems.inverse.build.auto_plate_margin_mm`), in place of the file's
+    ``[calibration] plate_margin_mm`` (None: the file's); the points it leaves out change the
+    data's hash, so a calibration of another margin never reads these results."""
     from problems.inverse.experiment import import_experiment, load_experiment
     from problems.inverse.lab import curve_summary, lab_case
 
     exp = load_experiment(experiment_path)
+    if plate_margin_mm is not None:
+        from problems.inverse.build import resolve_plate_margin
+
+        try:
+            margin = resolve_plate_margin(
+                plate_margin_mm, (exp.width_mm, exp.depth_mm, exp.height_mm)
+            )
+        except ValueError as exc:
+            raise ValueError(f"--plate-margin-mm {plate_margin_mm!r}: {exc}") from None
+        exp = dataclasses.replace(exp, plate_margin_mm=margin)
     out = Path(out_dir)
     if out.resolve() in (exp.path.parent, exp.log.parent, *(f.parent for f in exp.dic_files)):
         raise ValueError(
@@ -760,6 +775,8 @@ def assemble(exp, data: Dataset, summary: dict, results: dict, settings) -> dict
                 "points_read",
                 "dropped_not_in_every_image",
                 "dropped_off_face",
+                "plate_margin_mm",  # with a margin alone
+                "dropped_plate_margin",
                 "dropped_non_finite_rows",
                 "images_used",
                 "rigid_motion_removed",
@@ -930,7 +947,13 @@ def render_markdown(report: dict) -> str:
         "## Import",
         f"- {imp['images']} images, {imp['points_used']} face points used of "
         f"{imp['points_read']} read: {imp['dropped_off_face']} off the face, "
-        f"{imp['dropped_not_in_every_image']} not in every image, "
+        + (
+            f"{imp['dropped_plate_margin']} within the plate margin of "
+            f"{imp['plate_margin_mm']:g} mm, "
+            if "plate_margin_mm" in imp
+            else ""
+        )
+        + f"{imp['dropped_not_in_every_image']} not in every image, "
         f"{imp['dropped_non_finite_rows']} rows with non-finite values dropped",
         f"- calibration: {json.dumps(imp['calibration'])}",
         f"- force sd from a load-cell accuracy of {imp['force_accuracy_percent']:g} % of reading",

@@ -71,6 +71,10 @@ class CoverageSettings:
     correction, check_mesh, error_band : as :class:`bench.calibration.CalibrationSettings`
                    (check_mesh ``""``: no discretisation check, ``auto``: the inverse mesh's
                    default high-fidelity mesh; never the data mesh)
+    plate_margin_mm : the plate margin of every calibration, mm, or ``"auto"`` (10 % of each
+                   specimen's smallest dimension,
+                   :func:`problems.inverse.build.auto_plate_margin_mm`); part of the calibration
+                   key when not 0 (records without one read as margin 0)
     """
 
     variant: str = "linear-compression"
@@ -86,6 +90,7 @@ class CoverageSettings:
     correction: str = "none"
     check_mesh: str = ""
     error_band: str = "gci"
+    plate_margin_mm: float | str = 0.0
 
     def __post_init__(self):
         from problems.fe.mesh import discretisation_key, parse_mesh_spec
@@ -129,6 +134,27 @@ class CoverageSettings:
             raise ValueError(f"--strains {self.strains}: increasing values in (0, 0.05)")
         if list(self.strains) != sorted(set(self.strains)):
             raise ValueError(f"--strains {self.strains}: increasing values in (0, 0.05)")
+        if self.plate_margin_mm != "auto":
+            if isinstance(self.plate_margin_mm, str):
+                raise ValueError(
+                    f"--plate-margin-mm {self.plate_margin_mm!r}: a number of mm or auto"
+                )
+            object.__setattr__(self, "plate_margin_mm", float(self.plate_margin_mm))
+        for spec in self.specimens:
+            self.margin_mm(spec)  # in range on every specimen drawn from
+
+    def margin_mm(self, specimen_mm) -> float:
+        """The plate margin, mm, of a calibration of a specimen ``specimen_mm`` = (width,
+        depth, height) mm; ValueError naming ``--plate-margin-mm`` when out of its range."""
+        from problems.inverse.build import resolve_plate_margin
+
+        try:
+            return resolve_plate_margin(self.plate_margin_mm, specimen_mm)
+        except ValueError as exc:
+            raise ValueError(
+                f"--plate-margin-mm {self.plate_margin_mm}: {exc} on the "
+                f"{'x'.join(f'{v:g}' for v in specimen_mm)} mm specimen"
+            ) from None
 
     def calibration_settings(self):
         """The :class:`bench.calibration.CalibrationSettings` of each experiment's calibration."""
@@ -164,6 +190,8 @@ class CoverageSettings:
         body = {k: v for k, v in self.to_dict().items() if k != "n"} | {"index": i}
         if self.correction == "none":  # no band without a correction: studies before it resume
             body.pop("error_band")
+        if not self.plate_margin_mm:  # margin 0: the keys of studies before the option
+            body.pop("plate_margin_mm")
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
     def key(self, i: int) -> str:
@@ -311,6 +339,7 @@ def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) 
             f"mesh {s.data_mesh} ..."
         )
         write_virtual_experiment(test, data_folder, name)
+    margin = s.margin_mm((test.width_mm, test.depth_mm, test.height_mm))
     report = calibrate(
         exp,
         folder,
@@ -318,6 +347,7 @@ def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) 
         settings=s.calibration_settings(),
         progress=lambda m: progress(f"experiment {i}: {m}"),
         figures=False,
+        plate_margin_mm=margin,
     )
     rec = {
         "key": key,
@@ -330,6 +360,8 @@ def run_one(s: CoverageSettings, i: int, out: Path, work: Path, progress=print) 
         "data_mesh": s.data_mesh,
         "inverse_mesh": s.inverse_mesh,
         "calibration_key": ckey,
+        "plate_margin_mm": margin,
+        "points_used": report["import"]["points_used"],
         "wall_s": carried + time.perf_counter() - t0,
         **score(test.x, s.variant, report),
     }
@@ -389,8 +421,10 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
         "all_covered": sum(bool(r.get("all_covered")) for r in records),
         "all_within_target": int(np.sum(np.all(np.abs(E) <= TARGET_ERROR_PERCENT, axis=1))),
         "wall_s": float(sum(r["wall_s"] for r in records)),
+        "per_specimen": per_specimen(records),
         "experiments": [
-            {
+            {"plate_margin_mm": record_margin(r)}
+            | {
                 k: r.get(k)
                 for k in (
                     "index",
@@ -413,6 +447,35 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
     }
 
 
+def record_margin(record: dict) -> float:
+    """The plate margin, mm, of a record's calibration (records before the option: 0)."""
+    return float(record.get("plate_margin_mm", 0.0))
+
+
+def per_specimen(records: list[dict]) -> list[dict]:
+    """Per specimen (width, depth, height mm, in the order first met): experiments, those with
+    every parameter within the 2 % target, with the true variant first by AIC, with every 95 %
+    interval covering the truth, and the plate margins used (mm)."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in records:
+        groups.setdefault(tuple(r["specimen_mm"]), []).append(r)
+    return [
+        {
+            "specimen_mm": list(spec),
+            "n": len(rs),
+            "all_within_target": sum(
+                bool(r.get("ok"))
+                and all(abs(e) <= TARGET_ERROR_PERCENT for e in r["error_percent"])
+                for r in rs
+            ),
+            "true_first_aic": sum(bool(r.get("true_first_aic")) for r in rs),
+            "all_covered": sum(bool(r.get("all_covered")) for r in rs),
+            "plate_margin_mm": sorted({record_margin(r) for r in rs}),
+        }
+        for spec, rs in groups.items()
+    ]
+
+
 def _check_mesh(s: dict) -> str:
     """The study's check mesh as named, ``auto`` with the mesh it stands for."""
     if s["check_mesh"] != "auto":
@@ -420,6 +483,13 @@ def _check_mesh(s: dict) -> str:
     from problems.inverse.build import hifi_mesh_for
 
     return f"auto = {hifi_mesh_for(s['inverse_mesh'])}"
+
+
+def _margin_text(margin) -> str:
+    """The study's plate margin in words."""
+    if margin == "auto":
+        return "plate margin auto: 10 % of each specimen's smallest dimension"
+    return f"plate margin {float(margin):g} mm"
 
 
 def _delta_cell(e: dict) -> str:
@@ -441,7 +511,8 @@ def render_summary(summary: dict) -> str:
         f"Data made on mesh `{s['data_mesh']}`, calibrated on the inverse mesh "
         f"`{s['inverse_mesh']}` (correction {s['correction']}"
         + (f", check mesh `{_check_mesh(s)}`" if s["check_mesh"] else "")
-        + f"), `lm` with {s['budget']} evaluations per variant from the test's start; models "
+        + f"; {_margin_text(s.get('plate_margin_mm', 0.0))}), `lm` with {s['budget']} "
+        "evaluations per variant from the test's start; models "
         f"{', '.join(s['models'])}. Specimens (width x depth x height, mm) drawn from "
         + ", ".join("x".join(f"{v:g}" for v in sp) for sp in s["specimens"])
         + f"; the truth drawn in the middle half of the variant's box; seed {s['seed']}. "
@@ -500,6 +571,20 @@ def render_summary(summary: dict) -> str:
                 else (" - | - |" if banded else "")
             )
         )
+    lines += [
+        "",
+        "## Per specimen",
+        "",
+        "| specimen mm | experiments | every parameter within 2 % | true variant first (AIC) "
+        "| every 95 % interval covers | plate margin mm |",
+        "|---|---|---|---|---|---|",
+        *(
+            f"| {'x'.join(f'{v:g}' for v in g['specimen_mm'])} | {g['n']} | "
+            f"{g['all_within_target']} | {g['true_first_aic']} | {g['all_covered']} | "
+            f"{', '.join(f'{m:g}' for m in g['plate_margin_mm'])} |"
+            for g in summary.get("per_specimen", [])
+        ),
+    ]
     lines += [
         "",
         "## Experiments",

@@ -34,6 +34,18 @@ def _specimens(text: str) -> tuple:
     return tuple(out)
 
 
+def plate_margin(text: str):
+    """``--plate-margin-mm``: a number of mm >= 0, or ``auto``."""
+    from bench.commands._args import ArgumentTypeError, float_in
+
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float_in(0.0, None, unit="mm")(text)
+    except ArgumentTypeError as exc:
+        raise ArgumentTypeError(f"{exc}; or auto") from None
+
+
 def add_arguments(p) -> None:
     from bench.commands._args import comma_list, finite_float, output_dir, positive_int
 
@@ -83,6 +95,14 @@ def add_arguments(p) -> None:
         help="with a correction, widen each 95 %% interval by the discretisation band (default "
         "gci; none: Laplace alone)",
     )
+    p.add_argument(
+        "--plate-margin-mm",
+        type=plate_margin,
+        default=0.0,
+        metavar="MM|auto",
+        help="face points closer than MM to either plate are left out of every calibration "
+        "(auto: 10 %% of each specimen's smallest dimension; default 0)",
+    )
     p.add_argument("--out", type=output_dir, required=True, help="records and summary folder")
     p.add_argument(
         "--work", type=output_dir, default=None, help="virtual experiments (default OUT/work)"
@@ -123,6 +143,7 @@ def main(args) -> int:
         args.correction,
         "" if args.check_mesh == "none" else args.check_mesh,
         args.error_band,
+        args.plate_margin_mm,
     )
     summary = run_coverage(settings, args.out, work=args.work)
     n = summary["n_done"]

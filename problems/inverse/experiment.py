@@ -50,7 +50,12 @@ import numpy as np
 from problems.dic.correlate import DICConfig
 from problems.fe.newton import MachineLoading
 from problems.inverse import layout
-from problems.inverse.build import PLATE_MARGIN_TEXT, Region, plate_margin_mask
+from problems.inverse.build import (
+    PLATE_MARGIN_TEXT,
+    Region,
+    auto_plate_margin_mm,
+    plate_margin_mask,
+)
 from problems.inverse.data import EXPERIMENT_TIER, Dataset, DataSettings
 
 #: platen conditions an experiment may declare -> the FE model's plate condition
@@ -125,7 +130,8 @@ SECTIONS = {
         "models": "all, or a list of variants form-hardening",
         "budget": "evaluations of the local method per variant (default 80)",
         "images": "1-based indices of the images used (default all)",
-        "plate_margin_mm": f"{PLATE_MARGIN_TEXT} (default 0)",
+        "plate_margin_mm": f'{PLATE_MARGIN_TEXT} (default 0), or "auto": 10 % of the '
+        "specimen's smallest dimension",
     },
     "virtual": {
         "data_mesh": "virtual experiments only: the FE mesh that made the data; never the "
@@ -600,7 +606,15 @@ def parse_experiment(raw: dict, path: Path) -> Experiment:
     elif len(set(use)) != len(use) or use != sorted(use):
         errors.append(f"[calibration] images = {use!r}: increasing, without repeats")
         use = []
-    margin = _number(c, "plate_margin_mm", errors, "calibration", default=0.0, positive=False)
+    if c.get("plate_margin_mm") == "auto":  # 10 % of the smallest dimension (build.py)
+        margin = auto_plate_margin_mm(width, depth, height) if width and depth and height else 0.0
+    elif isinstance(c.get("plate_margin_mm"), str):
+        errors.append(
+            f'[calibration] plate_margin_mm = {c["plate_margin_mm"]!r}: a number of mm or "auto"'
+        )
+        margin = 0.0
+    else:
+        margin = _number(c, "plate_margin_mm", errors, "calibration", default=0.0, positive=False)
     why = margin is not None and height and Region.range_error(margin, height)
     if why:
         errors.append(f"[calibration] {why}")
@@ -999,9 +1013,12 @@ def import_experiment(exp: Experiment) -> Dataset:
         & (face[:, 1] >= mrg)
         & (face[:, 1] <= H - mrg)
     )
-    if exp.plate_margin_mm:
-        on &= plate_margin_mask(face, exp.plate_margin_mm, H)
     n_off = int((~on).sum())
+    n_margin = 0
+    if exp.plate_margin_mm:  # counted apart from the points off the face
+        near = on & ~plate_margin_mask(face, exp.plate_margin_mm, H)
+        n_margin = int(near.sum())
+        on &= ~near
     ref, face = ref[on], face[on]
     common = [key for key, keep in zip(common, on) if keep]
     if len(ref) < 4:
@@ -1070,6 +1087,9 @@ def import_experiment(exp: Experiment) -> Dataset:
         "images_used": [int(k) + 1 for k in use],
         "force_accuracy_percent": exp.force_accuracy_percent,
     }
+    if exp.plate_margin_mm:  # absent without a margin: the data hashes of studies before stay
+        meta["plate_margin_mm"] = exp.plate_margin_mm
+        meta["dropped_plate_margin"] = n_margin
     if exp.images is not None:
         meta["images"] = os.path.relpath(exp.images, exp.path.parent)
     if correlation is not None:
