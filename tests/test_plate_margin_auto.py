@@ -60,8 +60,14 @@ def test_coverage_keys_margin_zero_as_before_and_other_margins_apart():
         ("50", "--plate-margin-mm 50.0: plate_margin_mm = 50.0 is out of range: 0 <= margin < 50"),
     ],
 )
-def test_bad_margin_is_one_line_exit_2(tmp_path, capsys, value, said):
-    argv = ["calibrate-coverage", "--plate-margin-mm", value, "--out", str(tmp_path / "o")]
+@pytest.mark.parametrize("command", ["calibrate-coverage", "calibrate"])
+def test_bad_margin_is_one_line_exit_2(tmp_path, capsys, value, said, command):
+    argv = [command, "--plate-margin-mm", value, "--out", str(tmp_path / "o")]
+    if command == "calibrate":  # the shipped 100 mm cube
+        argv.insert(
+            1,
+            str(Path(__file__).resolve().parents[1] / "suites/experiments/cube100/experiment.toml"),
+        )
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said in err[0], err

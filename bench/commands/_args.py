@@ -277,6 +277,18 @@ def add_plate_margin_argument(parser, default: float | None = 0.0, note: str = "
     )
 
 
+def plate_margin_or_auto(text: str):
+    """A plate margin of a calibration: a number of mm >= 0, or ``auto``
+    (:func:`problems.inverse.build.auto_plate_margin_mm`; the upper bound, half the specimen's
+    height, is checked on the specimen)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return float_in(0.0, None, unit="mm")(text)
+    except ArgumentTypeError as exc:
+        raise ArgumentTypeError(f"{exc}; or auto") from None
+
+
 def assignments(items, option: str, names=None, *, units: dict | None = None) -> dict[str, float]:
     """``["E=3e4", "nu=0.2"]`` -> ``{"E": 30000.0, "nu": 0.2}``.
 

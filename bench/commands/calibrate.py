@@ -18,7 +18,7 @@ HELP = (
 
 
 def add_arguments(p) -> None:
-    from bench.commands._args import input_file, output_dir, positive_int
+    from bench.commands._args import input_file, output_dir, plate_margin_or_auto, positive_int
 
     p.add_argument("experiment", type=input_file, help="the experiment file (TOML)")
     p.add_argument(
@@ -58,6 +58,14 @@ def add_arguments(p) -> None:
         default="auto",
         help="finer mesh on which the best variant is rerun once to state the inverse mesh's "
         "discretisation error ('auto': the next finer preset; 'none': skip)",
+    )
+    p.add_argument(
+        "--plate-margin-mm",
+        type=plate_margin_or_auto,
+        default=None,
+        metavar="MM|auto",
+        help="face points closer than MM to either plate are left out (auto: 10 %% of the "
+        "specimen's smallest dimension; default: the file's [calibration] plate_margin_mm)",
     )
 
     p.add_argument(
@@ -123,7 +131,13 @@ def main(args) -> int:
         mcmc = McmcSettings(args.mcmc_forward, n_steps=args.mcmc_steps, n_train=args.mcmc_train)
     out = Path(args.out) if args.out else Path("calibration") / exp.name
     report = calibrate(
-        exp.path, out, models=models, settings=settings, mcmc=mcmc, mcmc_models=mcmc_models
+        exp.path,
+        out,
+        models=models,
+        settings=settings,
+        mcmc=mcmc,
+        mcmc_models=mcmc_models,
+        plate_margin_mm=args.plate_margin_mm,
     )
     print(f"calibration report: {out / 'report.md'}")
     for i, row in enumerate(report["ranking"], 1):

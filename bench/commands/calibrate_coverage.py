@@ -34,20 +34,14 @@ def _specimens(text: str) -> tuple:
     return tuple(out)
 
 
-def plate_margin(text: str):
-    """``--plate-margin-mm``: a number of mm >= 0, or ``auto``."""
-    from bench.commands._args import ArgumentTypeError, float_in
-
-    if text.strip().lower() == "auto":
-        return "auto"
-    try:
-        return float_in(0.0, None, unit="mm")(text)
-    except ArgumentTypeError as exc:
-        raise ArgumentTypeError(f"{exc}; or auto") from None
-
-
 def add_arguments(p) -> None:
-    from bench.commands._args import comma_list, finite_float, output_dir, positive_int
+    from bench.commands._args import (
+        comma_list,
+        finite_float,
+        output_dir,
+        plate_margin_or_auto,
+        positive_int,
+    )
 
     p.add_argument("--variant", default="linear-compression", help="the variant making the data")
     p.add_argument("--n", type=positive_int, default=10, help="virtual experiments (default 10)")
@@ -97,7 +91,7 @@ def add_arguments(p) -> None:
     )
     p.add_argument(
         "--plate-margin-mm",
-        type=plate_margin,
+        type=plate_margin_or_auto,
         default=0.0,
         metavar="MM|auto",
         help="face points closer than MM to either plate are left out of every calibration "

@@ -20,13 +20,13 @@ HELP = (
 METHODS = ("analytic", "forward", "central")
 
 
-
 def _steps() -> dict[str, float]:
     """The FE model's relative finite-difference steps by scheme
     (:data:`problems.inverse.forward.FD_REL_STEP`; imported when used: the FE stack is heavy)."""
     from problems.inverse.forward import FD_REL_STEP
 
     return FD_REL_STEP
+
 
 #: a tiny mesh run once before the timings, so that loading the compiled (numba) kernels is not
 #: charged to the first timed run
