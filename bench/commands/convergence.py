@@ -50,9 +50,24 @@ def _element(text: str) -> str:
     return text
 
 
+def _margins(text: str) -> tuple[float, ...]:
+    """Plate margins, mm: a comma-separated list of numbers in [0, 75) (half the cube's height;
+    :class:`problems.inverse.build.Region`), returned sorted without repeats."""
+    from bench.commands._args import comma_list, float_in
+    from problems.fe.mesh import SIZE_MM
+
+    margin = float_in(0.0, SIZE_MM[2] / 2, high_open=True, unit="mm")
+    return tuple(sorted(set(comma_list(margin, what="margin")(text))))
+
+
 def add_arguments(p) -> None:
     from bench.commands._args import add_quiet_argument, comma_list, mesh_spec, output_dir
-    from bench.studies.convergence import DEFAULT_COMPARE, DEFAULT_GRADING, DEFAULT_SIZES
+    from bench.studies.convergence import (
+        DEFAULT_COMPARE,
+        DEFAULT_GRADING,
+        DEFAULT_PLATE_MARGINS,
+        DEFAULT_SIZES,
+    )
 
     p.add_argument("cases", nargs="+", metavar="CASE", help="FE case name(s), or all")
     p.add_argument(
@@ -99,7 +114,19 @@ def add_arguments(p) -> None:
         "DIR/<case>)",
     )
     p.add_argument(
-        "--render", action="store_true", help="compute nothing: re-draw from the output folder"
+        "--plate-margins",
+        type=_margins,
+        metavar="MM,...",
+        help="plate margins of the measurement-region analysis of a study with the model-error "
+        "data mesh, mm, comma-separated, each in [0, 75) (default "
+        f"{','.join(f'{x:g}' for x in DEFAULT_PLATE_MARGINS)}; with --render: redo the analysis "
+        "from the mesh records, no FE solve)",
+    )
+    p.add_argument(
+        "--render",
+        action="store_true",
+        help="solve nothing: re-draw from the output folder (and with --plate-margins redo the "
+        "plate-margin analysis from its mesh records)",
     )
     add_quiet_argument(p)
 
@@ -109,12 +136,14 @@ def main(args) -> int:
 
     from bench.studies import case_names, default_output_dir, existing_dir, render_from
     from bench.studies.convergence import (
+        DEFAULT_PLATE_MARGINS,
         STUDY,
         family_label,
         family_specs,
         render_convergence,
         render_overview,
         run_convergence,
+        update_plate_margin,
     )
     from problems.inverse.cases import get_case
 
@@ -148,8 +177,11 @@ def main(args) -> int:
     for name in cases:
         if args.render:
             folder = existing_dir(STUDY, name, outs[name])
+            if args.plate_margins and update_plate_margin(folder, args.plate_margins):
+                print(f"wrote {folder / 'convergence.json'} (plate margins)")
         else:
-            folder = run_convergence(name, families, compare, outs[name], report)
+            margins = args.plate_margins or DEFAULT_PLATE_MARGINS
+            folder = run_convergence(name, families, compare, outs[name], report, margins)
         print(f"wrote {render_from(render_convergence, folder)}")
     default_root = default_output_dir(STUDY, cases[0]).parent
     roots = []

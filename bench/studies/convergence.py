@@ -13,10 +13,14 @@ Files, in ``results/studies/convergence/<case>/`` (or ``--out``):
   study resumes where it stopped and a torn or edited record is recomputed (not committed: ~1 MB
   each);
 * ``convergence.json`` — the summary: per family the observed orders and the extrapolated force
-  curve, per mesh the errors, biases and times (small);
+  curve, per mesh the errors, biases and times, and, with the model-error tier's data mesh, the
+  plate-margin analysis (``plate_margin``: :func:`plate_margin_summary`) (small);
 * ``extrapolated.json`` — the Richardson-extrapolated measurement vector (front-face fields and
   forces) the errors are measured against;
 * ``convergence.md`` and ``convergence.png`` (drawn from ``convergence.json`` alone).
+
+The overview of every study (:func:`render_overview`) is ``overview.md`` in the root, with
+``plate_margin.png`` beside it when a study has the plate-margin analysis.
 """
 
 from __future__ import annotations
@@ -43,6 +47,11 @@ DEFAULT_GRADING = 4.0
 DEFAULT_ELEMENTS = ("hex8",)
 #: uniform presets judged against the extrapolation
 DEFAULT_COMPARE = ("coarse", "paper")
+#: plate margins of the measurement-region analysis, mm (:func:`plate_margin_summary`): the grid
+#: rows are at z = 5, 10, ... mm, so 10 mm drops the row nearest each plate, 30 mm five
+DEFAULT_PLATE_MARGINS = (0.0, 10.0, 15.0, 20.0, 30.0)
+#: the file name of the overview's plate-margin figure (:func:`render_overview`)
+PLATE_MARGIN_FIGURE = "plate_margin.png"
 
 
 def family_specs(sizes, grading: float, element: str) -> list[str]:
@@ -165,10 +174,12 @@ def run_convergence(
     compare=(),
     out: str | Path | None = None,
     report=None,
+    plate_margins=DEFAULT_PLATE_MARGINS,
 ) -> Path:
     """Solve (or reuse) every mesh of ``families`` ({label: specs coarse to fine}) and ``compare``
     for ``case``, write the summary, the extrapolation and the markdown table; returns the output
-    folder. ``report(record, reused)`` is called after each mesh."""
+    folder. ``report(record, reused)`` is called after each mesh; ``plate_margins`` (mm) are
+    those of the plate-margin analysis (:func:`plate_margin_summary`; with the data mesh)."""
     folder = output_dir(STUDY, case, out)
     specs = [s for fam in families.values() for s in fam] + [s for s in compare]
     records = {}
@@ -182,7 +193,7 @@ def run_convergence(
         records[spec] = rec
         if report is not None:
             report(rec, reused)
-    summary, extrapolated = analyse(case, families, list(compare), records)
+    summary, extrapolated = analyse(case, families, list(compare), records, plate_margins)
     atomic_write_text(folder / "convergence.json", jsonio.dumps(summary, indent=1) + "\n")
     atomic_write_text(
         folder / "extrapolated.json",
@@ -199,13 +210,17 @@ def run_convergence(
     return folder
 
 
-def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[dict, np.ndarray]:
+def analyse(
+    case: str, families: dict, compare: list, records: dict, plate_margins=DEFAULT_PLATE_MARGINS
+) -> tuple[dict, np.ndarray]:
     """The summary of a study from its mesh records and the extrapolated measurement vector.
 
     Each family with three or more solved meshes is extrapolated from its last three; the
     reference is the extrapolation of the family whose finest mesh it moves least (the smallest
     Richardson error estimate) among the families in their asymptotic range (the last two observed
     orders agree: :func:`problems.analysis.convergence.asymptotic`), or among all when none is.
+    With the model-error tier's data mesh among the records the summary has the plate-margin
+    analysis for ``plate_margins`` (mm; :func:`plate_margin_summary`; none when empty).
     ValueError when no family can be extrapolated."""
     first = next(iter(records.values()))
     N, m = first["n_snapshots"], first["n_points"]
@@ -283,7 +298,91 @@ def analyse(case: str, families: dict, compare: list, records: dict) -> tuple[di
         "families": fam_out,
         "meshes": rows,
     }
+    if data_mesh is not None and len(plate_margins):
+        summary["plate_margin"] = plate_margin_summary(records, data_mesh, plate_margins)
     return summary, ref
+
+
+def plate_margin_summary(records: dict, data_mesh: str, margins_mm) -> dict:
+    """The plate-margin analysis of a study (``plate_margin`` of ``convergence.json``): how the
+    measurement region (:class:`problems.inverse.build.Region`) changes what each candidate
+    inverse mesh meets in the model-error data, from the mesh records ``records`` ({spec:
+    record}) and the data mesh ``data_mesh`` (a spec of ``records``) at plate margins
+    ``margins_mm`` (mm), with :func:`problems.analysis.convergence.plate_margin_study`.
+
+    Returns ``margins_mm``, ``points`` (front-face points kept at each margin) and ``meshes``:
+    per solved mesh with a Jacobian (the data mesh aside) its ``dofs``, and per margin (lists in
+    the order of ``margins_mm``; dicts {parameter: %} of the reference):
+
+    * ``untreated_pct`` — the linearised bias against the data mesh's response;
+    * ``corrected_pct`` — {finer mesh: biases}: for each solved mesh with more dofs (the data
+      mesh aside) the linearised bias of the mesh's Jacobian with that mesh's response minus the
+      data, the first-order limit of the iterated model-error correction with it as the
+      high-fidelity model;
+    * ``sd_pct`` — each parameter's noise sd under the rounding noise of the data
+      (:func:`problems.analysis.convergence.noise_sd`).
+
+    The points are the default measurement grid (:func:`problems.fe.front_face.measurement_grid`),
+    the specimen the standard cube; ValueError when the records have another number of points."""
+    from problems.fe.front_face import measurement_grid
+
+    data = records[data_mesh]
+    N, m = data["n_snapshots"], data["n_points"]
+    points = measurement_grid()
+    if len(points) != m:
+        raise ValueError(
+            f"the mesh records have {m} front-face points; the plate-margin analysis needs the "
+            f"default measurement grid's {len(points)}"
+        )
+    data_values = np.asarray(data["values"], float)
+    solved = {
+        spec: r
+        for spec, r in records.items()
+        if r["ok"] and r["values"] is not None and r["key"] != data["key"]
+    }
+    meshes, kept = {}, None
+    for spec, r in solved.items():
+        if r["jacobian"] is None:
+            continue
+        finer = [f for f, q in solved.items() if q["dofs"] > r["dofs"]]
+        residuals = {f: np.asarray(solved[f]["values"], float) - data_values for f in finer}
+        residuals["untreated"] = np.asarray(r["values"], float) - data_values
+        study = conv.plate_margin_study(
+            r["jacobian"], residuals, r["reference"], points, margins_mm, N, SIZE_MM[2]
+        )
+        kept = [s["points"] for s in study]
+
+        def pct(values, names=r["names"]):
+            return {n: float(f"{100.0 * v:.5g}") for n, v in zip(names, values)}
+
+        meshes[spec] = {
+            "dofs": r["dofs"],
+            "untreated_pct": [pct(s["bias"]["untreated"]) for s in study],
+            "corrected_pct": {f: [pct(s["bias"][f]) for s in study] for f in finer},
+            "sd_pct": [pct(s["sd"]) for s in study],
+        }
+    return {"margins_mm": [float(x) for x in margins_mm], "points": kept, "meshes": meshes}
+
+
+def update_plate_margin(folder: str | Path, margins_mm) -> Path | None:
+    """Redo the plate-margin analysis of a study's folder for ``margins_mm`` (mm) from its mesh
+    records (no FE solve) and rewrite ``convergence.json`` with it; the path, or None when the
+    study has no data mesh (nothing to analyse). ValueError (one line) when a mesh record is
+    missing or torn."""
+    folder = Path(folder)
+    summary = read_json(folder / "convergence.json")
+    if not summary.get("data_mesh"):
+        return None
+    records = {}
+    for spec in (r["mesh"] for r in summary["meshes"]):
+        records[spec] = read_record(record_path(folder, spec), summary["case"], spec)
+        if records[spec] is None:
+            raise ValueError(
+                f"{record_path(folder, spec)}: the mesh record is missing or torn; the "
+                "plate-margin analysis needs every mesh record (run the study without --render)"
+            )
+    summary["plate_margin"] = plate_margin_summary(records, summary["data_mesh"], margins_mm)
+    return atomic_write_text(folder / "convergence.json", jsonio.dumps(summary, indent=1) + "\n")
 
 
 def _data_mesh(specs, records: dict) -> str | None:
@@ -441,7 +540,8 @@ def render_overview(root: str | Path) -> Path:
     a study has it, with its error against that study's extrapolation and the other studies'
     extrapolations of the case; every other mesh's worst linearised bias against the data mesh
     (the candidates for the inverse model); per mesh the RMS error (sigma), force error (%),
-    worst bias and CPU s."""
+    worst bias and CPU s; with the plate-margin analysis (:func:`plate_margin_summary`) a section
+    on the measurement region and its figure :data:`PLATE_MARGIN_FIGURE`."""
     root = Path(root)
     studies = []  # (study label, folder, summary)
     for path in sorted(root.glob("*/convergence.json")) + sorted(root.glob("*/*/convergence.json")):
@@ -537,12 +637,149 @@ def render_overview(root: str | Path) -> Path:
             "",
             markdown_table(cand_rows, {"worst |bias| (%)": ".2f", "CPU s (max)": ".1f"}),
         ]
+    parts += _plate_margin_section(root, studies)
     parts += [
         "## Meshes",
         "",
         markdown_table(rows, {"RMS (sigma)": ".2f", "force (%)": "+.3f", "CPU s": ".1f"}),
     ]
     return atomic_write_text(root / "overview.md", "\n".join(parts))
+
+
+def _plate_margin_section(root: Path, studies) -> list[str]:
+    """The overview's section on the plate margin (markdown lines; none without the analysis):
+    per candidate mesh in every analysed case a table case x margin of the worst untreated
+    linearised bias and its parameter's noise sd, and one of the correction's limit with the
+    mesh's high-fidelity model (:func:`_correction_mesh`); draws :data:`PLATE_MARGIN_FIGURE`."""
+    from problems.inverse.data import MODEL_ERROR_INVERSE_MESH
+
+    analysed = {s["case"]: s for _, _, s in studies if s.get("plate_margin")}
+    if not analysed:
+        return []
+    cases = sorted(analysed)
+    margins = sorted({x for s in analysed.values() for x in s["plate_margin"]["margins_mm"]})
+    first = analysed[cases[0]]["plate_margin"]
+    meshes = [
+        mesh
+        for mesh in sorted(first["meshes"], key=lambda k: first["meshes"][k]["dofs"])
+        if all(mesh in s["plate_margin"]["meshes"] for s in analysed.values())
+    ]
+    shown = {}  # mesh -> case -> (correction mesh or None, {margin: cell}, {margin: cell})
+    for mesh in meshes:
+        for case, s in analysed.items():
+            pm = s["plate_margin"]
+            entry = pm["meshes"][mesh]
+            hifi = _correction_mesh(s, mesh, entry["corrected_pct"])
+            cells = {}
+            for i, margin in enumerate(pm["margins_mm"]):
+                cells[margin] = (
+                    _worst_margin_cell(entry["untreated_pct"][i], entry["sd_pct"][i]),
+                    _worst_margin_cell(entry["corrected_pct"][hifi][i], entry["sd_pct"][i])
+                    if hifi
+                    else None,
+                )
+            shown.setdefault(mesh, {})[case] = (hifi, cells)
+    points = ", ".join(f"{x:g} mm: {n}" for x, n in zip(first["margins_mm"], first["points"]))
+    parts = [
+        "## Measurement region: the plate margin",
+        "",
+        "A plate margin leaves out the front-face points closer than it to either plate (the "
+        "grid rows are at z = 5, 10, ... mm; the force is always kept). Front-face points kept: "
+        f"{points}. Per mesh and case the parameter with the largest linearised bias (%) "
+        "against the data mesh at each margin, untreated (the mesh's own response) and, below, "
+        "the limit of the iterated model-error correction with a finer mesh (the mesh's "
+        "Jacobian with the finer mesh's response minus the data, to first order), with that "
+        "parameter's noise sd (% of the reference, the data's rounding: 1 um / sqrt(12), "
+        f"1 kN). Last row: the largest |bias| over the cases. Figure: `{PLATE_MARGIN_FIGURE}` "
+        f"({MODEL_ERROR_INVERSE_MESH}).",
+        "",
+    ]
+    for mesh, by_case in shown.items():
+        for k, what in ((0, "untreated"), (1, "corrected")):
+            hifis = sorted({h for h, _ in by_case.values() if h})
+            if k == 1 and not hifis:
+                continue
+            rows = [
+                {
+                    "case": case,
+                    **{
+                        f"{x:g} mm": (cells[x][k][0] if x in cells and cells[x][k] else "-")
+                        for x in margins
+                    },
+                }
+                for case, (_, cells) in sorted(by_case.items())
+            ]
+            rows.append(
+                {
+                    "case": "worst over the cases",
+                    **{
+                        f"{x:g} mm": _fmt(
+                            max(
+                                (c[x][k][1] for _, c in by_case.values() if x in c and c[x][k]),
+                                default=None,
+                            ),
+                            ".2f",
+                        )
+                        + " %"
+                        for x in margins
+                    },
+                }
+            )
+            title = f"{mesh}, {what}" + (f" (correction with {', '.join(hifis)})" if k else "")
+            parts += [f"### {title}", "", markdown_table(rows)]
+    _plate_margin_figure(root / PLATE_MARGIN_FIGURE, shown, MODEL_ERROR_INVERSE_MESH)
+    return parts
+
+
+def _worst_margin_cell(bias_pct: dict, sd_pct: dict) -> tuple[str, float]:
+    """``("pt0 -8.46 % (sd 0.53 %)", 8.46)``: the worst parameter's bias and noise sd (%), and
+    its |bias| (%)."""
+    name = max(bias_pct, key=lambda n: abs(bias_pct[n]))
+    return f"{name} {bias_pct[name]:+.2f} % (sd {sd_pct[name]:.2f} %)", abs(bias_pct[name])
+
+
+def _correction_mesh(summary: dict, mesh: str, corrected: dict) -> str | None:
+    """The finer mesh whose correction the overview shows for ``mesh``: its default
+    high-fidelity mesh (:func:`problems.inverse.build.hifi_mesh_for`) when ``corrected`` has it,
+    else the next member of its family there, else None."""
+    from problems.inverse.build import hifi_mesh_for
+
+    try:
+        key = discretisation_key(hifi_mesh_for(mesh))
+    except ValueError:
+        key = None
+    match = [f for f in corrected if discretisation_key(f) == key]
+    if match:
+        return match[0]
+    for fam in summary["families"].values():
+        if mesh in fam["meshes"]:
+            later = fam["meshes"][fam["meshes"].index(mesh) + 1 :]
+            return next((f for f in later if f in corrected), None)
+    return None
+
+
+def _plate_margin_figure(path: Path, shown: dict, mesh: str) -> Path | None:
+    """Worst |linearised bias| (%, log) against the plate margin (mm) of ``mesh`` (else the
+    first mesh of ``shown``) per case, untreated and corrected: two panels."""
+    from bench.plotting import pyplot, row, save
+
+    mesh = mesh if mesh in shown else next(iter(shown))
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=row(2), sharey=True)
+    for k, (ax, what) in enumerate(zip(axes, ("untreated", "corrected"))):
+        for case, (_, cells) in sorted(shown[mesh].items()):
+            xs = [x for x in sorted(cells) if cells[x][k]]
+            if xs:
+                ax.plot(xs, [cells[x][k][1] for x in xs], marker="o", label=case)
+        hifis = sorted({h for h, _ in shown[mesh].values() if h})
+        ax.axhline(1.0, color="0.6", lw=0.8, ls="--")
+        ax.set_yscale("log")
+        ax.set_xlabel("plate margin (mm)")
+        ax.set_title(what + (f" (limit with {', '.join(hifis)})" if k else ""), fontsize=9)
+    axes[0].set_ylabel("worst |linearised bias| (%)")
+    axes[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    fig.suptitle(f"{mesh} against the model-error data mesh", fontsize=10)
+    return save(fig, path)
 
 
 def _reference_row(label: str, folder: Path, summary: dict, studies) -> dict:

@@ -16,7 +16,9 @@ Errors are in units of the data's noise: sigma = 1 um / sqrt(12) (the rounding o
 to 1 um) for each front-face displacement and 1 kN for the plate force (issue 25). The linearised
 bias of a mesh is the Gauss-Newton step a perfect optimiser would take from the reference x_ref,
 when the mesh's response at x_ref misses the reference data by r = U_mesh(x_ref) - U_ref:
-dx = -(J^T W J)^-1 J^T W r, W = diag(1 / sigma^2), J the mesh's exact Jacobian.
+dx = -(J^T W J)^-1 J^T W r, W = diag(1 / sigma^2), J the mesh's exact Jacobian; restricted to
+the rows of a measurement region (a plate margin, :func:`plate_margin_study`) it is the bias of a
+fit of that region, and sqrt diag (J^T W J)^-1 the noise sd of its estimate.
 """
 
 from __future__ import annotations
@@ -163,6 +165,57 @@ def linearised_bias(jacobian, residual, sd, x_ref) -> np.ndarray:
     rhs = np.asarray(residual, float) / np.asarray(sd, float)
     dz, *_ = np.linalg.lstsq(A, -rhs, rcond=None)
     return dz
+
+
+def parameter_sd(jacobian, sd, x_ref) -> np.ndarray:
+    """Noise standard deviation of each parameter's least-squares estimate relative to ``x_ref``
+    (fractions): sqrt diag (J^T W J)^-1 / x_ref, W = diag(sd^-2), for the noise ``sd`` (m,) of
+    the measurement and the exact Jacobian ``jacobian`` (m, n) (the linearised covariance; by
+    the singular values of the whitened, column-scaled system)."""
+    x_ref = np.asarray(x_ref, float)
+    A = np.asarray(jacobian, float) * x_ref[None, :] / np.asarray(sd, float)[:, None]
+    _, s, vt = np.linalg.svd(A, full_matrices=False)
+    return np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
+
+
+def plate_margin_study(
+    jacobian, residuals: dict, x_ref, points, margins_mm, n_snapshots: int, height_mm: float
+) -> list[dict]:
+    """The linearised bias and noise of a mesh's estimate for each plate margin (the measurement
+    region of :class:`problems.inverse.build.Region`).
+
+    jacobian   : (2 N m + N, n) the mesh's exact Jacobian at ``x_ref``
+    residuals  : {label: (2 N m + N,) model - data at ``x_ref``}, e.g. the mesh's response minus
+                 the data (the untreated bias) or a finer mesh's response minus the data (the
+                 limit of the iterated correction with that mesh, to first order)
+    points     : (m, 2) front-face points (y, z), mm; ``height_mm`` the specimen's height, mm
+    margins_mm : plate margins, mm
+
+    Per margin ``{"margin_mm", "points"`` (front-face points kept), ``"sd"`` (n,) (each
+    parameter's noise sd, fractions of ``x_ref``: :func:`parameter_sd` with :func:`noise_sd`),
+    ``"bias"`` ({label: (n,) fractions}: :func:`linearised_bias`)``}``, on the rows of the kept
+    points' ``u_h`` and ``u_v`` in every snapshot and of every force."""
+    from problems.inverse.build import plate_margin_mask
+
+    points = np.asarray(points, float)
+    J = np.asarray(jacobian, float)
+    sd = noise_sd(n_snapshots, len(points))
+    out = []
+    for margin in margins_mm:
+        keep = plate_margin_mask(points, margin, height_mm)
+        rows = layout.point_rows(keep, n_snapshots)
+        out.append(
+            {
+                "margin_mm": float(margin),
+                "points": int(keep.sum()),
+                "sd": parameter_sd(J[rows], sd[rows], x_ref),
+                "bias": {
+                    label: linearised_bias(J[rows], np.asarray(r, float)[rows], sd[rows], x_ref)
+                    for label, r in residuals.items()
+                },
+            }
+        )
+    return out
 
 
 #: order p of the discretisation band of an identified parameter (:func:`gci_band`), per mesh

@@ -38,6 +38,14 @@ def point_groups(n_snapshots: int, n_points: int) -> np.ndarray:
     return np.concatenate([p + k, nm + p + k])
 
 
+def point_rows(keep, n_snapshots: int) -> np.ndarray:
+    """Boolean mask (2 N m + N,) over the measurement vector of the front-face points ``keep``
+    (m,) bool: their ``u_h`` and ``u_v`` in each of the N snapshots, and every force (a
+    measurement region never drops the force)."""
+    kept = np.tile(np.asarray(keep, dtype=bool), (n_snapshots, 1))
+    return stack(kept, kept, np.ones(n_snapshots, dtype=bool)).astype(bool)
+
+
 def stack(u_h, u_v, force_kN) -> np.ndarray:
     """The measurement vector from ``u_h`` (N, m) mm, ``u_v`` (N, m) mm and ``force_kN`` (N,)."""
     return np.concatenate([np.ravel(u_h), np.ravel(u_v), np.ravel(force_kN)])
