@@ -664,6 +664,8 @@ def _plate_margin_section(root: Path, studies) -> list[str]:
         for mesh in sorted(first["meshes"], key=lambda k: first["meshes"][k]["dofs"])
         if all(mesh in s["plate_margin"]["meshes"] for s in analysed.values())
     ]
+    if not meshes:
+        return []
     shown = {}  # mesh -> case -> (correction mesh or None, {margin: cell}, {margin: cell})
     for mesh in meshes:
         for case, s in analysed.items():
