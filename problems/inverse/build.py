@@ -91,7 +91,11 @@ def auto_plate_margin_mm(width_mm: float, depth_mm: float, height_mm: float) -> 
     linearised ``pt0`` bias of the hyperbolic cases from -8.5 to -11.2 % to within 2.3 %; with
     the one-point or iterated correction a 15-20 mm margin gives <= 1 % on all of them
     (docs/calibrating.md). 10 % of the smallest dimension is the smallest margin of that
-    measurement scaled by size, and leaves ~80 % of a cube's face height measured.
+    measurement scaled by size, and leaves ~80 % of a cube's face height measured. Measured in
+    the hyperbolic-compression coverage study (results/calibration/coverage/
+    hyperbolic-compression-hex27-margin): right on the 150 mm cubes (pt0 within 3 %), too large
+    on the 100 mm cubes (the untreated pt0 bias changes sign, up to +17 %): the DIC step and ROI
+    margin are fixed in mm, so the bias is not self-similar in the specimen alone.
     """
     return AUTO_PLATE_MARGIN_FRACTION * min(float(width_mm), float(depth_mm), float(height_mm))
 
