@@ -488,7 +488,12 @@ def _check_mesh(s: dict) -> str:
 def _margin_text(margin) -> str:
     """The study's plate margin in words."""
     if margin == "auto":
-        return "plate margin auto: 10 % of each specimen's smallest dimension"
+        from problems.inverse.build import AUTO_PLATE_MARGIN_FRACTION
+
+        return (
+            f"plate margin auto: {100 * AUTO_PLATE_MARGIN_FRACTION:g} % of each specimen's "
+            "smallest dimension"
+        )
     return f"plate margin {float(margin):g} mm"
 
 
