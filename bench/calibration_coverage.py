@@ -18,6 +18,14 @@ cannot be told apart), and scored:
   discretisation band (:func:`bench.calibration.ranking_band`);
 * whether each 95 % interval (Laplace, Birge-widened) covers the true value.
 
+The summary also states what the noise alone allows (:func:`noise_limit`): were the estimate
+unbiased with Gaussian errors of the Laplace noise sd (the Cramér–Rao bound at the estimate), the
+expected number of experiments with a parameter within the 2 % target, and with every parameter
+within it (between the Šidák lower bound, the product over the parameters, and the least
+parameter's share, an upper bound); and each experiment's largest |error| / sd. A count of
+"within 2 %" below the noise's own ceiling is then read as what it is: a parameter the test does
+not determine to 2 %, not a biased calibration.
+
 Resumable: each experiment's record is written atomically to ``<out>/experiments/eNNN.json``
 keyed by what makes it (settings, index); a rerun reads the records whose key matches and runs
 the others (the calibration inside resumes per variant too). The bulky files (virtual
@@ -405,6 +413,11 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
                     bool(r["covered_laplace"][j]) for r in ok if "band_percent" in r
                 ),
             }
+    limit = noise_limit(ok, len(names))
+    if limit is not None:
+        for j, n in enumerate(names):
+            per[n]["within_target_noise_limit"] = float(limit["per_parameter"][j])
+            per[n]["rms_error_over_sd"] = float(limit["rms_error_over_sd"][j])
     n = len(records)
     return {
         "format": FORMAT,
@@ -420,6 +433,11 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
         "n_ranking_band": sum(bool(r.get("ranking_band")) for r in records),
         "all_covered": sum(bool(r.get("all_covered")) for r in records),
         "all_within_target": int(np.sum(np.all(np.abs(E) <= TARGET_ERROR_PERCENT, axis=1))),
+        **(
+            {"all_within_target_noise_limit": [limit["all_lower"], limit["all_upper"]]}
+            if limit is not None
+            else {}
+        ),
         "wall_s": float(sum(r["wall_s"] for r in records)),
         "per_specimen": per_specimen(records),
         "experiments": [
@@ -442,8 +460,44 @@ def summarise(s: CoverageSettings, records: list[dict]) -> dict:
                     "wall_s",
                 )
             }
+            | ({"max_error_over_sd": max_error_over_sd(r)} if "std_percent" in r else {})
             for r in records
         ],
+    }
+
+
+def noise_sd_percent(record: dict) -> np.ndarray:
+    """A record's Laplace noise sd of each parameter, % of the estimate (its ``std_percent``
+    without the Birge widening, which is >= 1 and multiplies it)."""
+    return np.asarray(record["std_percent"], float) / max(1.0, float(record["birge_ratio"]))
+
+
+def max_error_over_sd(record: dict) -> float:
+    """A record's largest |error| in units of its parameter's Laplace noise sd."""
+    return float(np.max(np.abs(record["error_percent"]) / noise_sd_percent(record)))
+
+
+def noise_limit(records: list[dict], n_par: int) -> dict | None:
+    """What the noise alone allows in ``records`` (those with ``std_percent``; None without any):
+    for an unbiased estimate with Gaussian errors of the Laplace noise sd ``sd``, the chance that
+    a parameter lands within the target t is ``p = erf(t / (sd sqrt 2))``. Returned: per
+    parameter the expected number of experiments within the target (the sum of p), and for every
+    parameter at once the Šidák lower bound (sum over experiments of the product of p; Gaussian
+    errors of any correlation do at least this well) and the upper bound (sum of the least p);
+    and per parameter the rms over the experiments of error / sd."""
+    from scipy.special import erf
+
+    rs = [r for r in records if "std_percent" in r]
+    if not rs:
+        return None
+    sd = np.array([noise_sd_percent(r) for r in rs]).reshape(len(rs), n_par)
+    p = erf(TARGET_ERROR_PERCENT / (np.sqrt(2.0) * sd))
+    z = np.array([r["error_percent"] for r in rs], float).reshape(sd.shape) / sd
+    return {
+        "per_parameter": p.sum(axis=0).tolist(),
+        "rms_error_over_sd": np.sqrt(np.mean(z**2, axis=0)).tolist(),
+        "all_lower": float(np.prod(p, axis=1).sum()),
+        "all_upper": float(np.min(p, axis=1).sum()),
     }
 
 
@@ -506,6 +560,55 @@ def _delta_cell(e: dict) -> str:
     return f"{d:.3g} ({u:.3g}{', not resolved' if d <= u else ''})"
 
 
+def _parameter_table(summary: dict) -> list[str]:
+    """The per-parameter table of the summary (with the discretisation band's and the noise
+    ceiling's columns where the records carry them) and its legend."""
+    params, n_ok = summary["parameters"], summary["n_ok"]
+    banded = any("mean_band_percent" in p for p in params.values())
+    ceiling = any("within_target_noise_limit" in p for p in params.values())
+    lines, head = [], ["parameter", "mean abs error %", "max abs error %"]
+    head += ["within 2 % (noise ceiling)", "rms error/sd"] if ceiling else ["within 2 %"]
+    head += ["95 % interval covers"]
+    if ceiling:
+        lines += [
+            "Noise ceiling: the expected count for an unbiased estimate with Gaussian errors of "
+            "the Laplace noise sd (no estimator does better on average at this noise); "
+            "'rms error/sd': the parameter's errors in units of its Laplace noise sd, rms over "
+            "the experiments (about 1: the noise's; well above: a bias); 'max \\|error\\|/sd' "
+            "per experiment.",
+            "",
+        ]
+    if banded:
+        lines += [
+            "95 % intervals: the Laplace half-width plus the discretisation band (GCI of the "
+            "corrected against the untreated estimate, docs/calibrating.md); 'Laplace alone' "
+            "without the band.",
+            "",
+        ]
+        head += ["mean band %", "Laplace alone covers"]
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, p in params.items():
+        cells = [name, f"{p['mean_abs_error_percent']:.3g}", f"{p['max_abs_error_percent']:.3g}"]
+        within = f"{p['within_target']} of {n_ok}"
+        if ceiling:
+            lim, z = p.get("within_target_noise_limit"), p.get("rms_error_over_sd")
+            cells += [
+                within + (f" ({lim:.1f})" if lim is not None else ""),
+                f"{z:.2g}" if z is not None else "-",
+            ]
+        else:
+            cells.append(within)
+        cells.append(f"{p['covered']} of {n_ok}")
+        if banded:
+            cells += (
+                [f"{p['mean_band_percent']:.3g}", f"{p['covered_laplace']} of {n_ok}"]
+                if "mean_band_percent" in p
+                else ["-", "-"]
+            )
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def render_summary(summary: dict) -> str:
     """The summary as Markdown."""
     s = summary["settings"]
@@ -546,36 +649,16 @@ def render_summary(summary: dict) -> str:
         ),
         f"- every 95 % interval covers the truth: {summary['all_covered']} of {n}",
         f"- every parameter within {TARGET_ERROR_PERCENT:g} %: {summary['all_within_target']} "
-        f"of {summary['n_ok']}",
+        f"of {summary['n_ok']}"
+        + (
+            " (the noise's own ceiling, an unbiased estimate at the Laplace noise sd: "
+            f"{lim[0]:.1f}–{lim[1]:.1f} expected; docs/calibrating.md)"
+            if (lim := summary.get("all_within_target_noise_limit"))
+            else ""
+        ),
         "",
     ]
-    banded = any("mean_band_percent" in p for p in summary["parameters"].values())
-    if banded:
-        lines += [
-            "95 % intervals: the Laplace half-width plus the discretisation band (GCI of the "
-            "corrected against the untreated estimate, docs/calibrating.md); 'Laplace alone' "
-            "without the band.",
-            "",
-            "| parameter | mean abs error % | max abs error % | within 2 % | 95 % interval covers "
-            "| mean band % | Laplace alone covers |",
-            "|---|---|---|---|---|---|---|",
-        ]
-    else:
-        lines += [
-            "| parameter | mean abs error % | max abs error % | within 2 % | 95 % interval "
-            "covers |",
-            "|---|---|---|---|---|",
-        ]
-    for name, p in summary["parameters"].items():
-        lines.append(
-            f"| {name} | {p['mean_abs_error_percent']:.3g} | {p['max_abs_error_percent']:.3g} | "
-            f"{p['within_target']} of {summary['n_ok']} | {p['covered']} of {summary['n_ok']} |"
-            + (
-                f" {p['mean_band_percent']:.3g} | {p['covered_laplace']} of {summary['n_ok']} |"
-                if "mean_band_percent" in p
-                else (" - | - |" if banded else "")
-            )
-        )
+    lines += _parameter_table(summary)
     lines += [
         "",
         "## Per specimen",
@@ -595,8 +678,8 @@ def render_summary(summary: dict) -> str:
         "## Experiments",
         "",
         "| # | specimen mm | error % (" + ", ".join(names) + ") | covered | first (AIC) | "
-        "p(true\\|D) | dAIC true (band U) | rms sigma | wall s |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "p(true\\|D) | dAIC true (band U) | max \\|error\\|/sd | rms sigma | wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for e in summary["experiments"]:
         err = e.get("error_percent")
@@ -605,7 +688,8 @@ def render_summary(summary: dict) -> str:
             + (", ".join(f"{v:+.2g}" for v in err) if err else "failed")
             + f" | {sum(e.get('covered') or [])} of {len(names)} | "
             f"{(e.get('ranking_aic') or ['-'])[0]} | {e.get('model_probability', math.nan):.3g} |"
-            f" {_delta_cell(e)} | {e.get('rms_sigma') or math.nan:.3g} | {e['wall_s']:.0f} |"
+            f" {_delta_cell(e)} | {e.get('max_error_over_sd', math.nan):.2g} |"
+            f" {e.get('rms_sigma') or math.nan:.3g} | {e['wall_s']:.0f} |"
         )
     return "\n".join(lines) + "\n"
 

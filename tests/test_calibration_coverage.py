@@ -138,3 +138,31 @@ def test_summary_of_one_model_does_not_claim_a_ranking():
     assert summary["parameters"]["H"]["covered"] == 0 and summary["all_covered"] == 0
     text = cov.render_summary(summary)
     assert "model selection not assessed" in text and "ranked first" not in text
+
+
+def test_noise_ceiling_is_the_gaussian_share_within_the_target():
+    """sd 2 % (std 4 % widened by a Birge ratio 2): P(|N(0, 2)| <= 2) = erf(1/sqrt 2) = 0.6827;
+    sd 1 %: 0.9545; the Šidák bound multiplies them, the upper bound takes the least."""
+    s = CoverageSettings(models=("linear-compression",), n=2)
+    base = {
+        "ok": True, "specimen_mm": [100.0] * 3, "truth": [1.0] * 6, "covered": [True] * 6,
+        "all_covered": True, "true_first_aic": True, "ranking_aic": ["linear-compression"],
+        "model_probability": 1.0, "rms_sigma": 1.0, "wall_s": 1.0,
+    }  # fmt: skip
+    recs = [
+        base | {"index": 0, "birge_ratio": 2.0, "std_percent": [4.0, 2.0, 1e-3, 1e-3, 1e-3, 1e-3],
+                "error_percent": [2.0, 0.5, 0.0, 0.0, 0.0, 0.0]},
+        base | {"index": 1, "birge_ratio": 1.0, "std_percent": [2.0, 1.0, 1e-3, 1e-3, 1e-3, 1e-3],
+                "error_percent": [-6.0, 0.5, 0.0, 0.0, 0.0, 0.0]},
+    ]  # fmt: skip
+    summary = cov.summarise(s, recs)
+    p1, p2 = 0.682689492, 0.954499736
+    assert summary["parameters"]["E"]["within_target_noise_limit"] == pytest.approx(2 * p1)
+    assert summary["parameters"]["beta"]["within_target_noise_limit"] == pytest.approx(2 * p2)
+    lo, hi = summary["all_within_target_noise_limit"]
+    assert lo == pytest.approx(2 * p1 * p2) and hi == pytest.approx(2 * p1)
+    # errors in sd units: E 1 and -3 -> rms sqrt(5); the largest per experiment 1 and 3
+    assert summary["parameters"]["E"]["rms_error_over_sd"] == pytest.approx(5**0.5)
+    assert [e["max_error_over_sd"] for e in summary["experiments"]] == pytest.approx([1.0, 3.0])
+    text = cov.render_summary(summary)
+    assert "1.3–1.4 expected" in text and "| E | 4 | 6 | 1 of 2 (1.4) | 2.2 |" in text
