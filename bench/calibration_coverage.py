@@ -83,6 +83,10 @@ class CoverageSettings:
                    specimen's smallest dimension,
                    :func:`problems.inverse.build.auto_plate_margin_mm`); part of the calibration
                    key when not 0 (records without one read as margin 0)
+    noise_scale  : multiplies the virtual experiments' noise (DIC points, load cell; the declared
+                   sigma unchanged): 0 makes the noise-free twins of a study's experiments (the
+                   same draws otherwise), whose errors are the inverse model's alone; part of the
+                   data and calibration keys when not 1
     """
 
     variant: str = "linear-compression"
@@ -99,6 +103,7 @@ class CoverageSettings:
     check_mesh: str = ""
     error_band: str = "gci"
     plate_margin_mm: float | str = 0.0
+    noise_scale: float = 1.0
 
     def __post_init__(self):
         from problems.fe.mesh import discretisation_key, parse_mesh_spec
@@ -150,6 +155,9 @@ class CoverageSettings:
             object.__setattr__(self, "plate_margin_mm", float(self.plate_margin_mm))
         for spec in self.specimens:
             self.margin_mm(spec)  # in range on every specimen drawn from
+        if not (math.isfinite(self.noise_scale) and self.noise_scale >= 0):
+            raise ValueError(f"--noise-scale {self.noise_scale!r}: a number >= 0 (1: as drawn)")
+        object.__setattr__(self, "noise_scale", float(self.noise_scale))
 
     def margin_mm(self, specimen_mm) -> float:
         """The plate margin, mm, of a calibration of a specimen ``specimen_mm`` = (width,
@@ -190,6 +198,8 @@ class CoverageSettings:
         d = self.to_dict()
         body = {k: d[k] for k in ("variant", "data_mesh", "seed", "specimens", "strains")}
         body |= {"spacing_mm": d["spacing_mm"], "index": i}
+        if self.noise_scale != 1.0:  # the keys of studies before the option
+            body["noise_scale"] = self.noise_scale
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
     def calibration_key(self, i: int) -> str:
@@ -200,6 +210,8 @@ class CoverageSettings:
             body.pop("error_band")
         if not self.plate_margin_mm:  # margin 0: the keys of studies before the option
             body.pop("plate_margin_mm")
+        if self.noise_scale == 1.0:
+            body.pop("noise_scale")
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
     def key(self, i: int) -> str:
@@ -244,6 +256,7 @@ def draw_test(s: CoverageSettings, i: int):
         drift_mm=(float(rng.uniform(-0.03, 0.03)), float(rng.uniform(-0.03, 0.03))),
         drift_rad=float(rng.uniform(-2e-4, 2e-4)),
         seed=int(rng.integers(2**31)),
+        noise_scale=s.noise_scale,
     )
 
 
@@ -551,6 +564,15 @@ def _margin_text(margin) -> str:
     return f"plate margin {float(margin):g} mm"
 
 
+def _noise_text(scale: float) -> str:
+    """The study's noise scale in words (nothing when the experiments' noise is as drawn)."""
+    if scale == 1.0:
+        return ""
+    if scale == 0.0:
+        return "; noise-free twins (every noise draw times 0, the declared sigma kept)"
+    return f"; every noise draw times {scale:g} (the declared sigma kept)"
+
+
 def _delta_cell(e: dict) -> str:
     """An experiment's true-variant dAIC and the ranking's band U there (``-`` for the first
     or without a band)."""
@@ -623,7 +645,9 @@ def render_summary(summary: dict) -> str:
         "evaluations per variant from the test's start; models "
         f"{', '.join(s['models'])}. Specimens (width x depth x height, mm) drawn from "
         + ", ".join("x".join(f"{v:g}" for v in sp) for sp in s["specimens"])
-        + f"; the truth drawn in the middle half of the variant's box; seed {s['seed']}. "
+        + f"; the truth drawn in the middle half of the variant's box; seed {s['seed']}"
+        + _noise_text(s.get("noise_scale", 1.0))
+        + ". "
         f"Total wall time {summary['wall_s'] / 60:.1f} min.",
         "",
         (

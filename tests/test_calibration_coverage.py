@@ -115,6 +115,8 @@ def test_draws_differ_and_stay_in_the_middle_of_the_box():
         (["--variant", "linear-nope"], "--variant 'linear-nope' is unknown"),
         (["--specimens", "100x100"], "WIDTHxDEPTHxHEIGHT"),
         (["--strains", "0.002,0.001"], "--strains"),
+        (["--noise-scale", "-1"], "--noise-scale -1.0: a number >= 0"),
+        (["--noise-scale", "nan"], "--noise-scale: 'nan' is not a finite number"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, argv, said):
@@ -166,3 +168,40 @@ def test_noise_ceiling_is_the_gaussian_share_within_the_target():
     assert [e["max_error_over_sd"] for e in summary["experiments"]] == pytest.approx([1.0, 3.0])
     text = cov.render_summary(summary)
     assert "1.3–1.4 expected" in text and "| E | 4 | 6 | 1 of 2 (1.4) | 2.2 |" in text
+
+
+def test_noise_free_twin_is_the_data_without_its_noise(tmp_path, monkeypatch):
+    """``noise_scale`` 0: the same DIC points, sigma and log as the noisy experiment, the
+    displacements less exactly the noise draws (in sigma units ~N(0, 1)), the forces without the
+    load-cell error; the data and calibration keys change only when the scale is not 1."""
+    from problems.inverse import virtual_experiment as ve
+
+    class Resp:  # a stand-in data model: a smooth face field and forces, no FE run
+        reaction_kN = np.array([100.0, 180.0])
+
+        @staticmethod
+        def front_face(pts):
+            y, z = pts[:, 0], pts[:, 1]
+            return np.array([1e-3 * y, 2e-3 * y]), np.array([-1e-3 * z, -2e-3 * z])
+
+    monkeypatch.setattr(ve, "_data_response", lambda test, name: Resp())
+    base = dict(variant="linear-compression", x=(1.0,) * 6, levels_mm=(0.1, 0.2), seed=3)
+    ve.write_virtual_experiment(ve.VirtualTest(**base), tmp_path / "noisy", "n")
+    ve.write_virtual_experiment(ve.VirtualTest(**base, noise_scale=0.0), tmp_path / "twin", "t")
+    for k in (1, 2):
+        a = np.loadtxt(tmp_path / f"noisy/dic/image_0{k}.csv", delimiter=",", skiprows=1)
+        b = np.loadtxt(tmp_path / f"twin/dic/image_0{k}.csv", delimiter=",", skiprows=1)
+        assert np.array_equal(a[:, [0, 1, 4]], b[:, [0, 1, 4]])  # points and sigma
+        z = (a[:, 2:4] - b[:, 2:4]) / a[:, 4:5]
+        assert 0.9 < z.std() < 1.1 and abs(z.mean()) < 0.1
+    la = np.genfromtxt(tmp_path / "noisy/machine_log.csv", delimiter=",", names=True)
+    lb = np.genfromtxt(tmp_path / "twin/machine_log.csv", delimiter=",", names=True)
+    assert np.array_equal(la["displacement_mm"], lb["displacement_mm"])
+    f_twin = lb["force_kN"][3::4]  # the images' rows: the data model's force, rounded
+    assert f_twin == pytest.approx([100.0, 180.0], abs=0.005)
+    assert not np.allclose(la["force_kN"][3::4], f_twin, atol=0.05)
+    s1 = CoverageSettings(variant="linear-compression", n=1)
+    s0 = CoverageSettings(variant="linear-compression", n=1, noise_scale=0.0)
+    assert s1.data_key(0) == CoverageSettings(variant="linear-compression", n=3).data_key(0)
+    assert s0.data_key(0) != s1.data_key(0) and s0.key(0) != s1.key(0)
+    assert draw_test(s0, 0).noise_scale == 0.0 and draw_test(s0, 0).x == draw_test(s1, 0).x

@@ -97,6 +97,14 @@ def add_arguments(p) -> None:
         help="face points closer than MM to either plate are left out of every calibration "
         "(auto: 10 %% of each specimen's smallest dimension; default 0)",
     )
+    p.add_argument(
+        "--noise-scale",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="multiply the experiments' noise by S (0: the noise-free twins of the same "
+        "experiments, whose errors are the inverse model's alone; default 1)",
+    )
     p.add_argument("--out", type=output_dir, required=True, help="records and summary folder")
     p.add_argument(
         "--work", type=output_dir, default=None, help="virtual experiments (default OUT/work)"
@@ -138,6 +146,7 @@ def main(args) -> int:
         "" if args.check_mesh == "none" else args.check_mesh,
         args.error_band,
         args.plate_margin_mm,
+        args.noise_scale,
     )
     summary = run_coverage(settings, args.out, work=args.work)
     n = summary["n_done"]

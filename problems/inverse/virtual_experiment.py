@@ -44,6 +44,10 @@ class VirtualTest:
     load_cell_class : ISO 7500-1 class of the force (uniform error within +-class % of reading)
     force_step_kN   : the log's force resolution
     seed            : of every random draw
+    noise_scale     : multiplies every noise draw (the DIC points', the load cell's, the camera's)
+                      while the declared sigma and load-cell class stay: 0 makes the noise-free
+                      twin of the experiment (the same draws otherwise), whose calibration error
+                      is the inverse model's alone
     """
 
     variant: str
@@ -64,6 +68,7 @@ class VirtualTest:
     load_cell_class: float = 1.0
     force_step_kN: float = 0.01
     seed: int = 0
+    noise_scale: float = 1.0
 
 
 def _data_response(test: VirtualTest, name: str):
@@ -104,7 +109,7 @@ def _write_log(test: VirtualTest, reaction_kN, out: Path, rng) -> None:
             f_ = (j + 1) / 4
             d = levels[i - 1] + f_ * (levels[i] - levels[i - 1])
             f = force[i - 1] + f_ * (force[i] - force[i - 1])
-            f *= 1.0 + rng.uniform(-q, q)
+            f *= 1.0 + test.noise_scale * rng.uniform(-q, q)
             f = round(f / test.force_step_kN) * test.force_step_kN
             t += 1.0
             image = f"image_{i:02d}" if j == 3 else ""
@@ -194,7 +199,7 @@ def write_virtual_experiment(test: VirtualTest, out_dir: str | Path, name: str) 
     corners = (np.array([[0, 0], [W, 0], [W, H], [0, H]], float) - c) @ Ainv.T
     for i in range(N):
         U = np.column_stack([u_s[i], u_z[i]]) @ Ainv.T
-        U += rng.normal(0.0, 1.0, U.shape) * sigma_px[:, None]
+        U += rng.normal(0.0, 1.0, U.shape) * (test.noise_scale * sigma_px[:, None])
         rows = ["x,y,u,v,sigma"] + [
             f"{p[0]:.4f},{p[1]:.4f},{u[0]:.5f},{u[1]:.5f},{s:.4g}"
             for p, u, s in zip(P, U, sigma_px)
@@ -315,7 +320,7 @@ def write_virtual_images(
     names = ["reference.png"] + [f"image_{k:02d}.png" for k in range(1, len(test.levels_mm) + 1)]
     for k, fname in enumerate(names):
         rng = np.random.default_rng([test.seed, 1, k])
-        img = acquire(intensities[k], camera.bit_depth, camera.noise_sigma, rng)
+        img = acquire(intensities[k], camera.bit_depth, test.noise_scale * camera.noise_sigma, rng)
         tmp = out / "images" / f".{fname}.tmp.png"  # written whole, then renamed
         os.replace(write_image(tmp, img), out / "images" / fname)
     _write_log(test, resp.reaction_kN, out, np.random.default_rng(test.seed))
