@@ -159,8 +159,9 @@ def comma_list(item_type, *, what: str = "value"):
 
 def mesh_spec(text: str) -> str:
     """A mesh spec the FE model accepts (``coarse``, ``paper``, ``fine``, ``NX,NY,NZ``, optionally
-    ``:eighth``/``:quarter``); returned unchanged (checked by problems.fe.mesh.parse_mesh_spec,
-    and refused when its operators cannot fit in memory: bench.resources.check_mesh_memory)."""
+    ``:TOKEN``s: ``eighth``/``quarter``, ``gR``, ``gzR``, ``hex8``/``hex27``); returned unchanged
+    (checked by problems.fe.mesh.parse_mesh_spec, and refused when its operators cannot fit in
+    memory: bench.resources.check_mesh_memory)."""
     from bench.resources import check_mesh_memory
     from problems.fe.mesh import parse_mesh_spec
 
@@ -319,7 +320,10 @@ def assignments(items, option: str, names=None, *, units: dict | None = None) ->
 
 # --- shared options -------------------------------------------------------------------------------
 
-MESH_HELP = "coarse | paper | fine | NX,NY,NZ, optionally :eighth or :quarter"
+MESH_HELP = (
+    "coarse | paper | fine | xfine | converged | NX,NY,NZ, optionally :TOKENs (:eighth or "
+    ":quarter, :gR grading, :gzR grading toward the plates, :hex8 or :hex27; docs/fe_model.md)"
+)
 
 
 def add_mesh_argument(parser, default: str = "coarse", help: str | None = None) -> None:

@@ -149,6 +149,7 @@ def solve_mesh(case_name: str, spec: str) -> dict:
         "key": discretisation_key(spec),
         "element": ms.element,
         "grading": ms.grading,
+        "grading_z": ms.grading_z,
         "symmetry": ms.symmetry,
         "elements": n_elements,
         "dofs": solved_dofs(spec),
@@ -259,6 +260,7 @@ def analyse(
                 "family": label,
                 "element": r["element"],
                 "grading": r["grading"],
+                "grading_z": r.get("grading_z"),  # records before gzR have none
                 "elements": r["elements"],
                 "dofs": r["dofs"],
                 "h_mm": r["h_mm"],

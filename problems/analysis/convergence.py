@@ -219,7 +219,8 @@ def plate_margin_study(
 
 
 #: order p of the discretisation band of an identified parameter (:func:`gci_band`), per mesh
-#: family ("element gGRADING", else the element): the smallest order observed in the shipped
+#: family ("element gGRADING", else the element; an anisotropic grading, ``gzR`` other than
+#: ``gR``, was never studied and takes the element's): the smallest order observed in the shipped
 #: convergence studies of that family (results/studies/convergence, every case, field and force,
 #: every triple; few families are asymptotic throughout), rounded down. A smaller p widens the
 #: band. hex27 g8 (the default inverse model's, nine cases): field 2.24 -> 3.63, force down to
@@ -248,6 +249,8 @@ def gci_order(mesh: str) -> float:
     from problems.fe.mesh import parse_mesh_spec
 
     spec = parse_mesh_spec(mesh)
+    if spec.grading_z is not None:  # anisotropic: not the family of its lateral ratio
+        return GCI_ORDERS[spec.element]
     return GCI_ORDERS.get(f"{spec.element} g{spec.grading:g}", GCI_ORDERS[spec.element])
 
 

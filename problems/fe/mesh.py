@@ -164,21 +164,28 @@ def graded_coordinates(n: int, length_mm: float, ratio: float, toward: str) -> n
 
 
 def graded_box_mesh(
-    nx: int, ny: int, nz: int, ratio: float = 1.0, size_mm: tuple[float, float, float] = SIZE_MM
+    nx: int,
+    ny: int,
+    nz: int,
+    ratio: float = 1.0,
+    size_mm: tuple[float, float, float] = SIZE_MM,
+    ratio_z: float | None = None,
 ) -> Mesh:
     """Structured mesh of the box [0, lx] x [0, ly] x [0, lz] mm (the quarter model) with
     nx x ny x nz hexahedra, node spacing graded geometrically (:func:`graded_coordinates`) toward
     the free faces x = lx, y = ly (largest elements at the symmetry planes x = 0, y = 0) and
     toward both plates z = 0, lz (largest at mid-height, symmetric about it): the largest element
-    is ``ratio`` (>= 1) times the smallest along each direction; ``ratio = 1`` is uniform
-    (:func:`box_mesh`). Node and element numbering do not depend on the ratio."""
+    is ``ratio`` (>= 1) times the smallest along x and y, ``ratio_z`` (>= 1; None: ``ratio``)
+    times along z; ratio 1 is uniform (:func:`box_mesh`). Node and element numbering do not
+    depend on the ratios."""
     for name, n in zip("xyz", (nx, ny, nz)):
         if int(n) != n or n < 1:
             raise ValueError(f"mesh n{name} = {n!r} is out of range: a whole number >= 1")
     nx, ny, nz = int(nx), int(ny), int(nz)
+    ratios = (ratio, ratio, ratio if ratio_z is None else ratio_z)
     x, y, z = (
-        graded_coordinates(n, L, ratio, toward)
-        for n, L, toward in zip((nx, ny, nz), size_mm, ("end", "end", "both"))
+        graded_coordinates(n, L, r, toward)
+        for n, L, r, toward in zip((nx, ny, nz), size_mm, ratios, ("end", "end", "both"))
     )
     Z, Y, X = np.meshgrid(z, y, x, indexing="ij")
     nodes = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
@@ -204,14 +211,22 @@ class MeshSpec:
     symmetry : ``eighth`` (solve the lower half z <= 75 mm, unfold the answer; needs nz even) or
                ``quarter`` (solve the whole height)
     grading  : largest / smallest element length along each direction (>= 1; 1 = uniform), see
-               :func:`graded_box_mesh`
+               :func:`graded_box_mesh`; along x and y only when ``grading_z`` is given
     element  : ``hex8`` or ``hex27`` (:data:`ELEMENTS`)
+    grading_z: largest / smallest element length along z, toward the plates (>= 1), or None: the
+               same as ``grading``; stored as None when it equals ``grading`` (one discretisation,
+               one spec and one :attr:`key`)
     """
 
     shape: tuple[int, int, int]
     symmetry: str
     grading: float = 1.0
     element: str = "hex8"
+    grading_z: float | None = None
+
+    def __post_init__(self):
+        if self.grading_z is not None and float(self.grading_z) == float(self.grading):
+            object.__setattr__(self, "grading_z", None)
 
     @property
     def mesh(self) -> Mesh:
@@ -222,7 +237,9 @@ class MeshSpec:
     def build(self, size_mm: tuple[float, float, float] = SIZE_MM) -> Mesh:
         """The quarter mesh of the whole height of a quarter model of extents ``size_mm`` (mm;
         :func:`quarter_size` of the specimen)."""
-        mesh = graded_box_mesh(*self.shape, ratio=self.grading, size_mm=size_mm)
+        mesh = graded_box_mesh(
+            *self.shape, ratio=self.grading, size_mm=size_mm, ratio_z=self.grading_z
+        )
         if self.element == "hex27":
             from problems.fe.mesh_quadratic import quadratic_mesh
 
@@ -231,11 +248,14 @@ class MeshSpec:
 
     @property
     def key(self) -> str:
-        """The discretisation: ``"NX,NY,NZ"`` then ``:gR`` when graded and ``:hex27`` for the
-        27-node element (a uniform 8-node mesh keeps the bare ``"NX,NY,NZ"``)."""
+        """The discretisation: ``"NX,NY,NZ"`` then ``:gR`` when graded, ``:gzR`` when the
+        grading toward the plates differs from it and ``:hex27`` for the 27-node element (a
+        uniform 8-node mesh keeps the bare ``"NX,NY,NZ"``)."""
         tokens = [",".join(map(str, self.shape))]
         if self.grading != 1.0:
             tokens.append(f"g{self.grading:g}")
+        if self.grading_z is not None:
+            tokens.append(f"gz{self.grading_z:g}")
         if self.element != "hex8":
             tokens.append(self.element)
         return ":".join(tokens)
@@ -263,19 +283,21 @@ def check_symmetry(symmetry: str, shape: tuple[int, int, int], what: str = "symm
 
 
 #: what may follow the size in a mesh spec (for error messages)
-_TOKENS_HELP = f"{'|'.join(SYMMETRIES)}|gR (R >= 1)|{'|'.join(ELEMENTS)}"
+_TOKENS_HELP = f"{'|'.join(SYMMETRIES)}|gR (R >= 1)|gzR (R >= 1)|{'|'.join(ELEMENTS)}"
 
 
-def _grading(token: str, spec) -> float:
-    """The ratio R of a ``gR`` token; ValueError unless R is a finite number >= 1."""
+def _grading(token: str, spec, prefix: str = "g") -> float:
+    """The ratio R of a ``gR`` (``prefix`` ``g``) or ``gzR`` (``gz``: toward the plates) token;
+    ValueError unless R is a finite number >= 1."""
     try:
-        ratio = float(token[1:])
+        ratio = float(token[len(prefix) :])
     except ValueError:
         ratio = float("nan")
     if not (np.isfinite(ratio) and ratio >= 1.0):
+        kind = "grading" if prefix == "g" else "grading toward the plates"
         raise ValueError(
-            f"mesh {spec!r}: grading {token!r} is out of range; allowed: gR with R a number >= 1 "
-            "(largest / smallest element length)"
+            f"mesh {spec!r}: {kind} {token!r} is out of range; allowed: {prefix}R with R a "
+            "number >= 1 (largest / smallest element length)"
         )
     return ratio
 
@@ -285,12 +307,14 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
     ``converged`` = ``12,12,24:g8:hex27``, whose tokens may not be given again), ``NX,NY,NZ`` or
     a tuple; then, in any order and each at most once, a symmetry ``eighth`` or
     ``quarter`` (default ``eighth`` where it is exact, NZ even), a grading ``gR`` (R >= 1 the
-    largest / smallest element length, :func:`graded_box_mesh`; default uniform, ``g1``) and an
-    element ``hex8`` (default) or ``hex27``. ValueError (one line) for anything else and for
-    NZ < 2 (every node on a plate: nothing to solve)."""
+    largest / smallest element length along every direction, :func:`graded_box_mesh`; default
+    uniform, ``g1``), a grading toward the plates ``gzR`` (R >= 1: the ratio along z, overriding
+    ``gR`` there; default that of ``gR``; ``6,6,12:g16:gz8`` grades 16 toward the free faces and
+    8 toward the plates) and an element ``hex8`` (default) or ``hex27``. ValueError (one line)
+    for anything else and for NZ < 2 (every node on a plate: nothing to solve)."""
     if isinstance(spec, MeshSpec):
         return spec
-    given: dict[str, object] = {}  # symmetry, grading, element
+    given: dict[str, object] = {}  # symmetry, grading, grading_z, element
     if isinstance(spec, tuple):
         for name, n in zip("xyz", spec):
             if int(n) != n or n < 1:
@@ -319,6 +343,8 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
                 kind, value = "symmetry", token
             elif token in ELEMENTS:
                 kind, value = "element", token
+            elif token.startswith("gz"):  # before gR, which would take it
+                kind, value = "grading_z", _grading(token, spec, "gz")
             elif re.fullmatch(r"g.*", token):
                 kind, value = "grading", _grading(token, spec)
             else:
@@ -327,7 +353,8 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
                     f"{_TOKENS_HELP}"
                 )
             if kind in given:
-                raise ValueError(f"mesh {spec!r}: {kind} given twice; allowed: once each")
+                what = "grading toward the plates (gzR)" if kind == "grading_z" else kind
+                raise ValueError(f"mesh {spec!r}: {what} given twice; allowed: once each")
             given[kind] = value
     if shape[2] < 2:
         raise ValueError(
@@ -339,13 +366,19 @@ def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
         if "symmetry" in given
         else default_symmetry(shape)
     )
-    return MeshSpec(shape, symmetry, given.get("grading", 1.0), given.get("element", "hex8"))
+    return MeshSpec(
+        shape,
+        symmetry,
+        given.get("grading", 1.0),
+        given.get("element", "hex8"),
+        given.get("grading_z"),
+    )
 
 
 def discretisation_key(spec: str | tuple[int, int, int] | MeshSpec) -> str:
-    """``"NX,NY,NZ[:gR][:hex27]"`` of a spec (:attr:`MeshSpec.key`): two specs with the same key
-    give the same answer (the eighth and the quarter model of one mesh agree to round-off),
-    whatever their names."""
+    """``"NX,NY,NZ[:gR][:gzR][:hex27]"`` of a spec (:attr:`MeshSpec.key`): two specs with the
+    same key give the same answer (the eighth and the quarter model of one mesh agree to
+    round-off), whatever their names."""
     return parse_mesh_spec(spec).key
 
 
