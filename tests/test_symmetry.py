@@ -227,3 +227,8 @@ def test_forward_cli_symmetry_option(tmp_path, capsys):
     assert err == "femubench forward: error: --symmetry 'half' is unknown; allowed: eighth, quarter"
     assert main(["forward", "--mesh", "2,2,3", "--symmetry", "eighth"]) == 2
     assert "needs an even NZ" in capsys.readouterr().err
+    # a graded or quadratic spec names no symmetry: --symmetry is its only statement
+    assert main(["forward", "--mesh", "2,2,4:g4", "--snapshots", "1", "--symmetry", "quarter"]) == 0
+    assert "solved as the quarter" in capsys.readouterr().out
+    assert main(["forward", "--mesh", "2,2,4:g4:eighth", "--symmetry", "quarter"]) == 2
+    assert "contradicts --mesh '2,2,4:g4:eighth'" in capsys.readouterr().err

@@ -88,7 +88,8 @@ def main(args) -> int:
             raise ValueError(
                 f"--symmetry {args.symmetry!r} is unknown; allowed: {', '.join(SYMMETRIES)}"
             )
-        if ":" in args.mesh and spec.symmetry != args.symmetry:
+        named = any(t.strip() in SYMMETRIES for t in str(args.mesh).split(":")[1:])
+        if named and spec.symmetry != args.symmetry:
             raise ValueError(
                 f"--symmetry {args.symmetry!r} contradicts --mesh {args.mesh!r}; give the model "
                 "once"
