@@ -145,6 +145,7 @@ def main(args) -> int:
         run_convergence,
         update_plate_margin,
     )
+    from problems.fe.mesh import discretisation_key
     from problems.inverse.cases import get_case
 
     cases = case_names(args.cases)
@@ -163,6 +164,15 @@ def main(args) -> int:
         for e in args.elements
     }
     compare = () if args.no_compare else args.compare
+    seen: dict[str, str] = {}
+    for spec in compare:  # one row per discretisation
+        key = discretisation_key(spec)
+        if key in seen:
+            raise ValueError(
+                f"--compare {spec}: the same discretisation as {seen[key]} ({key}); give each "
+                "mesh once"
+            )
+        seen[key] = spec
     outs = {
         name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name
         for name in cases
