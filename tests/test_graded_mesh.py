@@ -76,12 +76,19 @@ def test_shipped_records_keep_their_hashes():
         ("coarse:", "token '' is unknown"),
         ("4,4,7:g2:eighth", "needs an even NZ"),
         ("medium:g2", "is unknown; allowed: coarse"),
+        ("coarse:gz0.5", "grading toward the plates 'gz0.5' is out of range"),
+        ("coarse:gzx", "grading toward the plates 'gzx' is out of range"),
+        ("coarse:gz", "grading toward the plates 'gz' is out of range"),
+        ("coarse:gzinf", "grading toward the plates 'gzinf' is out of range"),
+        ("coarse:gz8:g4:gz4", "grading toward the plates (gzR) given twice"),
+        ("coarse:gz8:gz8", "grading toward the plates (gzR) given twice"),
     ],
 )
 def test_bad_specs_fail_with_one_line(text, words):
     with pytest.raises(ValueError) as exc:
         parse_mesh_spec(text)
-    assert words in str(exc.value) and "\n" not in str(exc.value)
+    msg = str(exc.value)
+    assert words in msg and repr(text) in msg and "\n" not in msg
 
 
 def test_ratio_one_is_the_uniform_mesh_bit_for_bit():

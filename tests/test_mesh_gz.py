@@ -88,25 +88,6 @@ def test_anisotropic_specs_take_the_elements_gci_order():
     assert gci_order("6,6,12:g4:gz8:hex27") == GCI_ORDERS["hex27"]
 
 
-@pytest.mark.parametrize(
-    "text, words",
-    [
-        ("coarse:gz0.5", "grading toward the plates 'gz0.5' is out of range"),
-        ("coarse:gzx", "grading toward the plates 'gzx' is out of range"),
-        ("coarse:gz", "grading toward the plates 'gz' is out of range"),
-        ("coarse:gzinf", "grading toward the plates 'gzinf' is out of range"),
-        ("coarse:gz8:g4:gz4", "grading toward the plates (gzR) given twice"),
-        ("coarse:gz8:gz8", "grading toward the plates (gzR) given twice"),
-    ],
-)
-def test_bad_gz_tokens_fail_with_one_line(text, words):
-    with pytest.raises(ValueError) as exc:
-        parse_mesh_spec(text)
-    msg = str(exc.value)
-    assert words in msg and repr(text) in msg and "\n" not in msg
-    assert "gzR with R a number >= 1" in msg or "once each" in msg
-
-
 def test_unknown_token_lists_gz():
     with pytest.raises(ValueError, match=r"gzR \(R >= 1\)"):
         parse_mesh_spec("coarse:hex20")
