@@ -4,6 +4,7 @@ and the honesty rule on its meshes."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -142,20 +143,21 @@ def test_summary_of_one_model_does_not_claim_a_ranking():
     assert "model selection not assessed" in text and "ranked first" not in text
 
 
-def test_noise_ceiling_is_the_gaussian_share_within_the_target():
-    """sd 2 % (std 4 % widened by a Birge ratio 2): P(|N(0, 2)| <= 2) = erf(1/sqrt 2) = 0.6827;
-    sd 1 %: 0.9545; the Šidák bound multiplies them, the upper bound takes the least."""
+def test_gaussian_efficient_reference_is_the_gaussian_share_within_the_target():
+    """Noise sd 2 % of the truth (std 4 % of the estimate / 1.02 widened by a Birge ratio 2):
+    P(|N(0, 2)| <= 2) = erf(1/sqrt 2) = 0.6827; sd 1 %: 0.9545; the Šidák bound multiplies
+    them, the upper bound takes the least; 2 of 2 experiments with chance 0.6827^2."""
     s = CoverageSettings(models=("linear-compression",), n=2)
     base = {
         "ok": True, "specimen_mm": [100.0] * 3, "truth": [1.0] * 6, "covered": [True] * 6,
         "all_covered": True, "true_first_aic": True, "ranking_aic": ["linear-compression"],
         "model_probability": 1.0, "rms_sigma": 1.0, "wall_s": 1.0,
     }  # fmt: skip
-    recs = [
-        base | {"index": 0, "birge_ratio": 2.0, "std_percent": [4.0, 2.0, 1e-3, 1e-3, 1e-3, 1e-3],
-                "error_percent": [2.0, 0.5, 0.0, 0.0, 0.0, 0.0]},
-        base | {"index": 1, "birge_ratio": 1.0, "std_percent": [2.0, 1.0, 1e-3, 1e-3, 1e-3, 1e-3],
-                "error_percent": [-6.0, 0.5, 0.0, 0.0, 0.0, 0.0]},
+    recs = [  # std_percent is % of the estimate, x = truth (1 + error/100)
+        base | {"index": 0, "birge_ratio": 2.0, "error_percent": [2.0, 0.5, 0, 0, 0, 0],
+                "std_percent": [4.0 / 1.02, 2.0 / 1.005, 1e-3, 1e-3, 1e-3, 1e-3]},
+        base | {"index": 1, "birge_ratio": 1.0, "error_percent": [-6.0, 0.5, 0, 0, 0, 0],
+                "std_percent": [2.0 / 0.94, 1.0 / 1.005, 1e-3, 1e-3, 1e-3, 1e-3]},
     ]  # fmt: skip
     summary = cov.summarise(s, recs)
     p1, p2 = 0.682689492, 0.954499736
@@ -163,11 +165,42 @@ def test_noise_ceiling_is_the_gaussian_share_within_the_target():
     assert summary["parameters"]["beta"]["within_target_noise_limit"] == pytest.approx(2 * p2)
     lo, hi = summary["all_within_target_noise_limit"]
     assert lo == pytest.approx(2 * p1 * p2) and hi == pytest.approx(2 * p1)
+    assert summary["all_within_target_noise_sd"] == pytest.approx((2 * p1 * (1 - p1)) ** 0.5)
+    assert summary["all_within_target_noise_target_chance"] == pytest.approx(p1**2)
     # errors in sd units: E 1 and -3 -> rms sqrt(5); the largest per experiment 1 and 3
     assert summary["parameters"]["E"]["rms_error_over_sd"] == pytest.approx(5**0.5)
     assert [e["max_error_over_sd"] for e in summary["experiments"]] == pytest.approx([1.0, 3.0])
     text = cov.render_summary(summary)
-    assert "1.3–1.4 expected" in text and "| E | 4 | 6 | 1 of 2 (1.4) | 2.2 |" in text
+    assert "1.3–1.4 expected, sd 0.7; at least 2 of 2 with chance 0.47" in text
+    assert "| E | 4 | 6 | 1 of 2 (1.4) | 2.2 |" in text
+    # a study of scaled noise (e.g. the noise-free twins) states no reference of the noise
+    twins = cov.summarise(CoverageSettings(models=("linear-compression",), noise_scale=0), recs)
+    assert "all_within_target_noise_limit" not in twins
+    assert "Gaussian-efficient" not in cov.render_summary(twins)
+    assert "noise-free twins" in cov.render_summary(twins)
+
+
+def test_count_at_least_is_the_poisson_binomial_tail():
+    assert cov.count_at_least([0.5, 0.5], 1) == pytest.approx(0.75)
+    assert cov.count_at_least([0.5, 0.5], 2) == pytest.approx(0.25)
+    assert cov.count_at_least([0.9, 0.2, 0.5], 2) == pytest.approx(0.9 * 0.2 + 0.9 * 0.5 * 0.8
+                                                                   + 0.1 * 0.2 * 0.5)  # fmt: skip
+
+
+def test_shipped_studies_keep_their_record_keys():
+    """The options added since (plate margin, noise scale) leave the keys of the shipped studies
+    made without them: their records resume, not rerun."""
+    root = Path(__file__).resolve().parents[1] / "results" / "calibration" / "coverage"
+    checked = 0
+    for name in ("hyperbolic-compression-hex27", "hyperbolic-compression-hex27-margin"):
+        st = json.loads((root / name / "summary.json").read_text())["settings"]
+        st = {k: tuple(map(tuple, v)) if k == "specimens" else tuple(v)
+              if isinstance(v, list) else v for k, v in st.items()}  # fmt: skip
+        s = CoverageSettings(**st)
+        rec = json.loads((root / name / "experiments" / "e000.json").read_text())
+        assert s.key(0) == rec["key"] and s.calibration_key(0) == rec["calibration_key"]
+        checked += 1
+    assert checked == 2
 
 
 def test_noise_free_twin_is_the_data_without_its_noise(tmp_path, monkeypatch):

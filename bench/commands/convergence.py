@@ -164,7 +164,7 @@ def main(args) -> int:
         for e in args.elements
     }
     compare = () if args.no_compare else args.compare
-    seen: dict[str, str] = {}
+    seen = {discretisation_key(m): m for specs in families.values() for m in specs}
     for spec in compare:  # one row per discretisation
         key = discretisation_key(spec)
         if key in seen:
