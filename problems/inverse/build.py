@@ -95,7 +95,7 @@ def auto_plate_margin_mm(width_mm: float, depth_mm: float, height_mm: float) -> 
     the hyperbolic-compression coverage study (results/calibration/coverage/
     hyperbolic-compression-hex27-margin): the errors are the noise's on every specimen (rms
     error / Laplace sd 0.7-1.4 per parameter); the two 100 mm cubes with pt0 off by 9.5 and
-    13.3 % are 1.9 and 2.5 sd off, and the noise-free twin of the worse one has pt0 within 0.3 %.
+    13.3 % are 1.8 and 2.2 sd off, and the noise-free twin of the worse one has pt0 within 0.3 %.
     """
     return AUTO_PLATE_MARGIN_FRACTION * min(float(width_mm), float(depth_mm), float(height_mm))
 
