@@ -753,14 +753,25 @@ def render_summary(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_coverage(s: CoverageSettings, out, *, work=None, progress=print) -> dict:
-    """Run (or resume) the study into ``out`` (module docstring); returns the summary."""
+def run_coverage(s: CoverageSettings, out, *, work=None, progress=print, indices=None) -> dict:
+    """Run (or resume) the study into ``out`` (module docstring); returns the summary.
+
+    indices : the experiments to run (default all ``range(s.n)``): several processes may share
+              ``out`` and ``work`` on disjoint ranges (each record is its own file); every
+              summary they write covers all the study's records done so far."""
+    from bench.calibration import done_before
+
     out = Path(out)
     work = Path(work) if work else out / "work"
-    records = []
-    for i in range(s.n):
+    indices = range(s.n) if indices is None else indices
+    summary = None
+    for i in indices:
         rec = run_one(s, i, out, work, progress)
-        records.append(rec)
+        done = (
+            rec if j == i else done_before(out / "experiments" / f"e{j:03d}.json", s.key(j))
+            for j in range(s.n)
+        )
+        records = [r for r in done if r is not None]
         summary = summarise(s, records)
         atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
         atomic_write_text(out / "summary.md", render_summary(summary))

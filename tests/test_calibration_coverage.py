@@ -54,6 +54,11 @@ def test_tiny_study_scores_resumes_and_summarises(tmp_path, capsys, monkeypatch)
     )  # fmt: skip
     again = run_coverage(s, out, work=work, progress=said.append)
     assert sum("done before" in m for m in said) == 2 and again["n_done"] == 2
+    # a range of the experiments runs (here: finds) those alone; its summary covers every record
+    said = []
+    part = run_coverage(s, out, work=work, progress=said.append, indices=range(1, 2))
+    assert said[0].startswith("experiment 1: done before") and part["n_done"] == 2
+    assert sum("done before" in m for m in said) == 1
 
     # a study differing in the calibration alone reuses the virtual experiments' data
     monkeypatch.undo()
@@ -117,6 +122,8 @@ def test_draws_differ_and_stay_in_the_middle_of_the_box():
         (["--specimens", "100x100"], "WIDTHxDEPTHxHEIGHT"),
         (["--strains", "0.002,0.001"], "--strains"),
         (["--noise-scale", "-1"], "--noise-scale -1.0: a number >= 0"),
+        (["--n", "2", "--experiments", "1-2"], "--experiments '1-2': I-J or I with 0 <= I <= J"),
+        (["--experiments", "x"], "--experiments 'x': I-J or I"),
         (["--noise-scale", "nan"], "--noise-scale: 'nan' is not a finite number"),
     ],
 )

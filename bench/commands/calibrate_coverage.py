@@ -105,6 +105,13 @@ def add_arguments(p) -> None:
         help="multiply the experiments' noise by S (0: the noise-free twins of the same "
         "experiments, whose errors are the inverse model's alone; default 1)",
     )
+    p.add_argument(
+        "--experiments",
+        default=None,
+        metavar="I-J",
+        help="run experiments I to J only (0-based, inclusive; default all): processes on "
+        "disjoint ranges may share --out and --work, each summary covers every record done",
+    )
     p.add_argument("--out", type=output_dir, required=True, help="records and summary folder")
     p.add_argument(
         "--work", type=output_dir, default=None, help="virtual experiments (default OUT/work)"
@@ -148,7 +155,10 @@ def main(args) -> int:
         args.plate_margin_mm,
         args.noise_scale,
     )
-    summary = run_coverage(settings, args.out, work=args.work)
+    indices = None
+    if args.experiments is not None:
+        indices = experiment_range(args.experiments, settings.n)
+    summary = run_coverage(settings, args.out, work=args.work, indices=indices)
     n = summary["n_done"]
     print(
         f"coverage of {settings.variant}: true variant first {summary['true_first_aic']}/{n} "
@@ -162,3 +172,18 @@ def main(args) -> int:
         f"{summary['all_covered']}/{n}; summary {args.out}/summary.md"
     )
     return 0
+
+
+def experiment_range(text: str, n: int) -> range:
+    """``"I-J"`` (or ``"I"``) as the experiments I..J of a study of ``n``; ValueError (one line
+    naming ``--experiments``) otherwise."""
+    lo, sep, hi = text.strip().partition("-")
+    try:
+        i, j = int(lo), int(hi) if sep else int(lo)
+    except ValueError:
+        i, j = -1, -1
+    if not 0 <= i <= j < n:
+        raise ValueError(
+            f"--experiments {text!r}: I-J or I with 0 <= I <= J < --n ({n}), whole numbers"
+        )
+    return range(i, j + 1)
