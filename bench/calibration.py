@@ -38,7 +38,7 @@ CONDITION_WARNING = 1e8
 #: Laplace standard deviation (% of the value) above which a parameter is called poorly identified
 STD_WARNING_PERCENT = 25.0
 #: discretisation treatments of a calibration (:class:`CalibrationSettings`)
-CORRECTIONS = ("none", "one-point", "iterated")
+CORRECTIONS = ("none", "one-point", "iterated", "first-order")
 #: discretisation error bands of the identified parameters (:func:`with_error_band`)
 ERROR_BANDS = ("gci", "none")
 
@@ -52,7 +52,10 @@ class CalibrationSettings:
     correction: ``none``; ``one-point``: the discretisation error at the untreated optimum, from
     one run on ``check_mesh``, subtracted from the data and the problem re-solved once;
     ``iterated``: the same, repeated at each new optimum until the parameters move less than
-    0.1 % (at most ``correction_rounds`` rounds; solvers/corrected.py). Do not use the mesh that
+    0.1 % (at most ``correction_rounds`` rounds; solvers/corrected.py); ``first-order``: the
+    iterated correction made first-order consistent (each round also subtracts
+    ``(J_fine - J_inverse)(x - x_k)``, exact Jacobians of both meshes at the round's start ``x_k``;
+    its fixed point is the check mesh's own optimum). Do not use the mesh that
     made a virtual experiment's data as ``check_mesh``;
     error_band: ``gci`` (default): with a correction, each parameter's discretisation band
     (:func:`problems.analysis.convergence.gci_band` from the untreated and the corrected
@@ -133,11 +136,14 @@ def objective_for(data: Dataset, case, mesh: str, correction=None):
     """The evaluator of ``case`` (a lab case) on the imported ``data``: :func:`model_for`, the
     data's noise model (:meth:`Dataset.noise`: per-point and per-force standard deviations, the
     points' correlation between snapshots); with a ``correction``
-    (problems/inverse/model_error.py) its shift subtracted from the data and its runs charged."""
+    (problems/inverse/model_error.py) its shift subtracted from the data (and a first-order
+    correction's ``slope (x - anchor)``: :func:`~problems.inverse.model_error.corrected_model`)
+    and its runs charged."""
     from problems.inverse.evaluator import Evaluator
+    from problems.inverse.model_error import corrected_model
     from problems.inverse.problem import LeastSquaresProblem
 
-    model = model_for(data, case, mesh)
+    model = corrected_model(model_for(data, case, mesh), correction)
     shift = 0.0 if correction is None else correction.shift
     problem = LeastSquaresProblem(
         model,
@@ -183,7 +189,11 @@ def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
         "budget": settings.budget,
         "seed": settings.seed,
         **({"correction": settings.fine_mesh} if settings.correction != "none" else {}),
-        **({"treatment": "one-point"} if settings.correction == "one-point" else {}),
+        **(
+            {"treatment": settings.correction}
+            if settings.correction in ("one-point", "first-order")
+            else {}
+        ),
     }
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -202,7 +212,7 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
         first = result.n_evals  # the uncorrected run the rounds start from
         untreated = [float(v) for v in result.x]
         chi2_untreated = float(result.cost)  # the evaluator's cost is R^T R = chi2 (no 1/2)
-        from problems.inverse.model_error import one_point
+        from problems.inverse.model_error import first_order, one_point
         from solvers.corrected import solve_iterated
 
         fine, coarse = (
@@ -217,7 +227,9 @@ def calibrate_variant(data: Dataset, case, settings: CalibrationSettings) -> dic
 
         result = solve_iterated(
             make_objective,
-            lambda x: one_point(fine, coarse, x),
+            lambda x: (first_order if settings.correction == "first-order" else one_point)(
+                fine, coarse, x
+            ),
             "lm",
             budget=settings.budget,
             x0=result.x,
@@ -854,7 +866,7 @@ def ranking_band(ranking: list[dict], results: dict, settings) -> dict:
         second = ranking[1]
         todo = (
             "refine the inverse mesh"
-            if settings.correction == "iterated"
+            if settings.correction in ("iterated", "first-order")
             else "refine the inverse mesh or use --correction iterated"
         )
         out |= {

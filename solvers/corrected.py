@@ -6,6 +6,11 @@ Round k: ``eps_k = U_hifi(x_k) - U_inverse(x_k)`` (``correction_at(x_k)``), obje
 ``max_i |x_{k+1,i} / x_{k,i} - 1| < tol`` (default 0.1 %) or after ``max_rounds``. Every round's
 evaluations count against one budget (in the objectives' budget unit: evaluations or nominal
 forward-equivalents), and every high-fidelity run is charged.
+
+The same loop makes the first-order consistent correction (treatment ``first-order``) when
+``correction_at`` returns a :func:`~problems.inverse.model_error.first_order` correction (a shift
+and a slope ``J_hifi(x_k) - J_inverse(x_k)``): the objective then fits
+``U_E - eps_k - S_k (x - x_k)`` and the fixed point is the high-fidelity model's own optimum.
 """
 
 from __future__ import annotations
@@ -35,7 +40,9 @@ def solve_iterated(
 
     make_objective : ``correction -> Evaluator``, the objective with that correction applied and its
                      runs charged (as :func:`problems.inverse.build.build_objective` does)
-    correction_at  : ``x (physical) -> Correction`` (high-fidelity and inverse runs at x, counted)
+    correction_at  : ``x (physical) -> Correction`` (high-fidelity and inverse runs at x, counted):
+                     a one-point correction (treatment ``iterated``) or a first-order one
+                     (treatment ``first-order``, recorded in the provenance)
     """
     if not 0 < tol < 1:
         raise ValueError(f"tol = {tol!r} is out of range: 0 < tol < 1")
@@ -43,12 +50,14 @@ def solve_iterated(
         raise ValueError(f"max_rounds = {max_rounds!r} is out of range: a whole number >= 1")
     x = np.asarray(x0, float)
     used, n_evals, fe, nominal, history, charges, rounds = 0.0, 0, 0.0, 0.0, [], {}, []
-    result = None
+    result, treatment = None, "iterated"
     for k in range(int(max_rounds)):
         left = int(budget - used + 1e-9)  # in the objective's budget unit
         if left < 1:
             break
         corr = correction_at(x)
+        if corr.treatment == "first-order":
+            treatment = "first-order"
         objective = make_objective(corr)
         result = solve(objective, method, budget=left, seed=seed, x0=x, **options)
         n_evals += result.n_evals
@@ -93,5 +102,5 @@ def solve_iterated(
         history=history,
         extra=extra,
         n_iterations=sum(r["n_evals"] > 0 for r in rounds),
-        provenance={**result.provenance, "treatment": "iterated", "tol": tol},
+        provenance={**result.provenance, "treatment": treatment, "tol": tol},
     )

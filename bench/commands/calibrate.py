@@ -39,11 +39,13 @@ def add_arguments(p) -> None:
     )
     p.add_argument(
         "--correction",
-        choices=["none", "one-point", "iterated"],
+        choices=["none", "one-point", "iterated", "first-order"],
         default="none",
         help="one-point: subtract the discretisation error at the untreated optimum (one run on "
         "the check mesh) from the data and re-solve; iterated: repeat at each new optimum until "
-        "the parameters move < 0.1 %% (default none)",
+        "the parameters move < 0.1 %%; first-order: iterated, also matching the check mesh's "
+        "exact Jacobian at each round's start (its limit is the check mesh's own optimum; "
+        "default none)",
     )
     p.add_argument(
         "--error-band",

@@ -72,7 +72,7 @@ def add_arguments(p) -> None:
     p.add_argument("--spacing", type=finite_float, default=5.0, help="DIC grid step, mm")
     p.add_argument(
         "--correction",
-        choices=["none", "one-point", "iterated"],
+        choices=["none", "one-point", "iterated", "first-order"],
         default="none",
         help="discretisation correction of the calibration on --check-mesh (default none)",
     )

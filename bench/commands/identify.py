@@ -39,7 +39,7 @@ def add_arguments(p) -> None:
     )
     p.add_argument(
         "--correction",
-        choices=["none", "one-point", "iterated", "bae", "default"],
+        choices=["none", "one-point", "iterated", "first-order", "bae", "default"],
         default="none",
         help="model-error treatment (default none); 'default' is the case's default treatment "
         "with its plate margin, high-fidelity mesh and BAE samples (listed by `femubench cases`)",

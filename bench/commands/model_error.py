@@ -74,7 +74,7 @@ def add_arguments(p) -> None:
         "--bias-only",
         action="store_true",
         help="the linearised perfect-optimiser bias alone, no LM (for the expensive paper inverse "
-        "mesh; not with iterated)",
+        "mesh; not with iterated or first-order)",
     )
     p.add_argument(
         "--budget", type=positive_int, default=200, help="LM evaluations per row (default 200)"

@@ -52,6 +52,7 @@ def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
     """
     from dataclasses import replace
 
+    from problems.inverse.model_error import ITERATED
     from problems.inverse.plausibility import warn_data, warn_result
     from solvers import solve
     from solvers.corrected import solve_iterated
@@ -77,10 +78,10 @@ def identify(spec: RunSpec, *, mapper=None, dataset=None, observers=()):
                 built.append(obj)
             return obj
 
-        if spec.treatment.name == "iterated":
+        if spec.treatment.name in ITERATED:
             return solve_iterated(
                 objective_with,
-                asm.one_point,
+                asm.one_point if spec.treatment.name == "iterated" else asm.first_order,
                 method,
                 budget=budget,
                 seed=spec.seed,

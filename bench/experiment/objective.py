@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.experiment.spec import RunSpec, Treatment
+from problems.inverse.model_error import ITERATED
 
 
 @dataclass
@@ -86,16 +87,25 @@ class Assembly:
 
         return one_point(*self.models(), at, mapper=self.mapper)
 
+    def first_order(self, at):
+        """The first-order correction (shift and Jacobian difference of the high-fidelity and
+        inverse models) at the physical ``at``."""
+        from problems.inverse.model_error import first_order
+
+        return first_order(*self.models(), at, mapper=self.mapper)
+
     def correction(self):
         """The spec's fixed correction (made once): None for ``none``, the one-point correction at
-        the spec's start, or the BAE statistics; ``iterated`` has none (it follows a solver)."""
+        the spec's start, or the BAE statistics; ``iterated`` and ``first-order`` have none (they
+        follow a solver)."""
         s = self.spec
         if s.treatment.name == "none" or self.case.is_analytic:
             return None
-        if s.treatment.name == "iterated":
+        if s.treatment.name in ITERATED:
             raise ValueError(
-                "treatment 'iterated' re-evaluates the correction at a solver's solutions: it "
-                "exists for identifications only; allowed here: none, one-point, bae, default"
+                f"treatment {s.treatment.name!r} re-evaluates the correction at a solver's "
+                "solutions: it exists for identifications only; allowed here: none, one-point, "
+                "bae, default"
             )
         if self._fixed is None:
             if s.treatment.name == "one-point":

@@ -74,10 +74,10 @@ class DataSpec:
 class Treatment:
     """The model-error treatment of a run's objective.
 
-    name            : ``none``, ``one-point``, ``iterated`` or ``bae`` (a correction:
-                      problems/inverse/model_error.py), or ``default``: the case's default
-                      treatment (:func:`problems.inverse.cases.default_treatment`), which sets the
-                      four fields below itself (:meth:`resolved`)
+    name            : ``none``, ``one-point``, ``iterated``, ``first-order`` or ``bae`` (a
+                      correction: problems/inverse/model_error.py), or ``default``: the case's
+                      default treatment (:func:`problems.inverse.cases.default_treatment`), which
+                      sets the four fields below itself (:meth:`resolved`)
     plate_margin_mm : the measurement region (:class:`problems.inverse.build.Region`)
     hifi_mesh       : high-fidelity mesh of the correction (None: the next finer preset of the
                       inverse mesh, :func:`problems.inverse.build.hifi_mesh_for`)

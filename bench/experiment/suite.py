@@ -66,7 +66,8 @@ SUITE_KEYS = {
     "mesh": "FE mesh name (default 'coarse')",
     "tiers": 'list of data tiers, "model-error" and/or "consistent" (default ["model-error"])',
     "treatments": (
-        'list of model-error treatments: "none", "one-point", "iterated", "bae" (default ["none"])'
+        'list of model-error treatments: "none", "one-point", "iterated", "first-order", "bae" '
+        '(default ["none"])'
     ),
     "plate_margin_mm": f"{PLATE_MARGIN_TEXT} (default 0)",
     "tracks": (

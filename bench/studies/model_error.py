@@ -28,7 +28,7 @@ import numpy as np
 from bench.studies import output_dir, write_csv
 from problems.io import jsonio
 
-TREATMENT_ORDER = ("none", "one-point", "iterated", "bae")
+TREATMENT_ORDER = ("none", "one-point", "iterated", "first-order", "bae")
 #: a diagnostic, bias-only: the one-point correction made *at the reference* (not available in
 #: practice). Its bias is what the high-fidelity model's own error against the data leaves: the
 #: floor of every correction made with that high-fidelity mesh.
@@ -113,11 +113,13 @@ def one_row(
         return _bias_row(case, cfg, asm, t0)
     result = identify(spec, mapper=mapper, dataset=data)
     # the linearised bias of the correction the solver ended with: at the start (one-point), at
-    # the LM solution (iterated, the fixed point), or the BAE statistics
+    # the LM solution (iterated and first-order, the fixed point), or the BAE statistics
     if cfg.treatment == "one-point":
         correction = asm.one_point(c.start)
     elif cfg.treatment == "iterated":
         correction = asm.one_point(np.asarray(result.x))
+    elif cfg.treatment == "first-order":
+        correction = asm.first_order(np.asarray(result.x))
     else:
         correction = asm.correction()
     objective = asm.objective(correction)
@@ -151,9 +153,11 @@ def _bias_row(case: str, cfg: Configuration, asm, t0: float) -> dict:
     """The linearised perfect-optimiser bias alone (one residual and one Jacobian: one run with
     sensitivities on the FE model, plus the correction's runs) of the assembly ``asm``; the
     one-point correction is made at the default start (at the reference for :data:`HIFI_LIMIT`),
-    ``iterated`` needs the LM solution and is refused."""
-    if cfg.treatment == "iterated":
-        raise ValueError("a bias-only row of treatment 'iterated' needs the LM solution: run LM")
+    ``iterated`` and ``first-order`` need the LM solution and are refused."""
+    if cfg.treatment in ("iterated", "first-order"):
+        raise ValueError(
+            f"a bias-only row of treatment {cfg.treatment!r} needs the LM solution: run LM"
+        )
     if cfg.treatment == HIFI_LIMIT:
         corr = asm.one_point(asm.case.reference)
         corr.treatment = HIFI_LIMIT
@@ -464,7 +468,7 @@ def render_overview(root) -> list[Path]:
     ax.set_ylabel("max |parameter error| of LM, %")
     ax.set_title(f"model-error study, {len(folders)} cases (dotted: the 2 % target)")
     handles, labels = ax.get_legend_handles_labels()
-    rank = {t: i for i, t in enumerate(("none", "one-point", "iterated", "BAE"))}
+    rank = {t: i for i, t in enumerate(("none", "one-point", "iterated", "first-order", "BAE"))}
     pairs = sorted(
         zip(labels, handles),
         key=lambda p: ("DIC" in p[0], rank.get(p[0].split(" ")[0].rstrip(","), 9), p[0]),

@@ -20,7 +20,7 @@ from problems.inverse.case import Case
 from problems.inverse.cases import get_case
 from problems.inverse.data import Dataset, get_data, load, tier_settings
 from problems.inverse.evaluator import Evaluator
-from problems.inverse.model_error import Correction, check_honest
+from problems.inverse.model_error import Correction, check_honest, corrected_model
 from problems.inverse.problem import LeastSquaresProblem
 
 #: high-fidelity mesh of a model-error correction for each inverse mesh (a finer mesh of the same
@@ -228,7 +228,10 @@ def build_objective(
     region     : the front-face points used (:class:`Region`)
     correction : a model-error correction (see :mod:`problems.inverse.model_error`) made with the
                  high-fidelity model on ``hifi_mesh``: its mean shifts the data, its low-rank
-                 covariance is added to the noise's; its runs are charged to the evaluator
+                 covariance is added to the noise's, a first-order correction's slope adds
+                 ``slope (x - anchor)`` to the model (and ``slope`` to its Jacobian, physical
+                 units: the scaling to ``z`` is the problem's); its runs are charged to the
+                 evaluator
     sigma_force_kN : standard deviation of the plate force, kN
     forward    : a surrogate of the FE model on ``mesh`` (a ``problems.surrogate.SurrogateModel``)
                  used in its place, restricted to the region's points; refused when it was
@@ -279,6 +282,7 @@ def build_objective(
         from problems.surrogate.model import restricted
 
         model = restricted(forward, case, points, ds.settings.loading)
+    model = corrected_model(model, correction)  # a first-order correction's slope
     shift = 0.0 if correction is None or correction.shift is None else correction.shift
     problem = LeastSquaresProblem(
         model,
