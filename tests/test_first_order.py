@@ -2,6 +2,7 @@
 is the high-fidelity model's own optimum, where the zero-order ``iterated`` stops elsewhere."""
 
 import hashlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,6 +132,7 @@ def test_cli_and_suites_accept_first_order(tmp_path, capsys):
     from bench.calibration import CalibrationSettings
     from bench.cli import build_parser, main
     from bench.experiment.spec import Treatment
+    from bench.experiment.suite import load_suite
 
     parser = build_parser()
     ident = ["identify", "linear-shear", "--solver", "lm", "--correction"]
@@ -141,6 +143,12 @@ def test_cli_and_suites_accept_first_order(tmp_path, capsys):
     assert args.correction == "first-order"
     assert CalibrationSettings("6,6,12:g8:hex27", correction="first-order").fine_mesh
     assert Treatment("first-order").name == "first-order"
+    root = Path(__file__).resolve().parents[1]
+    runs = load_suite(root / "suites" / "table1-first-order.toml").runs()
+    assert sorted((r.case, r.treatment.name) for r in runs) == [
+        ("exponent-shear", "first-order"),
+        ("exponent-tension", "first-order"),
+    ]
     assert main([*ident, "second-order"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "invalid choice: 'second-order'" in err
