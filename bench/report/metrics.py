@@ -141,7 +141,7 @@ def prepare(runs: pd.DataFrame, history: pd.DataFrame | None = None):
 SHARED_CHARGES = ("surrogate-training",)
 #: Charges that are shared when the run's treatment is BAE: the high-fidelity and inverse-model
 #: runs of the error statistics, computed once per case and stored with a hash
-#: (a one-point or iterated correction pays its own high-fidelity runs: not shared)
+#: (a one-point, iterated or first-order correction pays its own high-fidelity runs: not shared)
 SHARED_CHARGES_BAE = ("hifi", "inverse-for-correction")
 
 
