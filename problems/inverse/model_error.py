@@ -203,16 +203,24 @@ def one_point(hifi, inverse, x0, *, mapper=None, provenance: dict | None = None)
     pairs, hifi_s, inv_s = _run_pair(hifi, inverse, [x0], mapper)
     if pairs[0] is None:
         raise RuntimeError(f"model-error correction: a model failed at x0 = {x0.tolist()}")
-    hi, lo = pairs[0]
+    return _at_point("one-point", pairs[0], x0, hifi_s, inv_s, dict(provenance or {}))
+
+
+def _at_point(treatment: str, pair, x, hifi_s, inv_s, provenance: dict, **fields) -> Correction:
+    """The correction of one high-fidelity / inverse run ``pair`` at the physical ``x``: the
+    shift ``U_hifi(x) - U_inverse(x)``, the two runs counted with their wall times, ``fields``
+    (e.g. a first-order slope) as given."""
+    hi, lo = pair
     return Correction(
-        "one-point",
+        treatment,
         shift=np.asarray(hi.values) - np.asarray(lo.values),
         n_hifi=1,
         hifi_wall_s=hifi_s,
         n_inverse=1,
         inverse_wall_s=inv_s,
-        points=x0[None, :],
-        provenance=dict(provenance or {}),
+        points=np.asarray(x, float)[None, :],
+        provenance=provenance,
+        **fields,
     )
 
 
@@ -235,15 +243,13 @@ def first_order(hifi, inverse, x, *, mapper=None, provenance: dict | None = None
     if pairs[0] is None or pairs[0][0].jacobian is None or pairs[0][1].jacobian is None:
         raise RuntimeError(f"first-order correction: a model failed at x = {x.tolist()}")
     hi, lo = pairs[0]
-    return Correction(
+    return _at_point(
         "first-order",
-        shift=np.asarray(hi.values) - np.asarray(lo.values),
-        n_hifi=1,
-        hifi_wall_s=hifi_s,
-        n_inverse=1,
-        inverse_wall_s=inv_s,
-        points=x[None, :],
-        provenance={**(provenance or {}), "with_jacobian": True},
+        pairs[0],
+        x,
+        hifi_s,
+        inv_s,
+        {**(provenance or {}), "with_jacobian": True},
         slope=np.asarray(hi.jacobian, float) - np.asarray(lo.jacobian, float),
         anchor=x.copy(),
     )
