@@ -245,3 +245,27 @@ def test_noise_free_twin_is_the_data_without_its_noise(tmp_path, monkeypatch):
     assert s1.data_key(0) == CoverageSettings(variant="linear-compression", n=3).data_key(0)
     assert s0.data_key(0) != s1.data_key(0) and s0.key(0) != s1.key(0)
     assert draw_test(s0, 0).noise_scale == 0.0 and draw_test(s0, 0).x == draw_test(s1, 0).x
+
+
+def test_noise_free_twin_of_the_images_route_has_no_camera_noise(tmp_path, monkeypatch):
+    """``noise_scale`` 0 on the images route: the camera's noise is scaled too (the images are the
+    rendered intensities, quantised), while 1 adds its ``noise_grey`` (2 grey levels)."""
+    from problems.dic.imageio import read_image
+    from problems.inverse import virtual_experiment as ve
+
+    class Resp:
+        reaction_kN = np.array([100.0, 180.0])
+
+    flat = np.full((40, 60), 0.5)  # a stand-in for the rendered speckle: no FE run, no render
+    monkeypatch.setattr(ve, "_data_response", lambda test, name: Resp())
+    monkeypatch.setattr(
+        ve, "render_virtual_images", lambda t, im, r: (ve._camera(t, im), [flat] * 3)
+    )
+    base = dict(variant="linear-compression", x=(1.0,) * 6, levels_mm=(0.1, 0.2), seed=3)
+    grey = {}
+    for scale in (1.0, 0.0):
+        test = ve.VirtualTest(**base, noise_scale=scale)
+        ve.write_virtual_images(test, tmp_path / f"s{scale:g}", "n", ve.VirtualImages())
+        grey[scale] = read_image(tmp_path / f"s{scale:g}" / "images" / "image_02.png")
+    assert np.ptp(grey[0.0]) == 0  # 0.5 of 255, rounded: one grey level everywhere
+    assert 1.6 < np.std(grey[1.0]) < 2.4  # the camera's 2 grey levels
