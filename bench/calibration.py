@@ -863,10 +863,12 @@ def ranking_band(ranking: list[dict], results: dict, settings) -> dict:
         "probabilities_conditional": False,
     }
     if len(ranking) > 1 and not ranking[1]["resolved"]:
+        from problems.inverse.model_error import ITERATED
+
         second = ranking[1]
         todo = (
             "refine the inverse mesh"
-            if settings.correction in ("iterated", "first-order")
+            if settings.correction in ITERATED
             else "refine the inverse mesh or use --correction iterated"
         )
         out |= {

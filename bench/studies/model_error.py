@@ -154,7 +154,9 @@ def _bias_row(case: str, cfg: Configuration, asm, t0: float) -> dict:
     sensitivities on the FE model, plus the correction's runs) of the assembly ``asm``; the
     one-point correction is made at the default start (at the reference for :data:`HIFI_LIMIT`),
     ``iterated`` and ``first-order`` need the LM solution and are refused."""
-    if cfg.treatment in ("iterated", "first-order"):
+    from problems.inverse.model_error import ITERATED
+
+    if cfg.treatment in ITERATED:
         raise ValueError(
             f"a bias-only row of treatment {cfg.treatment!r} needs the LM solution: run LM"
         )
