@@ -184,21 +184,6 @@ def default_mesh(args) -> str:
     return default_inverse_mesh(tier)
 
 
-def check_finer(hifi_mesh: str, mesh: str) -> None:
-    """ValueError (one line) unless ``hifi_mesh`` is finer than the inverse ``mesh``: at least as
-    many elements along x, y and z and more along one (a coarser or equal "high-fidelity" model
-    corrects nothing, or the wrong way)."""
-    from problems.fe.mesh import parse_mesh_spec
-
-    hi, lo = parse_mesh_spec(hifi_mesh).shape, parse_mesh_spec(mesh).shape
-    if not (all(h >= n for h, n in zip(hi, lo)) and hi != lo):
-        raise ValueError(
-            f"--hifi-mesh {hifi_mesh!r} ({','.join(map(str, hi))} elements) is not finer than "
-            f"the inverse mesh {mesh!r} ({','.join(map(str, lo))}); allowed: a mesh with at least "
-            "as many elements along x, y and z and more along one"
-        )
-
-
 def derived_errors(case, result) -> dict[str, dict[str, float]]:
     """The material parameters ``case`` derives from the identified ones (the exponent cases'
     ``a``, MPa^(1-b), as Table 1 shows it): ``{name: {"reference", "start", "found",
@@ -343,6 +328,8 @@ def main(args) -> int:
     if args.mesh is None:
         args.mesh = default_mesh(args)
     if args.hifi_mesh is not None:
+        from problems.inverse.build import check_finer
+
         check_finer(args.hifi_mesh, args.mesh)
     if args.polish_budget < 1:
         raise ValueError(

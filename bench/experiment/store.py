@@ -777,7 +777,8 @@ def case_facts(name: str) -> tuple[bool, str, float] | None:
 def method_label(config: dict, facts=case_facts) -> str:
     """How a run's method is shown in tables and figures: the solver with its data tier and, when
     there is one, its model-error treatment, finite-difference Jacobian and surrogate track, e.g.
-    ``lm (model-error, iterated)``, ``lm (consistent, FD forward)``,
+    ``lm (model-error, iterated)``, ``lm (model-error, iterated on 9,9,18:g16:gz8:hex27)`` (a
+    high-fidelity mesh named in the configuration), ``lm (consistent, FD forward)``,
     ``cma (consistent, surrogate + FE polish)``. ``facts``: :func:`case_facts` or a function like
     it (what ``default`` stands for)."""
     known = facts(config["case"])
@@ -788,8 +789,9 @@ def method_label(config: dict, facts=case_facts) -> str:
     if treatment == "default":
         margin = f" {known[2]:g} mm" if known[2] else ""
         tags.append(f"default {known[1]}{margin}")
-    elif treatment != "none":
-        tags.append(treatment)
+    elif treatment != "none":  # with the high-fidelity mesh when the run names one
+        hifi = config.get("hifi_mesh")
+        tags.append(f"{treatment} on {hifi}" if hifi else treatment)
     if config.get("jacobian", "exact") != "exact":
         tags.append(f"FD {config['jacobian']}")
     if config.get("track", "fe") == "surrogate":

@@ -18,6 +18,7 @@ The schema is documented in ``docs/suites.md``; in short::
     random_starts = 1                # random starts per seed when "random" is listed
     budgets = [200]                  # forward evaluations per run
     mesh = "coarse"                  # optional
+    hifi_mesh = "fine"               # optional: the corrections' high-fidelity mesh
 
     [data]                           # optional, passed to build_objective(data=...)
     noise_um = 0.0
@@ -52,6 +53,7 @@ from bench.experiment.spec import (
 )
 from problems.inverse.build import PLATE_MARGIN_TEXT, Region
 from problems.inverse.evaluator import BUDGET_UNITS
+from problems.inverse.model_error import TREATMENTS
 from problems.io.tomlio import read_toml
 
 SUITE_KEYS = {
@@ -70,6 +72,11 @@ SUITE_KEYS = {
         '(default ["none"])'
     ),
     "plate_margin_mm": f"{PLATE_MARGIN_TEXT} (default 0)",
+    "hifi_mesh": (
+        "high-fidelity mesh spec of the correction treatments (one-point, iterated, first-order, "
+        "bae), finer than mesh and not the data's; none runs unchanged; not with default (it sets "
+        "its own) (default: problems.inverse.build.hifi_mesh_for(mesh))"
+    ),
     "tracks": (
         'list of "fe" (the solver on the FE model) and/or "surrogate" (the solver on the stored '
         'default surrogate, then an FE polish) (default ["fe"])'
@@ -85,6 +92,10 @@ SUITE_KEYS = {
         "included (COCO's rule)"
     ),
 }
+#: treatments that a suite's ``hifi_mesh`` does not apply to: ``none`` has no high-fidelity
+#: model, ``default`` sets its own (:meth:`~bench.experiment.spec.Treatment.resolved`; refused
+#: with the key)
+NO_HIFI = ("none", "default")
 PART_KEYS = tuple(k for k in SUITE_KEYS if k not in ("name", "description"))
 TOP_KEYS = ("suite", "part", "data", "options", "problems")
 PROBLEM_KEYS = {
@@ -108,6 +119,7 @@ class Part:
     tiers: tuple[str, ...] = ("model-error",)
     treatments: tuple[str, ...] = ("none",)
     plate_margin_mm: float = 0.0
+    hifi_mesh: str | None = None
     tracks: tuple[str, ...] = ("fe",)
     jacobians: tuple[str, ...] = ("exact",)
     budget_unit: str = "evaluations"
@@ -117,9 +129,9 @@ class Part:
     def runs(self, data: dict, options: dict, problems: dict | None = None) -> list[RunSpec]:
         """All runs, ordered track, tier, treatment, case, method, Jacobian, budget, seed, start,
         start index. The consistent tier is never corrected (it runs once, untreated, whatever
-        the treatments); the Jacobian choice only multiplies
-        the methods that use one; a deterministic method runs once from the default start (under
-        the first seed)."""
+        the treatments); ``hifi_mesh`` reaches the corrections only (not ``none`` nor ``default``:
+        :data:`NO_HIFI`); the Jacobian choice only multiplies the methods that use one; a
+        deterministic method runs once from the default start (under the first seed)."""
         out = []
         for track, tier, treatment, case, method, jac, budget, seed, start in itertools.product(
             self.tracks,
@@ -153,7 +165,11 @@ class Part:
                         self.mesh,
                         dict(options.get(method, {})),
                         DataSpec(tier, dict(data)),
-                        Treatment(treatment, self.plate_margin_mm),
+                        Treatment(
+                            treatment,
+                            self.plate_margin_mm,
+                            None if treatment in NO_HIFI else self.hifi_mesh,
+                        ),
                         surrogate=DEFAULT_SURROGATE if track == "surrogate" else None,
                         polish_budget=self.polish_budget if track == "surrogate" else 0,
                         jacobian=jac,
@@ -424,9 +440,10 @@ def parse_suite(
     if not isinstance(parts_raw, list) or not all(isinstance(p, dict) for p in parts_raw):
         err("'part' must be an array of tables: [[part]]")
         parts_raw = []
-    specs = []
+    specs, spec_errs = [], []  # each part's clean values and where its errors go
     if not parts_raw:
         specs.append(_parse_spec(s, err, problems))
+        spec_errs.append(err)
     else:
         for i, part in enumerate(parts_raw, 1):
             for key in part:
@@ -439,6 +456,7 @@ def parse_suite(
                 errors.append(msg.replace("[suite]", f"[[part]] {i}:", 1))
 
             specs.append(_parse_spec(merged, part_err, problems))
+            spec_errs.append(part_err)
     methods = list(dict.fromkeys(m for sp in specs for m in sp["methods"] if isinstance(m, str)))
 
     # [data]
@@ -468,6 +486,10 @@ def parse_suite(
     if data and not any(e.startswith("[data]") for e in errors):
         for reason in _data_settings_errors(data):
             err(f"[data] {reason}")
+    if not any(e.startswith("[data]") for e in errors):
+        for spec, spec_err in zip(specs, spec_errs):
+            for reason in _honesty_errors(spec, data):
+                spec_err(reason)
 
     # [options.<method>]
     options = raw.get("options", {})
@@ -658,7 +680,6 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
         err(f"[suite] {why}")
 
     from problems.inverse.data import TIERS
-    from problems.inverse.model_error import TREATMENTS
 
     tiers = _choice_list(s, "tiers", ["model-error"], TIERS, err)
     treatments = _choice_list(s, "treatments", ["none"], TREATMENTS, err)
@@ -667,6 +688,7 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
     if why:
         err(f"[suite] {why}")
         plate_margin = 0.0
+    hifi_mesh = _parse_hifi_mesh(s, mesh, tiers, treatments, err)
 
     tracks = _choice_list(s, "tracks", ["fe"], TRACKS, err)
     if "surrogate" in tracks:
@@ -703,12 +725,74 @@ def _parse_spec(s: dict, err, problems: dict | None = None) -> dict:
         tiers=tuple(tiers),
         treatments=tuple(treatments),
         plate_margin_mm=float(plate_margin),
+        hifi_mesh=hifi_mesh,
         tracks=tuple(tracks),
         jacobians=tuple(jacobians),
         budget_unit=budget_unit,
         polish_budget=int(polish_budget),
         free_repeats=free_repeats,
     )
+
+
+def _parse_hifi_mesh(s: dict, mesh, tiers: list, treatments: list, err) -> str | None:
+    """The part's ``hifi_mesh`` (None when not given or refused): a valid mesh spec
+    (:func:`_mesh_error`), finer than the inverse ``mesh``
+    (:func:`problems.inverse.build.check_finer`, as ``identify --hifi-mesh``), with a correction
+    to apply to and without ``default`` (which sets its own). Whether it is the data's
+    discretisation is checked with the ``[data]`` table (:func:`_honesty_errors`)."""
+    if "hifi_mesh" not in s:
+        return None
+    hifi_mesh = s["hifi_mesh"]
+    why = _mesh_error(hifi_mesh)
+    if why:
+        err(f"[suite] hifi_mesh: {why}")
+        return None
+    corrections = [t for t in TREATMENTS if t not in NO_HIFI]
+    if "default" in treatments:
+        err(
+            f'[suite] hifi_mesh = {hifi_mesh!r} is set but treatments lists "default", which sets '
+            "its own high-fidelity mesh (femubench cases); allowed: hifi_mesh with "
+            f"{', '.join(corrections)} only (run default in a [[part]] without hifi_mesh)"
+        )
+        return None
+    if all(t in NO_HIFI for t in treatments) or "model-error" not in tiers:
+        err(
+            f"[suite] hifi_mesh = {hifi_mesh!r} applies to no run: it is the high-fidelity mesh "
+            f"of the treatments {', '.join(corrections)} on the model-error tier; allowed: "
+            "leave it out, or list one of them"
+        )
+        return None
+    if not _mesh_error(mesh):
+        from problems.inverse.build import check_finer
+
+        try:
+            check_finer(hifi_mesh, mesh, "[suite] hifi_mesh =")
+        except ValueError as exc:
+            err(str(exc))
+            return None
+    return hifi_mesh
+
+
+def _honesty_errors(spec: dict, data: dict) -> list[str]:
+    """Why the part ``spec``'s ``hifi_mesh`` may not be used on the model-error data of the
+    ``[data]`` table ``data`` (the honesty rule,
+    :func:`problems.inverse.model_error.check_honest`: never the discretisation that made the
+    data), or []."""
+    from problems.fe.mesh import discretisation_key
+    from problems.inverse.data import tier_settings
+    from problems.inverse.model_error import check_honest
+
+    hifi_mesh = spec.get("hifi_mesh")
+    if hifi_mesh is None or "model-error" not in spec["tiers"]:
+        return []
+    data_mesh = tier_settings("model-error", inverse_mesh=spec["mesh"], **data).mesh
+    try:
+        check_honest(
+            discretisation_key(data_mesh), "model-error", hifi=discretisation_key(hifi_mesh)
+        )
+    except ValueError as exc:
+        return [f"[suite] hifi_mesh = {hifi_mesh!r}: {exc}"]
+    return []
 
 
 def _q(m: str) -> str:

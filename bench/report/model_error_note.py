@@ -4,7 +4,7 @@ of the shipped model-error study (``results/studies/model_error/<case>/``, see d
 when it is found.
 
 Two study rows per case, matched on the runs' inverse mesh, treatment and plate margin (and on the
-data hash when both sides have one):
+data hash and the high-fidelity mesh when both sides have one):
 
 * ``<mesh>__<treatment>__margin<m>__fe[__bias].json``: the linearised bias of the same treated
   objective, −(JᵀJ)⁻¹Jᵀr at the reference (the error of a perfect optimiser);
@@ -114,7 +114,7 @@ def run_settings(runs: pd.DataFrame, records=()) -> dict[str, Setting]:
         margin = prov.get("region_plate_margin_mm")
         if margin is None:
             margin = d[1] if d else cfg.get("plate_margin_mm", 0.0)
-        hifi = prov.get("hifi_mesh") or (d[2] if d else "")
+        hifi = prov.get("hifi_mesh") or (d[2] if d else cfg.get("hifi_mesh") or "")
         mesh = prov.get("inverse_mesh") or r.get("mesh") or ""
         dh = prov.get("data_hash") or r.get("data_hash")
         out[case] = Setting(
@@ -151,8 +151,10 @@ def _biases(row: dict | None, key: str = "linearised_bias_percent") -> dict[str,
 def load_study(dirs, settings: dict[str, Setting]) -> dict[str, dict] | None:
     """Per case of ``settings``: ``{"bias": {parameter: %}, "floor": (parameter, %) | None,
     "hifi_mesh": str, "stale": bool}`` from the first folder of ``dirs`` holding the case's rows;
-    None when no folder exists at all (the study was not found). A case without rows is left out;
-    ``stale``: the rows were made with other data than the runs (their numbers are not used)."""
+    None when no folder exists at all (the study was not found). A case without rows is left out,
+    and so is one whose rows name another high-fidelity mesh than its runs (a suite's
+    ``hifi_mesh``; the convergence study may stand in); ``stale``: the rows were made with other
+    data than the runs (their numbers are not used)."""
     dirs = [Path(d) for d in dirs or () if Path(d).is_dir()]
     if not dirs:
         return None
@@ -166,6 +168,8 @@ def load_study(dirs, settings: dict[str, Setting]) -> dict[str, dict] | None:
             floor = _read(d / case / f"{key.format(FLOOR_TREATMENT)}__bias.json")
             if own is None and floor is None:
                 continue
+            if s.hifi_mesh and s.hifi_mesh != _hifi_of(own, floor, s.hifi_mesh):
+                continue  # another high-fidelity mesh: not this correction's numbers
             hashes = {(r.get("provenance") or {}).get("data_hash") for r in (own, floor) if r}
             hashes.discard(None)
             stale = bool(s.data_hash and hashes and hashes != {s.data_hash})
@@ -180,6 +184,16 @@ def load_study(dirs, settings: dict[str, Setting]) -> dict[str, dict] | None:
             }
             break
     return out
+
+
+def _hifi_of(own: dict | None, floor: dict | None, default: str) -> str:
+    """The high-fidelity mesh the study's rows ``own`` and ``floor`` name in their provenance
+    (the floor's first), ``default`` when neither names one."""
+    for row in (floor, own):
+        hifi = ((row or {}).get("provenance") or {}).get("hifi_mesh")
+        if hifi:
+            return str(hifi)
+    return default
 
 
 def load_convergence(dirs, settings: dict[str, Setting]) -> dict[str, dict]:

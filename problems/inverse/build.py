@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from problems.fe.mesh import SIZE_MM, discretisation_key
+from problems.fe.mesh import SIZE_MM, discretisation_key, parse_mesh_spec
 from problems.inverse import layout
 from problems.inverse.case import Case
 from problems.inverse.cases import get_case
@@ -129,6 +129,20 @@ def hifi_mesh_for(mesh: str) -> str:
         f"no default high-fidelity mesh for inverse mesh {mesh!r}; allowed inverse meshes: "
         f"{', '.join(DEFAULT_HIFI)} (or name the high-fidelity mesh explicitly)"
     )
+
+
+def check_finer(hifi_mesh: str, mesh: str, name: str = "--hifi-mesh") -> None:
+    """ValueError (one line, naming the option ``name``) unless the high-fidelity mesh
+    ``hifi_mesh`` is finer than the inverse ``mesh``: at least as many elements along x, y and z
+    and more along one (a coarser or equal "high-fidelity" model corrects nothing, or the wrong
+    way)."""
+    hi, lo = parse_mesh_spec(hifi_mesh).shape, parse_mesh_spec(mesh).shape
+    if not (all(h >= n for h, n in zip(hi, lo)) and hi != lo):
+        raise ValueError(
+            f"{name} {hifi_mesh!r} ({','.join(map(str, hi))} elements) is not finer than "
+            f"the inverse mesh {mesh!r} ({','.join(map(str, lo))}); allowed: a mesh with at least "
+            "as many elements along x, y and z and more along one"
+        )
 
 
 def resolve_data(case: Case, mesh: str, tier: str, data: Dataset | str | Path | None) -> Dataset:
