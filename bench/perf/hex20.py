@@ -1,9 +1,12 @@
 """Benchmark (not a test): 20-node serendipity against 27-node Lagrange hexahedra, measured with an
 independent code (scikit-fem) on the project's graded meshes; elastic bonded cube (issue 25).
 
-    OMP_NUM_THREADS=1 python -m bench.perf.hex20 [--grading 4] [--hex8 4,6,8,12,16,24]
-        [--hex20 2,3,4,6,8,10] [--hex27 2,3,4,6,8] [--reference 12]
+    OMP_NUM_THREADS=1 python -m bench.perf.hex20 [--grading 4] [--hex8 4,6,8,12,16,24,32]
+        [--hex20 2,3,4,6,8,10,12,16] [--hex27 2,3,4,6,8,12] [--reference 16]
         [--locking 2,4] [--locking-reference 12] [--out PATH]
+
+(about 6 CPU-min with the defaults, peak memory ~3 GB; shipped: results/perf/hex20.txt, g8, and
+results/perf/hex20_g4.txt)
 
 The problem: the bonded quarter cube of the project (x, y in [0, 75], z in [0, 150] mm; symmetry
 u_x = 0 on x = 0, u_y = 0 on y = 0; bonded plates, u = 0 on z = 0, u_x = u_y = 0 and
@@ -20,18 +23,21 @@ Printed (units in the headers):
 1. the cross-check of the two codes: scikit-fem ``hex27`` against the project's 27-node element with
    the B-bar switched off, same mesh, force and front-face field (relative differences);
 2. per element and mesh: the quarter's dofs (the project's convention, as in docs/fe_model.md),
-   the free dofs and the non-zeros of the solved (eighth) stiffness, CPU s of assembly and of the
-   solve (process clock, CHOLMOD with its own ordering for every element), the whole-cube plate
-   force (kN) and its error against the independent 461.88 kN and against the Richardson
-   extrapolation F_inf of the 27-node meshes (%), the RMS front-face error (x = 75 mm, u_y and u_z
-   on the 14 x 29 measurement grid) against the 27-node ``--reference`` mesh in sigma =
-   1 um/sqrt(12), and the observed orders in h (force against F_inf, field);
-3. each element's errors interpolated (log-log between neighbouring meshes) at the free dofs and
-   at the non-zeros of each 27-node mesh, as ratios to the 27-node error: accuracy at equal cost;
+   the free dofs, the non-zeros of the solved (eighth) stiffness and of its Cholesky factor
+   (CHOLMOD supernodal with its own ordering, for every element: nnz(L), the fill), CPU s of
+   assembly and of the solve (process clock), the whole-cube plate force (kN) and its error
+   against the independent 461.88 kN and against the Richardson extrapolation F_inf of the last
+   three 27-node meshes (%), the RMS front-face error (x = 75 mm, u_y and u_z on the 14 x 29
+   measurement grid) against the 27-node ``--reference`` mesh in sigma = 1 um/sqrt(12), the
+   observed orders in h (force against F_inf, field) and an estimate of the field reference's
+   own error;
+3. each element's errors interpolated (log-log between neighbouring meshes) at the free dofs, the
+   nnz and the nnz(L) of each 27-node mesh, as ratios to the 27-node error: accuracy at equal
+   cost (no field ratio where the 27-node error is < 3 x the reference's own);
 4. locking, the proxy for isochoric plastic flow: at nu = 0.3, 0.49, 0.499, 0.4999, the force of
-   ``hex20``, ``hex20r``, ``hex27`` (scikit-fem) and Q2-P1 (project) on the ``--locking`` meshes as
-   a ratio to Q2-P1 on the ``--locking-reference`` mesh (its own change from the next coarser
-   mesh is printed as its uncertainty);
+   ``hex20``, ``hex20r`` (on each ``--locking`` mesh and on the one of about the 27-node mesh's
+   dofs), ``hex27`` (scikit-fem) and Q2-P1 (project) as a ratio to Q2-P1 on the
+   ``--locking-reference`` mesh (its own change from n - 2 is printed as its uncertainty);
 5. the zero-energy modes of one free 20-node element (eigenvalues < 1e-9 of the largest; 6 are
    rigid-body modes) under full and reduced integration, and whether they survive in the
    assembled constrained meshes (smallest / largest eigenvalue of the solved stiffness, Cholesky).
@@ -112,8 +118,9 @@ def eighth_mesh(spec: str):
     return skfem.MeshHex.init_tensor(x, y, z[: (len(z) - 1) // 2 + 1])
 
 
-def _cholesky_solve(A: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
-    """x = A^-1 rhs by CHOLMOD (its own ordering); ArithmeticError unless A is positive definite."""
+def _cholesky_solve(A: sp.spmatrix, rhs: np.ndarray) -> tuple[np.ndarray, object]:
+    """x = A^-1 rhs by CHOLMOD (supernodal, its own fill-reducing ordering) and the factor;
+    ArithmeticError unless A is positive definite."""
     import kvxopt
     import kvxopt.cholmod as cholmod
 
@@ -121,8 +128,17 @@ def _cholesky_solve(A: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
     K = kvxopt.spmatrix(c.data, c.row.astype(int), c.col.astype(int), c.shape)
     b = kvxopt.matrix(np.asarray(rhs, float))
     cholmod.options["supernodal"] = 2
-    cholmod.linsolve(K, b, uplo="L")
-    return np.array(b).ravel()
+    F = cholmod.symbolic(K, uplo="L")
+    cholmod.numeric(K, F)
+    cholmod.solve(F, b)
+    return np.array(b).ravel(), F
+
+
+def factor_size(F) -> int:
+    """Stored entries of a CHOLMOD factor (supernodal: with the zeros its dense blocks hold)."""
+    import kvxopt.cholmod as cholmod
+
+    return len(cholmod.getfactor(F))
 
 
 def skfem_solve(spec: str, element: str, nu: float = NU, points=None) -> dict:
@@ -153,7 +169,7 @@ def skfem_solve(spec: str, element: str, nu: float = NU, points=None) -> dict:
     u = np.zeros(basis.N)
     u[top_z] = -0.5 * DELTA_MM
     A, b, _, free = condense(K, np.zeros(basis.N), x=u, D=fixed)
-    u[free] = _cholesky_solve(A, b)
+    u[free], factor = _cholesky_solve(A, b)
     t2 = time.process_time()
     out = {
         "spec": spec,
@@ -161,6 +177,7 @@ def skfem_solve(spec: str, element: str, nu: float = NU, points=None) -> dict:
         "quarter_dofs": quarter_dofs(spec, element),
         "free_dofs": int(len(free)),
         "nnz": int(A.nnz),
+        "nnz_L": factor_size(factor),
         "cpu_assemble": t1 - t0,
         "cpu_solve": t2 - t1,
         "force_kN": 4.0 * float((K @ u)[bottom.all("u^3")].sum()) / 1000.0,
@@ -282,10 +299,10 @@ def _fmt(v, spec=".3g") -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--grading", type=float, default=4.0, help="gR of every mesh (1: uniform)")
-    ap.add_argument("--hex8", default="4,6,8,12,16,24", help="8-node meshes n (n,n,2n)")
-    ap.add_argument("--hex20", default="2,3,4,6,8,10", help="20-node meshes n (both rules)")
-    ap.add_argument("--hex27", default="2,3,4,6,8", help="27-node meshes n")
-    ap.add_argument("--reference", type=int, default=12, help="27-node field reference n")
+    ap.add_argument("--hex8", default="4,6,8,12,16,24,32", help="8-node meshes n (n,n,2n)")
+    ap.add_argument("--hex20", default="2,3,4,6,8,10,12,16", help="20-node meshes n (both rules)")
+    ap.add_argument("--hex27", default="2,3,4,6,8,12", help="27-node meshes n")
+    ap.add_argument("--reference", type=int, default=16, help="27-node field reference n")
     ap.add_argument("--locking", default="2,4", help="meshes n of the locking study")
     ap.add_argument("--locking-reference", type=int, default=12, help="Q2-P1 reference n")
     ap.add_argument("--out", type=Path, help="also write the printed text here (atomically)")
@@ -358,11 +375,12 @@ def main(argv=None) -> int:
     )
     say()
     say(
-        "| element | quarter mesh | quarter dofs | free dofs | nnz | CPU asm s | CPU solve s | "
+        "| element | quarter mesh | quarter dofs | free dofs | nnz | nnz(L) | CPU asm s | "
+        "CPU solve s | "
         "force kN | err vs 461.88 % | err vs F_inf % | RMS front face σ | order force | "
         "order field |"
     )
-    say("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    say("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for element, rs in rows.items():
         for i, r in enumerate(rs):
             r["err_pct"] = 100.0 * (r["force_kN"] / REFERENCE_KN - 1.0)
@@ -376,15 +394,27 @@ def main(argv=None) -> int:
                 pf = np.log(q["rms_sigma"] / r["rms_sigma"]) / lr
             say(
                 f"| {element} | {r['spec']} | {r['quarter_dofs']} | {r['free_dofs']} | {r['nnz']} "
+                f"| {r['nnz_L']} "
                 f"| {r['cpu_assemble']:.2f} | {r['cpu_solve']:.2f} | {r['force_kN']:.4f} | "
                 f"{r['err_pct']:+.4f} | {r['err_inf_pct']:+.4f} | {r['rms_sigma']:.3f} | "
                 f"{_fmt(po, '.2f')} | {_fmt(pf, '.2f')} |"
             )
     say()
+    r1, r2 = rows["hex27"][-2:]
+    p_field = np.log(r1["rms_sigma"] / r2["rms_sigma"]) / np.log(r2["n"] / r1["n"])
+    ref_error = r2["rms_sigma"] / ((args.reference / r2["n"]) ** p_field - 1)
+    say(
+        f"the field reference's own error, estimated from hex27 n = {r1['n']}, {r2['n']} (order "
+        f"{p_field:.2f}): {ref_error:.4f} σ"
+    )
+    say()
 
     # 3. equal cost
     say("## 3. at equal cost: error / 27-node error, log-log interpolated at each 27-node mesh")
-    say("(force error against F_inf; '–': outside the element's measured range)")
+    say(
+        "(force error against F_inf; '–': outside the element's measured range; 'ref': the "
+        "27-node field error is < 3 x the reference's own, no ratio)"
+    )
     say()
     say(
         "| 27-node mesh | cost | value | hex8 force | hex20 force | hex20r force | hex8 field | "
@@ -392,44 +422,59 @@ def main(argv=None) -> int:
     )
     say("|---|---|---|---|---|---|---|---|---|")
     for r27 in rows["hex27"]:
-        for cost in ("free_dofs", "nnz"):
+        for cost in ("free_dofs", "nnz", "nnz_L"):
             cells = []
             for key in ("err_inf_pct", "rms_sigma"):  # force, field
                 for element in ("hex8", "hex20", "hex20r"):
                     rs = rows[element]
                     v = loglog_at([r[cost] for r in rs], [r[key] for r in rs], r27[cost])
-                    cells.append(None if v is None else v / abs(r27[key]))
-            say(
-                f"| {r27['spec']} | {cost} | {r27[cost]} | "
-                + " | ".join(_fmt(c, ".2f") for c in cells)
-                + " |"
-            )
+                    if key == "rms_sigma" and r27[key] < 3 * ref_error:
+                        cells.append("ref")
+                    else:
+                        cells.append(_fmt(None if v is None else v / abs(r27[key]), ".2f"))
+            say(f"| {r27['spec']} | {cost} | {r27[cost]} | " + " | ".join(cells) + " |")
     say()
 
     # 4. locking
+    ref_lock = family_spec(args.locking_reference, g) + ":hex27"
+    coarser = family_spec(args.locking_reference - 2, g) + ":hex27"
+    F_ref = {nu: project_solve(ref_lock, nu)["force_kN"] for nu in LOCKING_NUS}
+    F_prev = {nu: project_solve(coarser, nu)["force_kN"] for nu in LOCKING_NUS}
+    say(f"## 4. locking: force / Q2-P1 on {ref_lock} (the project's element)")
     say(
-        f"## 4. locking: force / Q2-P1 on {family_spec(args.locking_reference, g)}:hex27 "
-        "(the project's element)"
+        "reference kN: "
+        + ", ".join(
+            f"nu {nu}: {F_ref[nu]:.3f} ({100 * (F_ref[nu] / F_prev[nu] - 1):+.4f} % vs {coarser})"
+            for nu in LOCKING_NUS
+        )
     )
     say()
-    say("| nu | reference kN | reference vs n - 2 | mesh | hex20 | hex20r | hex27 | Q2-P1 |")
-    say("|---|---|---|---|---|---|---|---|")
-    for nu in LOCKING_NUS:
-        F_ref = project_solve(family_spec(args.locking_reference, g) + ":hex27", nu)["force_kN"]
-        F_prev = project_solve(family_spec(args.locking_reference - 2, g) + ":hex27", nu)[
-            "force_kN"
-        ]
-        for n in locking:
-            s = family_spec(n, g)
-            ratios = [
-                skfem_solve(s, e, nu)["force_kN"] / F_ref for e in ("hex20", "hex20r", "hex27")
-            ]
-            ratios.append(project_solve(s + ":hex27", nu)["force_kN"] / F_ref)
-            say(
-                f"| {nu} | {F_ref:.3f} | {100 * (F_ref / F_prev - 1):+.4f} % | {s} | "
-                + " | ".join(f"{v:.4f}" for v in ratios)
-                + " |"
-            )
+    say(
+        "| element | quarter mesh | free dofs | "
+        + " | ".join(f"nu {nu}" for nu in LOCKING_NUS)
+        + " |"
+    )
+    say("|---|---|---|" + "---|" * len(LOCKING_NUS))
+    for n in locking:
+        # the 20-node meshes on n and at about the 27-node mesh's dofs
+        n_eq = min(
+            range(n, 2 * n + 1),
+            key=lambda m: abs(
+                quarter_dofs(family_spec(m, g), "hex20") - quarter_dofs(family_spec(n, g), "hex27")
+            ),
+        )
+        runs = [(e, m) for e in ("hex20", "hex20r") for m in sorted({n, n_eq})]
+        for element, m in runs + [("hex27", n), ("Q2-P1", n)]:
+            s = family_spec(m, g)
+            ratios = []
+            for nu in LOCKING_NUS:
+                if element == "Q2-P1":  # the same nodes and constraints as hex27 on this mesh
+                    F = project_solve(s + ":hex27", nu)["force_kN"]
+                else:
+                    r = skfem_solve(s, element, nu)
+                    F, dofs = r["force_kN"], r["free_dofs"]
+                ratios.append(F / F_ref[nu])
+            say(f"| {element} | {s} | {dofs} | " + " | ".join(f"{v:.4f}" for v in ratios) + " |")
     say()
 
     # 5. zero-energy modes
