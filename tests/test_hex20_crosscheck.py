@@ -89,3 +89,12 @@ def test_bad_input_is_one_line_and_exit_code_2(argv, word, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and word in err
+
+
+def test_equal_cost_interpolation_is_exact_for_a_power_law():
+    from bench.perf.hex20 import loglog_at
+
+    costs = np.array([100.0, 400.0, 1600.0])
+    errors = -3.0 * costs**-1.5  # the sign of an error does not matter
+    assert loglog_at(costs, errors, 800.0) == pytest.approx(3.0 * 800.0**-1.5, rel=1e-12)
+    assert loglog_at(costs, errors, 50.0) is None and loglog_at(costs, errors, 2000.0) is None
