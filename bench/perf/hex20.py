@@ -5,7 +5,8 @@ independent code (scikit-fem) on the project's graded meshes; elastic bonded cub
         [--hex20 2,3,4,6,8,10,12,16] [--hex27 2,3,4,6,8,12] [--reference 16]
         [--locking 2,4] [--locking-reference 12] [--out PATH]
 
-(about 6 CPU-min with the defaults, peak memory ~3 GB; shipped: results/perf/hex20.txt, g8, and
+(about 6 CPU-min with the defaults, peak memory 7.5 GB: the scikit-fem assembly of the 27-node
+reference; shipped: results/perf/hex20.txt, g8, and
 results/perf/hex20_g4.txt)
 
 The problem: the bonded quarter cube of the project (x, y in [0, 75], z in [0, 150] mm; symmetry
