@@ -99,22 +99,23 @@ def test_hifi_mesh_with_default_or_without_a_correction_is_refused(
     assert line.startswith(f"- [suite] hifi_mesh = '{HIFI}'") and needle in line, line
 
 
-def test_the_shipped_suite_runs_the_iterated_correction_on_the_named_mesh():
-    """suites/table1-fine-correction.toml: two runs whose assembled objective's correction
-    models are the named high-fidelity mesh and the inverse mesh (no FE run)."""
+def test_the_shipped_suite_runs_the_first_order_correction_on_the_named_mesh():
+    """suites/table1-first-order.toml: two runs whose assembled objective's correction models
+    are the named high-fidelity mesh and the inverse mesh (no FE run)."""
     from bench.experiment.objective import prepare
     from bench.experiment.store import method_label
 
-    runs = load_suite(ROOT / "suites" / "table1-fine-correction.toml").runs()
+    named = "11,11,22:g8:hex27"
+    runs = load_suite(ROOT / "suites" / "table1-first-order.toml").runs()
     assert [(r.case, r.method, r.budget, r.start, r.mesh, r.data.tier) for r in runs] == [
         (c, "lm", 200, "default", "6,6,12:g8:hex27", "model-error")
         for c in ("exponent-shear", "exponent-tension")
     ]
-    assert {(r.treatment.name, r.treatment.hifi_mesh) for r in runs} == {("iterated", HIFI)}
+    assert {(r.treatment.name, r.treatment.hifi_mesh) for r in runs} == {("first-order", named)}
     asm = prepare(runs[0])
     hifi, inverse = asm.models()
-    assert (asm.hifi_mesh, hifi.mesh, inverse.mesh) == (HIFI, HIFI, "6,6,12:g8:hex27")
-    assert method_label(runs[0].to_dict()) == f"lm (model-error, iterated on {HIFI})"
+    assert (asm.hifi_mesh, hifi.mesh, inverse.mesh) == (named, named, "6,6,12:g8:hex27")
+    assert method_label(runs[0].to_dict()) == f"lm (model-error, first-order on {named})"
     assert method_label(_runs()["iterated"].to_dict()) == "lm (model-error, iterated)"
 
 
