@@ -82,13 +82,17 @@ def test_quarter_dofs_count_the_nodes(element):
         (["--grading", "0.5"], "--grading"),
         (["--hex27", "4"], "--hex27"),
         (["--hex20", "3,2"], "--hex20"),
-        (["--reference", "8"], "--reference"),
+        (["--reference", "8"], "--reference = 8 is out of range: a whole number > 12"),
+        (["--locking", "1", "--locking-reference", "2"], "--locking-reference = 2"),
+        # checked before the minutes of work, not when writing
+        (["--out", "no-such-folder/hex20.txt"], "--out no-such-folder/hex20.txt: folder"),
+        (["--out", "."], "--out . is a directory; give a file name"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(argv, word, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and word in err
+    assert err.count("\n") == 0 and word in err, err
 
 
 def test_equal_cost_interpolation_is_exact_for_a_power_law():

@@ -58,6 +58,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from bench.commands._args import ArgumentTypeError, output_file
 from problems.analysis.convergence import SIGMA_DISPLACEMENT_MM, observed_order, richardson
 from problems.fe.front_face import front_face_operator, measurement_grid
 from problems.fe.mesh import SIZE_MM, parse_mesh_spec
@@ -226,9 +227,8 @@ def rms_sigma(a: dict, b: dict) -> float:
 
 
 def zero_energy_modes(element: str, tol: float = 1e-9) -> int:
-    """Eigenvalues of one free element's stiffness (a graded, non-cubic element: the corner
-    element of ``1,1,2:g4`` scaled) below ``tol`` times the largest: 6 rigid-body modes plus any
-    spurious ones."""
+    """Eigenvalues of one free element's stiffness (a non-cubic brick, 1 x 1.3 x 0.8 mm) below
+    ``tol`` times the largest: 6 rigid-body modes plus any spurious ones."""
     import skfem
     from skfem import asm
     from skfem.models.elasticity import lame_parameters, linear_elasticity
@@ -320,12 +320,18 @@ def main(argv=None) -> int:
         locking = _lists(args.locking, "--locking")
         for opt, n, low in (
             ("--reference", args.reference, max(fams["hex27"])),
-            ("--locking-reference", args.locking_reference, max(locking)),
+            # its uncertainty is its change from n - 2, a mesh of >= 1 element
+            ("--locking-reference", args.locking_reference, max(2, *locking)),
         ):
             if n <= low:
                 raise ValueError(f"{opt} = {n} is out of range: a whole number > {low}")
         if len(fams["hex27"]) < 2:
             raise ValueError(f"--hex27 = {args.hex27!r} is out of range: at least two meshes")
+        if args.out is not None:  # before minutes of work, not after
+            try:
+                output_file(str(args.out))
+            except ArgumentTypeError as exc:
+                raise ValueError(f"--out {exc}") from None
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
