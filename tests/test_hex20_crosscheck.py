@@ -102,3 +102,46 @@ def test_equal_cost_interpolation_is_exact_for_a_power_law():
     errors = -3.0 * costs**-1.5  # the sign of an error does not matter
     assert loglog_at(costs, errors, 800.0) == pytest.approx(3.0 * 800.0**-1.5, rel=1e-12)
     assert loglog_at(costs, errors, 50.0) is None and loglog_at(costs, errors, 2000.0) is None
+
+
+def _rows(text: str, first: str) -> list[list[str]]:
+    """The cells of the markdown table rows of ``text`` whose first cell starts with ``first``."""
+    rows = [[c.strip() for c in line.strip().strip("|").split("|")] for line in text.splitlines()]
+    return [r for r in rows if r[0].startswith(first)]
+
+
+def test_the_docs_tables_are_the_shipped_measurement():
+    """docs/fe_model.md, "20-node or 27-node: measured": every ratio of its equal-cost table and
+    every force ratio of its locking table is the one results/perf/hex20.txt (g8) prints."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    doc = (root / "docs" / "fe_model.md").read_text(encoding="utf-8")
+    doc = doc.split("### 20-node or 27-node: measured", 1)[1].split("\n## ", 1)[0]
+    shipped = (root / "results" / "perf" / "hex20.txt").read_text(encoding="utf-8")
+    equal_cost = {(r[0], r[1]): r[3:] for r in _rows(shipped, "") if r[1:2] and r[1] in
+                  ("free_dofs", "nnz", "nnz_L")}  # fmt: skip
+    checked = 0
+    for row in _rows(doc, ""):
+        mesh = row[0].split(" (")[0].replace(" × ", ",")
+        if (mesh + ":g8", "free_dofs") not in equal_cost:
+            continue
+        got = {c: equal_cost[(mesh + ":g8", c)] for c in ("free_dofs", "nnz", "nnz_L")}
+        # (docs column, shipped column): hex20 / hex20r force, hex20 / hex20r field
+        for doc_col, col in ((2, 1), (3, 2), (4, 4), (5, 5)):
+            want = [got[c][col].replace("ref", "–") for c in ("free_dofs", "nnz", "nnz_L")]
+            shown = row[doc_col].split(" / ")
+            assert shown == (["–"] if set(want) == {"–"} else want), (mesh, doc_col, shown)
+        eight = [got["free_dofs"][0], got["free_dofs"][3].replace("ref", "–")]
+        assert row[6].split(" / ") == eight, (mesh, row[6])
+        checked += 1
+    assert checked == 6
+    locking = {(r[0], r[1]): r[3:] for r in _rows(shipped, "") if len(r) == 7}
+    names = {"hex20": "hex20", "hex20r": "hex20r", "hex27 (no B-bar)": "hex27",
+             "Q2–P1 (project)": "Q2-P1", "Q2–P1": "Q2-P1"}  # fmt: skip
+    rows = [r for r in _rows(doc, "") if r[0].split(",")[0] in names and len(r) == 5]
+    for r in rows:
+        element, mesh = r[0].split(", ")
+        key = (names[element], mesh.replace(" × ", ",") + ":g8")
+        assert r[1:] == locking[key], (key, r[1:])
+    assert len(rows) == 6
