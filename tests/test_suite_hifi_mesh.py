@@ -136,3 +136,28 @@ def test_the_note_quotes_no_study_rows_of_another_high_fidelity_mesh(tmp_path):
     default = s._replace(hifi_mesh="9,9,18:g8:hex27")
     got = N.load_study([tmp_path / "model_error"], {"exponent-shear": default})
     assert got["exponent-shear"]["floor"] == ("pt0", 0.59)
+
+
+@pytest.mark.parametrize(
+    "value",
+    [
+        "converged",
+        "converged:eighth",
+        "12,12,24:g8:hex27:eighth",
+        "12,12,24:g8:gz8:hex27",  # gz equal to g: the same mesh
+        " 12, 12,24:gz8.0:g8:hex27:quarter ",
+    ],
+)
+def test_no_spelling_of_the_data_mesh_passes_as_hifi_mesh(value):
+    """The honesty rule compares discretisations, not strings: every spelling of the model-error
+    data mesh 12,12,24:g8:hex27 is refused (a [[part]] too), and a grading that differs is not."""
+    with pytest.raises(ValueError, match="which made the model-error data") as info:
+        parse_suite({"suite": BASE | {"treatments": ["iterated"], "hifi_mesh": value}})
+    assert "hifi model uses discretisation 12,12,24:g8:hex27," in str(info.value)
+    with pytest.raises(ValueError, match=r"\[\[part\]\] 2: hifi_mesh = .*made the model-error"):
+        parse_suite(
+            {"suite": BASE | {"treatments": ["iterated"]}, "part": [{}, {"hifi_mesh": value}]}
+        )
+    other = "12,12,24:g8:gz4:hex27"
+    suite = parse_suite({"suite": BASE | {"treatments": ["iterated"], "hifi_mesh": other}})
+    assert [r.treatment.hifi_mesh for r in suite.runs()] == [other]
