@@ -4,6 +4,8 @@ integration has the known spurious modes, and the script refuses bad input."""
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -93,6 +95,13 @@ def test_bad_input_is_one_line_and_exit_code_2(argv, word, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and word in err, err
+
+
+def test_without_scikit_fem_the_script_says_so_in_one_line(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "skfem", None)  # import skfem fails
+    assert main([]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "needs scikit-fem" in err and "[test]" in err, err
 
 
 def test_equal_cost_interpolation_is_exact_for_a_power_law():

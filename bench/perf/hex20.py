@@ -332,6 +332,12 @@ def main(argv=None) -> int:
                 output_file(str(args.out))
             except ArgumentTypeError as exc:
                 raise ValueError(f"--out {exc}") from None
+        try:
+            import skfem  # noqa: F401
+        except ImportError:
+            raise ValueError(
+                "this benchmark needs scikit-fem (a test dependency): pip install -e '.[test]'"
+            ) from None
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
