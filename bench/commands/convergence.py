@@ -187,8 +187,8 @@ def main(args) -> int:
     for name in cases:
         if args.render:
             folder = existing_dir(STUDY, name, outs[name])
-            if args.plate_margins and update_plate_margin(folder, args.plate_margins):
-                print(f"wrote {folder / 'convergence.json'} (plate margins)")
+            if update_plate_margin(folder, args.plate_margins or ()):
+                print(f"wrote {folder / 'convergence.json'} (rounding floor, plate margins)")
         else:
             margins = args.plate_margins or DEFAULT_PLATE_MARGINS
             folder = run_convergence(name, families, compare, outs[name], report, margins)

@@ -300,9 +300,74 @@ def analyse(
         "families": fam_out,
         "meshes": rows,
     }
+    if data_mesh is not None:
+        add_rounding(summary, records)
     if data_mesh is not None and len(plate_margins):
         summary["plate_margin"] = plate_margin_summary(records, data_mesh, plate_margins)
     return summary, ref
+
+
+def add_rounding(summary: dict, records: dict) -> dict:
+    """Add what the data's rounding costs to a study's ``summary`` with the model-error tier's
+    data mesh (``summary["data_mesh"]``), from its mesh records ``records`` ({spec: record}).
+
+    The data are the data mesh's response rounded as the tier rounds them
+    (:func:`problems.inverse.data.rounded` with the tier's settings: displacements to 1 um,
+    forces to 0.1 kN). Adds, in %, {parameter: %} of the reference:
+
+    * per mesh row with a Jacobian ``rounded_data_bias_pct`` and ``worst_rounded_data_bias``:
+      the linearised bias against the rounded data (what a fit of the model-error data with that
+      mesh finds, Table 1), beside ``data_bias_pct`` (against the unrounded response);
+    * ``rounding_floor_pct``: the exact data model's linearised step on its rounded data
+      (:func:`problems.analysis.convergence.rounding_floor`) with the Jacobian of the solved mesh
+      with the most dofs that has one (``rounding_floor_mesh``), and
+      ``rounding_floor_spread_pct``: its largest difference with the Jacobian of any other mesh
+      of the same element (its uncertainty from the Jacobian).
+
+    Returns ``summary`` (changed in place); unchanged when no mesh has a Jacobian. ValueError
+    when the records' layout is not the tier's (another number of front-face points)."""
+    from problems.inverse.data import rounded, tier_settings
+
+    data = records[summary["data_mesh"]]
+    N, m = data["n_snapshots"], data["n_points"]
+    settings = tier_settings("model-error", snapshots=N)
+    if len(settings.points) != m:
+        raise ValueError(
+            f"the mesh records have {m} front-face points; the model-error data have "
+            f"{len(settings.points)}"
+        )
+    exact = np.asarray(data["values"], float)
+    data_values = rounded(exact, settings)
+    sd = conv.noise_sd(N, m)
+    names = summary["parameters"]
+    for row in summary["meshes"]:
+        r = records[row["mesh"]]
+        if r["ok"] and r["jacobian"] is not None:
+            bias = conv.linearised_bias(
+                np.asarray(r["jacobian"]), np.asarray(r["values"]) - data_values, sd, r["reference"]
+            )
+            row["rounded_data_bias_pct"] = {n: 100.0 * b for n, b in zip(names, bias)}
+            row["worst_rounded_data_bias"] = _worst(names, bias)
+    with_jacobian = sorted(
+        (r for r in records.values() if r["ok"] and r["jacobian"] is not None),
+        key=lambda r: -r["dofs"],
+    )
+    if not with_jacobian:
+        return summary
+    # the spread over the meshes of the finest's element (an 8-node mesh of the hex27 study
+    # misses the data by 60 % or more: its Jacobian is not the data model's)
+    with_jacobian = [r for r in with_jacobian if r["element"] == with_jacobian[0]["element"]]
+    floor, spread = conv.rounding_floor(
+        [np.asarray(r["jacobian"]) for r in with_jacobian],
+        exact,
+        data_values,
+        sd,
+        data["reference"],
+    )
+    summary["rounding_floor_mesh"] = with_jacobian[0]["mesh"]
+    summary["rounding_floor_pct"] = {n: 100.0 * float(v) for n, v in zip(names, floor)}
+    summary["rounding_floor_spread_pct"] = {n: 100.0 * float(v) for n, v in zip(names, spread)}
+    return summary
 
 
 def plate_margin_summary(records: dict, data_mesh: str, margins_mm) -> dict:
@@ -367,10 +432,13 @@ def plate_margin_summary(records: dict, data_mesh: str, margins_mm) -> dict:
 
 
 def update_plate_margin(folder: str | Path, margins_mm) -> Path | None:
-    """Redo the plate-margin analysis of a study's folder for ``margins_mm`` (mm) from its mesh
-    records (no FE solve) and rewrite ``convergence.json`` with it; the path, or None when the
-    study has no data mesh (nothing to analyse). ValueError (one line) when a mesh record is
-    missing or torn."""
+    """Redo the analyses of a study's folder against the model-error data from its mesh records
+    (no FE solve): the rounding floor and each mesh's bias against the rounded data
+    (:func:`add_rounding`) and, for ``margins_mm`` (mm; none when empty), the plate-margin
+    analysis; rewrite ``convergence.json`` and ``convergence.md``. Returns the json's path, or
+    None when the study has no data mesh (nothing to analyse) or, without margins, a mesh record
+    is missing (the mesh records are local caches: the shipped summary stays). ValueError (one
+    line) when a mesh record is missing or torn and margins are asked for."""
     folder = Path(folder)
     summary = read_json(folder / "convergence.json")
     if not summary.get("data_mesh"):
@@ -379,11 +447,16 @@ def update_plate_margin(folder: str | Path, margins_mm) -> Path | None:
     for spec in (r["mesh"] for r in summary["meshes"]):
         records[spec] = read_record(record_path(folder, spec), summary["case"], spec)
         if records[spec] is None:
+            if not len(margins_mm):
+                return None
             raise ValueError(
                 f"{record_path(folder, spec)}: the mesh record is missing or torn; the "
                 "plate-margin analysis needs every mesh record (run the study without --render)"
             )
-    summary["plate_margin"] = plate_margin_summary(records, summary["data_mesh"], margins_mm)
+    add_rounding(summary, records)
+    if len(margins_mm):
+        summary["plate_margin"] = plate_margin_summary(records, summary["data_mesh"], margins_mm)
+    atomic_write_text(folder / "convergence.md", markdown(summary))
     return atomic_write_text(folder / "convergence.json", jsonio.dumps(summary, indent=1) + "\n")
 
 
@@ -463,6 +536,8 @@ def markdown(summary: dict) -> str:
         }
         if summary.get("data_mesh"):
             row["worst bias vs the data mesh"] = _bias_text(r.get("worst_data_bias"))
+        if "rounding_floor_pct" in summary:
+            row["worst bias vs the rounded data"] = _bias_text(r.get("worst_rounded_data_bias"))
         rows.append(row)
     table = markdown_table(
         rows,
@@ -486,9 +561,47 @@ def markdown(summary: dict) -> str:
             "vs the data mesh' is each mesh's linearised bias against its response (what an "
             "inverse model on that mesh meets in the model-error data, rounding aside).",
         ]
+        if "rounding_floor_pct" in summary:
+            lines[-1] += (
+                " 'worst bias vs the rounded data': against the data as the tier makes them "
+                "(displacements rounded to 1 um, forces to 0.1 kN): what a fit of the "
+                "model-error data with that mesh finds."
+            )
     return "\n".join(
-        lines + ["", "## Meshes", "", table, "", "## Linearised parameter bias (%)", "", bias, ""]
+        lines
+        + ["", "## Meshes", "", table, "", "## Linearised parameter bias (%)", "", bias, ""]
+        + _rounding_floor_lines(summary)
     )
+
+
+def _rounding_floor_lines(summary: dict) -> list[str]:
+    """The case markdown's section on the rounding floor (:func:`add_rounding`; none without
+    it): per parameter the floor, its spread over the Jacobians and each mesh's bias against the
+    rounded data."""
+    if "rounding_floor_pct" not in summary:
+        return []
+    floor, spread = summary["rounding_floor_pct"], summary["rounding_floor_spread_pct"]
+    rows = [
+        {"": "rounding floor", **floor},
+        {"": "spread over the Jacobians", **spread},
+    ] + [
+        {"": r["mesh"], **r["rounded_data_bias_pct"]}
+        for r in summary["meshes"]
+        if "rounded_data_bias_pct" in r
+    ]
+    return [
+        "## The rounding floor of the model-error data (%)",
+        "",
+        "The data mesh's own linearised step on its data rounded as the tier rounds them (1 um, "
+        f"0.1 kN), with the Jacobian of {summary['rounding_floor_mesh']} (spread: the largest "
+        "difference with another mesh's Jacobian of its element): what the exact model finds "
+        "on these data, the floor no inverse model beats on average. Then each mesh's "
+        "linearised bias against the rounded data (its bias against the unrounded response "
+        "plus, to first order, the floor).",
+        "",
+        markdown_table(rows, {p: "+.2f" for p in summary["parameters"]}),
+        "",
+    ]
 
 
 def render_convergence(folder: str | Path) -> Path:
@@ -639,6 +752,7 @@ def render_overview(root: str | Path) -> Path:
             "",
             markdown_table(cand_rows, {"worst |bias| (%)": ".2f", "CPU s (max)": ".1f"}),
         ]
+    parts += _rounding_floor_section(studies)
     parts += _plate_margin_section(root, studies)
     parts += [
         "## Meshes",
@@ -646,6 +760,59 @@ def render_overview(root: str | Path) -> Path:
         markdown_table(rows, {"RMS (sigma)": ".2f", "force (%)": "+.3f", "CPU s": ".1f"}),
     ]
     return atomic_write_text(root / "overview.md", "\n".join(parts))
+
+
+#: the meshes whose bias against the rounded data the overview shows beside the unrounded one:
+#: the default inverse model on the model-error tier
+#: (:data:`problems.inverse.data.MODEL_ERROR_INVERSE_MESH`) and the next of its family
+ROUNDING_MESHES = ("6,6,12:g8:hex27", "9,9,18:g8:hex27")
+
+
+def _rounding_floor_section(studies) -> list[str]:
+    """The overview's section on the data's rounding floor (:func:`add_rounding`; none without
+    it): per case the worst parameter's floor, every parameter's floor and its spread, and the
+    worst bias of :data:`ROUNDING_MESHES` against the rounded data beside the same parameter's
+    bias against the unrounded response."""
+    rows = []
+    for _, _, s in studies:
+        if "rounding_floor_pct" not in s:
+            continue
+        floor, spread = s["rounding_floor_pct"], s["rounding_floor_spread_pct"]
+        worst = max(floor, key=lambda n: abs(floor[n]))
+        row = {
+            "case": s["case"],
+            "worst floor": f"{worst} {floor[worst]:+.2f} %",
+            "floor of every parameter (%)": ", ".join(f"{n} {v:+.2f}" for n, v in floor.items()),
+            "spread (%)": max(spread.values()),
+        }
+        by_mesh = {r["mesh"]: r for r in s["meshes"]}
+        for mesh in ROUNDING_MESHES:
+            r = by_mesh.get(mesh, {})
+            w = r.get("worst_rounded_data_bias")
+            row[f"{mesh}: rounded (unrounded)"] = (
+                "-"
+                if w is None
+                else f"{w['parameter']} {w['pct']:+.2f} % "
+                f"({r['data_bias_pct'][w['parameter']]:+.2f} %)"
+            )
+        rows.append(row)
+    if not rows:
+        return []
+    return [
+        "## The rounding floor of the model-error data",
+        "",
+        "The model-error data are the data mesh's response rounded to 1 um (displacements) and "
+        "0.1 kN (force). The rounding floor is the exact data model's linearised step on these "
+        "data, dx / x_ref = -(J^T W J)^-1 J^T W (U_data mesh - round(U_data mesh)), with the "
+        "Jacobian of the finest solved mesh that has one (spread: the largest difference with "
+        "another mesh's Jacobian of its element): what the exact model would find on these "
+        "data, so no inverse model does better on average. Beside it the worst linearised bias "
+        "against the rounded data (what Table 1's fits find) of the default inverse model and "
+        "of 9,9,18:g8:hex27, with the same parameter's bias against the unrounded response in "
+        "brackets.",
+        "",
+        markdown_table(rows, {"spread (%)": ".2f"}),
+    ]
 
 
 def _plate_margin_section(root: Path, studies) -> list[str]:

@@ -167,6 +167,21 @@ def linearised_bias(jacobian, residual, sd, x_ref) -> np.ndarray:
     return dz
 
 
+def rounding_floor(jacobians, exact, rounded, sd, x_ref) -> tuple[np.ndarray, np.ndarray]:
+    """The rounding floor of a data set: the linearised step (fractions of ``x_ref``) the exact
+    data model itself takes on its rounded data, residual r = ``exact`` - ``rounded`` (m,) (the
+    data model's response at ``x_ref`` and the data made from it), noise ``sd`` (m,):
+    :func:`linearised_bias` with ``jacobians[0]`` (m, n), the best available Jacobian. Returns
+    ``(floor, spread)``: ``spread`` (n,) the largest |difference| of the floor with any other of
+    ``jacobians`` (its uncertainty from the Jacobian; zeros with one). For a linear model the
+    floor is exact, and a model's linearised bias against the rounded data is its bias against
+    the exact data plus the floor (superposition)."""
+    r = np.asarray(exact, float) - np.asarray(rounded, float)
+    floors = [linearised_bias(J, r, sd, x_ref) for J in jacobians]
+    spread = np.max(np.abs(np.array(floors) - floors[0]), axis=0)
+    return floors[0], spread
+
+
 def parameter_sd(jacobian, sd, x_ref) -> np.ndarray:
     """Noise standard deviation of each parameter's least-squares estimate relative to ``x_ref``
     (fractions): sqrt diag (J^T W J)^-1 / x_ref, W = diag(sd^-2), for the noise ``sd`` (m,) of

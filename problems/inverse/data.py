@@ -290,6 +290,27 @@ def _round(values: np.ndarray, step: float) -> np.ndarray:
     return np.round(values / step) * step if step > 0 else values
 
 
+def rounded(values, settings: DataSettings) -> np.ndarray:
+    """A measurement vector ``values`` (:mod:`problems.inverse.layout`: ``settings.snapshots`` x
+    the points of ``settings``) rounded as :func:`make_data` rounds the FE route's data:
+    displacements (mm) to ``resolution_um`` um, forces (kN) to ``force_resolution_kN`` kN (a
+    step 0: unchanged). ValueError when the length does not fit the settings' layout."""
+    from problems.inverse import layout
+
+    v = np.asarray(values, dtype=float)
+    N, m = settings.snapshots, len(settings.points)
+    if v.shape != (layout.size(N, m),):
+        raise ValueError(
+            f"a measurement vector of shape {v.shape} does not fit {N} snapshots x {m} points "
+            f"({layout.size(N, m)} values)"
+        )
+    b = layout.blocks(N, m)
+    out = v.copy()
+    out[b["displacement"]] = _round(v[b["displacement"]], settings.resolution_um * 1e-3)
+    out[b["force"]] = _round(v[b["force"]], settings.force_resolution_kN)
+    return out
+
+
 def displacement_std_mm(settings: DataSettings) -> float:
     """Standard deviation of one displacement value: uniform rounding error (step/sqrt 12) and
     noise.
