@@ -114,3 +114,16 @@ def test_render_adds_the_floor_from_the_records_and_keeps_the_summary_without_th
     worst = max(floor.values(), key=abs)
     assert f"| rounding floor | {floor['E']:+.2f} | {floor['sigma0']:+.2f} |" in text
     assert worst != 0.0
+
+
+def test_the_shipped_model_error_data_are_fixed_points_of_the_rounding():
+    """The shipped data set of a case is already rounded in the units rounded() assumes (mm,
+    kN): rounding it again, or after a shift below half a step, gives it back."""
+    from problems.inverse.data import get_data
+
+    settings = tier_settings("model-error", "6,6,12:g8:hex27")
+    values = get_data("exponent-tension", settings).values
+    assert np.abs(rounded(values, settings) - values).max() < 1e-12
+    shifted = values + 0.4e-3  # 0.4 um on a displacement, 0.0004 kN on a force
+    assert np.abs(rounded(shifted, settings) - values).max() < 1e-12
+    assert np.abs(rounded(values + 0.6e-3, settings) - values).max() > 0.9e-3

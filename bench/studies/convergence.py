@@ -14,6 +14,7 @@ Files, in ``results/studies/convergence/<case>/`` (or ``--out``):
   each);
 * ``convergence.json`` — the summary: per family the observed orders and the extrapolated force
   curve, per mesh the errors, biases and times, and, with the model-error tier's data mesh, the
+  rounding floor and each mesh's bias against the rounded data (:func:`add_rounding`) and the
   plate-margin analysis (``plate_margin``: :func:`plate_margin_summary`) (small);
 * ``extrapolated.json`` — the Richardson-extrapolated measurement vector (front-face fields and
   forces) the errors are measured against;

@@ -18,7 +18,9 @@ bias of a mesh is the Gauss-Newton step a perfect optimiser would take from the 
 when the mesh's response at x_ref misses the reference data by r = U_mesh(x_ref) - U_ref:
 dx = -(J^T W J)^-1 J^T W r, W = diag(1 / sigma^2), J the mesh's exact Jacobian; restricted to
 the rows of a measurement region (a plate margin, :func:`plate_margin_study`) it is the bias of a
-fit of that region, and sqrt diag (J^T W J)^-1 the noise sd of its estimate.
+fit of that region, and sqrt diag (J^T W J)^-1 the noise sd of its estimate. With
+r = U_ref - round(U_ref) (the reference's rounding to the data's resolution) the same step is the
+rounding floor (:func:`rounding_floor`): what the exact model finds on the rounded data.
 """
 
 from __future__ import annotations
