@@ -8,6 +8,7 @@ this package runs from (the folder holding ``pyproject.toml``); else, for an ins
 
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 
@@ -31,3 +32,31 @@ def default_dir(*parts: str) -> Path:
     path = results_root().joinpath(*parts)
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def output_file(text: str) -> str:
+    """A file to be written, checked before any work: not an existing directory, its folder an
+    existing, writable folder (so that a long computation never ends on an unwritable path)."""
+    p = Path(text)
+    if not text:
+        raise argparse.ArgumentTypeError("empty file name")
+    if p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a directory; give a file name")
+    parent = p.parent
+    if not parent.exists():
+        raise argparse.ArgumentTypeError(f"{text}: folder {parent} does not exist; create it first")
+    if not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: {parent} is a file, not a folder")
+    if not_writable(p):
+        raise argparse.ArgumentTypeError(f"{text} is not writable (permission denied)")
+    return text
+
+
+def not_writable(path) -> bool:
+    """True when ``path`` cannot be written: the file exists read-only, or its nearest existing
+    folder does not allow creating files (a missing folder is created by the writer)."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        return not os.access(p, os.W_OK)
+    folder = next((q for q in (p, *p.parents) if q.exists()), Path("."))
+    return folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK)

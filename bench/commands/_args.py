@@ -22,6 +22,8 @@ import argparse
 import math
 from pathlib import Path
 
+from bench.paths import not_writable, output_file  # noqa: F401 (the options' checks)
+
 ArgumentTypeError = argparse.ArgumentTypeError
 
 
@@ -183,36 +185,6 @@ def input_file(text: str) -> str:
     if not p.is_file():
         raise ArgumentTypeError(f"{text} does not exist")
     return text
-
-
-def output_file(text: str) -> str:
-    """A file to be written, checked before any work: not an existing directory, its folder an
-    existing, writable folder (so that a long computation never ends on an unwritable path)."""
-    p = Path(text)
-    if not text:
-        raise ArgumentTypeError("empty file name")
-    if p.is_dir():
-        raise ArgumentTypeError(f"{text} is a directory; give a file name")
-    parent = p.parent
-    if not parent.exists():
-        raise ArgumentTypeError(f"{text}: folder {parent} does not exist; create it first")
-    if not parent.is_dir():
-        raise ArgumentTypeError(f"{text}: {parent} is a file, not a folder")
-    if not_writable(p):
-        raise ArgumentTypeError(f"{text} is not writable (permission denied)")
-    return text
-
-
-def not_writable(path) -> bool:
-    """True when ``path`` cannot be written: the file exists read-only, or its nearest existing
-    folder does not allow creating files (a missing folder is created by the writer)."""
-    import os
-
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        return not os.access(p, os.W_OK)
-    folder = next((q for q in (p, *p.parents) if q.exists()), Path("."))
-    return folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK)
 
 
 def output_dir(text: str) -> str:

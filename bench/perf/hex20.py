@@ -53,12 +53,13 @@ import argparse
 import dataclasses
 import sys
 import time
+from argparse import ArgumentTypeError
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from bench.commands._args import ArgumentTypeError, output_file
+from bench.paths import output_file
 from problems.analysis.convergence import SIGMA_DISPLACEMENT_MM, observed_order, richardson
 from problems.fe.front_face import front_face_operator, measurement_grid
 from problems.fe.mesh import SIZE_MM, parse_mesh_spec
