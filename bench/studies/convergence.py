@@ -596,7 +596,8 @@ def _rounding_floor_lines(summary: dict) -> list[str]:
         "The data mesh's own linearised step on its data rounded as the tier rounds them (1 um, "
         f"0.1 kN), with the Jacobian of {summary['rounding_floor_mesh']} (spread: the largest "
         "difference with another mesh's Jacobian of its element): what the exact model finds "
-        "on these data, the floor no inverse model beats on average. Then each mesh's "
+        "on these data (a model lands closer only where its own bias cancels part of it). "
+        "Then each mesh's "
         "linearised bias against the rounded data (its bias against the unrounded response "
         "plus, to first order, the floor).",
         "",
@@ -807,7 +808,8 @@ def _rounding_floor_section(studies) -> list[str]:
         "data, dx / x_ref = -(J^T W J)^-1 J^T W (U_data mesh - round(U_data mesh)), with the "
         "Jacobian of the finest solved mesh that has one (spread: the largest difference with "
         "another mesh's Jacobian of its element): what the exact model would find on these "
-        "data, so no inverse model does better on average. Beside it the worst linearised bias "
+        "data (a model lands closer only where its own bias cancels part of it). Beside it the "
+        "worst linearised bias "
         "against the rounded data (what Table 1's fits find) of the default inverse model and "
         "of 9,9,18:g8:hex27, with the same parameter's bias against the unrounded response in "
         "brackets.",
