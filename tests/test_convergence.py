@@ -166,6 +166,7 @@ def test_study_on_tiny_meshes_resumes_and_recomputes_a_torn_record(tmp_path):
         (["--compare", "6,6"], "--compare: mesh '6,6' is unknown"),
         (["--compare", "coarse", "6,6,12:g16:gz8", "6,6,12:g16:gz8:eighth"], "give each mesh once"),
         (["--sizes", "6,10,14", "--compare", "10,10,20:g4"], "the same discretisation as 10,10,20"),
+        (["--no-compare", "--plain", "14,14,28"], "--plain 14,14,28: not a mesh of this study"),
     ],
 )
 def test_bad_options_are_one_line_errors(argv, words, capsys, tmp_path):

@@ -175,3 +175,26 @@ def test_a_shipped_set_made_with_other_settings_is_served_with_a_warning(monkeyp
     with pytest.warns(UserWarning, match=made):
         ds = data.get_data(CASE, data.tier_settings("model-error"))
     assert ds.settings.mesh == "12,12,24:g8:hex27"
+
+
+def test_a_plain_mesh_is_solved_once_without_jacobian_and_again_when_asked_with_one(
+    counted_runs, tmp_path
+):
+    """``plain`` meshes (the finest of a study) go through the response cache without the
+    Jacobian: they extend the extrapolation, their errors are measured, their bias is not; a
+    later study that wants the mesh's Jacobian solves it again."""
+    family = {"hex8 g4": ["2,2,4:g4", "3,3,6:g4", "4,4,8:g4"]}
+    folder = run_convergence(CASE, family, [], tmp_path / "s", plain=["4,4,8:g4:quarter"])
+    assert counted_runs == ["2,2,4:g4", "3,3,6:g4", "4,4,8:g4"]
+    entries = {p.name.split("__")[1] for p in response_cache.folder().iterdir()}
+    assert entries == {"3x3x6_g4", "4x4x8_g4"}  # the data mesh and the plain one
+    rows = {r["mesh"]: r for r in json.loads((folder / "convergence.json").read_text())["meshes"]}
+    assert rows["4,4,8:g4"]["ok"] and rows["4,4,8:g4"]["message"] == "no Jacobian (a plain run)"
+    assert "worst_bias" not in rows["4,4,8:g4"] and "worst_bias" in rows["2,2,4:g4"]
+    assert 0 < rows["4,4,8:g4"]["rms_sigma"] < rows["2,2,4:g4"]["rms_sigma"]  # in the family
+    first = rows["2,2,4:g4"]["rms_sigma"]
+    counted_runs.clear()
+    folder = run_convergence(CASE, family, [], tmp_path / "s")  # now with its Jacobian
+    assert counted_runs == ["4,4,8:g4"]  # the data mesh's plain record is kept
+    rows = {r["mesh"]: r for r in json.loads((folder / "convergence.json").read_text())["meshes"]}
+    assert "worst_bias" in rows["4,4,8:g4"] and rows["2,2,4:g4"]["rms_sigma"] == first

@@ -107,6 +107,16 @@ def add_arguments(p) -> None:
     )
     p.add_argument("--no-compare", action="store_true", help="no comparison meshes")
     p.add_argument(
+        "--plain",
+        type=mesh_spec,
+        nargs="+",
+        metavar="MESH",
+        default=(),
+        help="meshes of the study solved without the exact Jacobian, through the response cache "
+        "shared with `femubench data` (~2/3 of the cost; their errors are measured, their own "
+        "bias is not): for the finest meshes, space-separated",
+    )
+    p.add_argument(
         "--out",
         metavar="DIR",
         type=output_dir,
@@ -173,6 +183,12 @@ def main(args) -> int:
                 "mesh once"
             )
         seen[key] = spec
+    for spec in args.plain:
+        if discretisation_key(spec) not in seen:
+            raise ValueError(
+                f"--plain {spec}: not a mesh of this study; allowed: one of "
+                f"{', '.join(seen.values())}"
+            )
     outs = {
         name: args.out if args.out is None or len(cases) == 1 else Path(args.out) / name
         for name in cases
@@ -191,7 +207,9 @@ def main(args) -> int:
                 print(f"wrote {folder / 'convergence.json'} (rounding floor, plate margins)")
         else:
             margins = args.plate_margins or DEFAULT_PLATE_MARGINS
-            folder = run_convergence(name, families, compare, outs[name], report, margins)
+            folder = run_convergence(
+                name, families, compare, outs[name], report, margins, args.plain
+            )
         print(f"wrote {render_from(render_convergence, folder)}")
     default_root = default_output_dir(STUDY, cases[0]).parent
     roots = []

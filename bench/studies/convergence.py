@@ -107,15 +107,16 @@ def read_record(path: Path, case: str, spec: str) -> dict | None:
     return doc
 
 
-def solve_mesh(case_name: str, spec: str) -> dict:
+def solve_mesh(case_name: str, spec: str, jacobian: bool = True) -> dict:
     """One mesh at the case's reference: measurement vector, exact Jacobian (columns the case's
     parameters, physical units), element size (mm), elements, solved dofs, CPU and wall time (s)
     of the response + Jacobian run (the discretisation is built first, not timed).
 
-    The model-error tier's data mesh is taken from :mod:`problems.inverse.response_cache`: the
-    run ``femubench data`` makes that tier from (solved once for both; computed here, without a
-    Jacobian, if missing). Without a Jacobian its record has ``jacobian`` None: its errors are
-    measured, its own bias is not."""
+    The model-error tier's data mesh, and any mesh asked for without a Jacobian
+    (``jacobian=False``: a *plain* run, ~2/3 of the cost, for the finest meshes of a study), is
+    taken from :mod:`problems.inverse.response_cache`: the run ``femubench data`` makes that tier
+    from (solved once for both; computed here, without a Jacobian, if missing). Without a
+    Jacobian its record has ``jacobian`` None: its errors are measured, its own bias is not."""
     from bench.progress import solved_dofs
     from problems.inverse import response_cache
     from problems.inverse.cases import get_case
@@ -125,7 +126,8 @@ def solve_mesh(case_name: str, spec: str) -> dict:
 
     case = get_case(case_name)
     model = FEForwardModel(case, mesh=spec)
-    if shares_reference_solve(spec):
+    plain = not jacobian or shares_reference_solve(spec)
+    if plain:
         run = response_cache.solve(model, case.reference, jacobian=False)
         res = ForwardResult(
             run["ok"],
@@ -155,9 +157,8 @@ def solve_mesh(case_name: str, spec: str) -> dict:
         "elements": n_elements,
         "dofs": solved_dofs(spec),
         "h_mm": conv.element_size_mm(np.prod(SIZE_MM), n_elements),
-        "ok": bool(res.ok and (res.jacobian is not None or shares_reference_solve(spec))),
-        "message": res.message
-        or ("" if res.jacobian is not None else "no Jacobian (the data run has none)"),
+        "ok": bool(res.ok and (res.jacobian is not None or plain)),
+        "message": res.message or ("" if res.jacobian is not None else "no Jacobian (a plain run)"),
         "cpu_s": cpu,
         "wall_s": wall,
         "plain_wall_s": res.plain_wall_s,
@@ -177,20 +178,30 @@ def run_convergence(
     out: str | Path | None = None,
     report=None,
     plate_margins=DEFAULT_PLATE_MARGINS,
+    plain=(),
 ) -> Path:
     """Solve (or reuse) every mesh of ``families`` ({label: specs coarse to fine}) and ``compare``
     for ``case``, write the summary, the extrapolation and the markdown table; returns the output
     folder. ``report(record, reused)`` is called after each mesh; ``plate_margins`` (mm) are
-    those of the plate-margin analysis (:func:`plate_margin_summary`; with the data mesh)."""
+    those of the plate-margin analysis (:func:`plate_margin_summary`; with the data mesh);
+    ``plain``: specs (any spelling) solved without the Jacobian (:func:`solve_mesh`). A stored
+    record without a Jacobian is solved again when its mesh is not plain (nor the data mesh)."""
+    from problems.inverse.data import shares_reference_solve
+
     folder = output_dir(STUDY, case, out)
     specs = [s for fam in families.values() for s in fam] + [s for s in compare]
+    plain_keys = {discretisation_key(s) for s in plain}
     records = {}
     for spec in dict.fromkeys(specs):
+        jacobian = discretisation_key(spec) not in plain_keys
         path = record_path(folder, spec)
         rec = read_record(path, case, spec)
+        if rec and rec["ok"] and rec["jacobian"] is None and jacobian:
+            # a plain record of a mesh now asked with its Jacobian (the data mesh's has none)
+            rec = rec if shares_reference_solve(spec) else None
         reused = rec is not None
         if rec is None:
-            rec = solve_mesh(case, spec)
+            rec = solve_mesh(case, spec, jacobian)
             write_record(path, rec)
         records[spec] = rec
         if report is not None:
