@@ -53,7 +53,6 @@ import argparse
 import dataclasses
 import sys
 import time
-from argparse import ArgumentTypeError
 from pathlib import Path
 
 import numpy as np
@@ -331,7 +330,7 @@ def main(argv=None) -> int:
         if args.out is not None:  # before minutes of work, not after
             try:
                 output_file(str(args.out))
-            except ArgumentTypeError as exc:
+            except argparse.ArgumentTypeError as exc:
                 raise ValueError(f"--out {exc}") from None
         try:
             import skfem  # noqa: F401
