@@ -151,12 +151,14 @@ def test_the_code_hash_follows_the_response_sources_only(tmp_path):
         "inverse/forward.py",
         "inverse/data.py",
         "analysis/gsa.py",
+        "fe/presets.py",
     ):
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_text(f"# {rel}\n")
     before = response_cache.sources_hash(tmp_path)
     (tmp_path / "inverse/data.py").write_text("changed\n")  # not a response source
     (tmp_path / "analysis/gsa.py").write_text("changed\n")
+    (tmp_path / "fe/presets.py").write_text("changed\n")  # names only: requests spell them out
     assert response_cache.sources_hash(tmp_path) == before
     for rel in ("fe/sub/kernel.py", "materials/dp.py", "inverse/forward.py"):
         (tmp_path / rel).write_text("changed\n")

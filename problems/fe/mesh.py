@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from problems.fe.presets import MESH_PRESETS, SPEC_PRESETS  # noqa: F401 (this module's API)
+
 #: the whole specimen of the default test, (x, y, z) extents in mm: the 150 mm cube
 SPECIMEN_MM = (150.0, 150.0, 150.0)
 
@@ -38,22 +40,6 @@ def quarter_size(specimen_mm=SPECIMEN_MM) -> tuple[float, float, float]:
 
 #: the quarter model of the default specimen
 SIZE_MM = quarter_size(SPECIMEN_MM)
-#: named presets: ``coarse`` ~ 400-600, ``paper`` ~ 5 000 (paper: 4 960), ``fine`` 15 000-20 000
-#: elements
-MESH_PRESETS: dict[str, tuple[int, int, int]] = {
-    "coarse": (6, 6, 12),  # 432 elements, 12.5 mm cubes
-    # 5 096 elements (was 14 x 14 x 25: nz even gives the exact eighth model)
-    "paper": (14, 14, 26),
-    "fine": (20, 20, 40),  # 16 000 elements, 3.75 mm cubes
-    # 27 648 elements, 3.125 mm cubes: the former model-error data mesh (not converged: 5.3 sigma,
-    # +0.35 % in force on linear-compression; docs/fe_model.md)
-    "xfine": (24, 24, 48),
-}
-#: named full specs (size and tokens): ``converged`` is the model-error tier's data mesh, the
-#: 27-node 12 x 12 x 24 quarter graded with ratio 8 (46 875 dofs; within 0.3 sigma RMS and
-#: 0.05 % in force of the Richardson extrapolation on every case, docs/fe_model.md)
-SPEC_PRESETS: dict[str, str] = {"converged": "12,12,24:g8:hex27"}
-
 #: models of the quarter mesh: ``eighth`` solves z in [0, 75] mm and unfolds it (nz even only),
 #: ``quarter`` all of it
 SYMMETRIES = ("eighth", "quarter")
