@@ -240,10 +240,10 @@ def plate_margin_study(
 #: ``gR``, was never studied and takes the element's): the smallest order observed in the shipped
 #: convergence studies of that family (results/studies/convergence, every case, field and force,
 #: every triple; few families are asymptotic throughout), rounded down. A smaller p widens the
-#: band. hex27 g8 (the default inverse model's, nine cases, six of them with the fifth mesh
-#: 18,18,36:g8:hex27): field 1.97 -> 3.63, force down to 1.13 (exponent-tension, the five-mesh
-#: study's finest triple 9,9,18 / 12,12,24 / 18,18,36); other hex27 gradings (g4, nine
-#: cases): down to 0.93; hex8 (nine cases): down to 0.68
+#: band. hex27 g8 (the default inverse model's, nine cases, with the fifth mesh
+#: 18,18,36:g8:hex27): down to 1.13, exponent-tension's force on the five-mesh study's finest
+#: triple 9,9,18 / 12,12,24 / 18,18,36 (the field's orders are higher); other hex27 gradings
+#: (g4, nine cases): down to 0.93; hex8 (nine cases): down to 0.68
 GCI_ORDERS = {"hex27 g8": 1.13, "hex27": 0.92, "hex8": 0.67}
 #: Roache's safety factor of a grid convergence index from two discretisations, or from three
 #: outside the asymptotic range (1.25 is for three grids with an asymptotic observed order)
