@@ -195,6 +195,9 @@ def test_a_plain_mesh_is_solved_once_without_jacobian_and_again_when_asked_with_
     assert "worst_bias" not in rows["4,4,8:g4"] and "worst_bias" in rows["2,2,4:g4"]
     assert 0 < rows["4,4,8:g4"]["rms_sigma"] < rows["2,2,4:g4"]["rms_sigma"]  # in the family
     first = rows["2,2,4:g4"]["rms_sigma"]
+    text = render_overview(tmp_path).read_text()  # the plain mesh is no inverse-model candidate
+    candidates = text.split("## Candidate inverse models")[1].split("##")[0]
+    assert "| 2,2,4:g4 |" in candidates and "4,4,8:g4" not in candidates
     counted_runs.clear()
     folder = run_convergence(CASE, family, [], tmp_path / "s")  # now with its Jacobian
     assert counted_runs == ["4,4,8:g4"]  # the data mesh's plain record is kept

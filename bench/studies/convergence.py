@@ -728,6 +728,8 @@ def render_overview(root: str | Path) -> Path:
             "CPU s (max)": max(r["cpu_s"] for r in by_case.values()),
         }
         for mesh, by_case in candidates.items()
+        # a mesh without a Jacobian in any case (a plain run: a reference candidate) has no bias
+        if any("worst_data_bias" in r for r in by_case.values())
     ]
     cand_rows.sort(key=lambda r: r["dofs"])
     parts = [
