@@ -194,6 +194,15 @@ def test_a_plain_mesh_is_solved_once_without_jacobian_and_again_when_asked_with_
     assert rows["4,4,8:g4"]["ok"] and rows["4,4,8:g4"]["message"] == "no Jacobian (a plain run)"
     assert "worst_bias" not in rows["4,4,8:g4"] and "worst_bias" in rows["2,2,4:g4"]
     assert 0 < rows["4,4,8:g4"]["rms_sigma"] < rows["2,2,4:g4"]["rms_sigma"]  # in the family
+    # meshes without a Jacobian get their own bias estimated through 2,2,4:g4's: its bias
+    # against the extrapolation minus its bias against their response
+    assert rows["4,4,8:g4"]["bias_est_via"] == rows["3,3,6:g4"]["bias_est_via"] == "2,2,4:g4"
+    coarse = rows["2,2,4:g4"]
+    for name, est in rows["3,3,6:g4"]["bias_est_pct"].items():
+        assert est == pytest.approx(
+            coarse["bias_pct"][name] - coarse["data_bias_pct"][name], abs=1e-9
+        )
+    assert "bias_est_pct" not in coarse
     first = rows["2,2,4:g4"]["rms_sigma"]
     text = render_overview(tmp_path).read_text()  # the plain mesh is no inverse-model candidate
     candidates = text.split("## Candidate inverse models")[1].split("##")[0]

@@ -299,6 +299,7 @@ def analyse(
                     row["data_bias_pct"] = {n: 100.0 * b for n, b in zip(r["names"], data_bias)}
                     row["worst_data_bias"] = _worst(r["names"], data_bias)
             rows.append(row)
+    _estimate_missing_biases(rows, records, families[ref_label], ref, sd)
     summary = {
         "schema": SCHEMA,
         "case": case,
@@ -472,6 +473,32 @@ def update_plate_margin(folder: str | Path, margins_mm) -> Path | None:
     return atomic_write_text(folder / "convergence.json", jsonio.dumps(summary, indent=1) + "\n")
 
 
+def _estimate_missing_biases(rows, records: dict, family, ref, sd) -> None:
+    """For each solved mesh without a Jacobian (the data mesh, plain runs) its own linearised
+    bias against the extrapolation ``ref`` seen through the Jacobian of the reference family's
+    finest mesh that has one (``bias_est_pct``, ``worst_bias_est``, ``bias_est_via``): in the
+    linearisation that mesh's bias against ``ref`` minus its bias against the mesh's response,
+    i.e. an estimate, exact only when the two Jacobians agree."""
+    via = next(
+        (s for s in reversed(family) if records[s]["ok"] and records[s]["jacobian"] is not None),
+        None,
+    )
+    if via is None:
+        return
+    J, names, reference = (
+        np.asarray(records[via]["jacobian"]),
+        records[via]["names"],
+        records[via]["reference"],
+    )
+    for row in rows:
+        r = records[row["mesh"]]
+        if r["ok"] and r["jacobian"] is None:
+            bias = conv.linearised_bias(J, np.asarray(r["values"]) - ref, sd, reference)
+            row["bias_est_pct"] = {n: 100.0 * b for n, b in zip(names, bias)}
+            row["worst_bias_est"] = _worst(names, bias)
+            row["bias_est_via"] = via
+
+
 def _data_mesh(specs, records: dict) -> str | None:
     """The spec among ``specs`` whose record is of the model-error tier's data mesh
     (:data:`problems.inverse.data.MODEL_ERROR_MESH`, any spelling: by its ``key``) and solved,
@@ -541,6 +568,8 @@ def markdown(summary: dict) -> str:
             "worst bias": (
                 f"{r['worst_bias']['parameter']} {r['worst_bias']['pct']:+.2f} %"
                 if "worst_bias" in r
+                else f"{_bias_text(r['worst_bias_est'])} (est. via {r['bias_est_via']})"
+                if "worst_bias_est" in r
                 else r["message"]
             ),
             "CPU s": r["cpu_s"],
