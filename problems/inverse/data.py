@@ -7,13 +7,13 @@ Two tiers, labelled in every file, record and report:
 
 * ``model-error``: made on ``12,12,24:g8:hex27`` (the preset ``converged``: 27-node Q2-P1
   hexahedra, 12 x 12 x 24 quarter graded with ratio 8 toward the plate edges and free faces),
-  the converged reference
-  of the convergence study (within 0.3 sigma RMS and 0.05 % in force of the Richardson
-  extrapolation, docs/fe_model.md) and never a model of the inverse loop (inverse model,
-  high-fidelity model of a correction, BAE statistics, surrogate training): the honest
-  pseudo-experiment, with the inverse model's discretisation error in it, as a real test would
-  have it. (Until this tier it was made on the uniform ``xfine``, 24 x 24 x 48 trilinear, which
-  is not converged: docs/cases_and_data.md);
+  the finest mesh of the convergence study when the tier was made (against today's five-mesh
+  extrapolation 0.25-0.42 sigma RMS and +0.042 to +0.095 % in force: short of the 0.3 sigma /
+  0.05 % criterion on most cases, docs/fe_model.md) and never a model of the inverse loop
+  (inverse model, high-fidelity model of a correction, BAE statistics, surrogate training): the
+  honest pseudo-experiment, with the inverse model's discretisation error in it, as a real test
+  would have it. (Until this tier it was made on the uniform ``xfine``, 24 x 24 x 48 trilinear,
+  which is not converged: docs/cases_and_data.md);
 * ``consistent``: made with the inverse model's own discretisation plus the same measurement
   model (rounding, optional noise): a known optimum, for judging the optimisers alone.
 

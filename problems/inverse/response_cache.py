@@ -9,7 +9,8 @@ An entry is one JSON file in ``<data cache dir>/responses/`` (default
 by the *request*: the case, the discretisation key (any spelling of one mesh gives the same
 entry), the parameters, the loading (snapshot levels, plates), the measurement grid, the
 specimen, the Newton settings and the hash of the code that computes the response
-(:func:`code_hash`: the sources of :data:`CODE_SOURCES`, read once per process). It holds the
+(:func:`code_hash`: the sources of :data:`CODE_SOURCES` but the mesh presets,
+:data:`NOT_RESPONSE_CODE`, read once per process). It holds the
 measurement vector, the exact Jacobian when the run that made it was asked for one (it costs
 ~0.5 plain runs more; the data need none, and the study takes the data mesh's run as it is), the
 snapshot levels and mesh of the response, and the CPU and wall times of the run. Written
