@@ -145,7 +145,7 @@ def test_default_objective_uses_the_stored_statistics_without_a_run(stored_stati
 
 
 @pytest.mark.parametrize(
-    "tier, mesh", [("consistent", "coarse"), ("model-error", "12,12,24:g8:hex27")]
+    "tier, mesh", [("consistent", "coarse"), ("model-error", "15,15,30:g16:hex27")]
 )
 def test_study_objective_takes_the_tier_data(tier, mesh):
     from bench.studies import study_objective

@@ -11,7 +11,7 @@ from problems.inverse.model_error import HonestyError
 
 
 def test_a_dishonest_high_fidelity_mesh_is_refused_before_any_high_fidelity_run(monkeypatch):
-    # linear-compression's model-error data were made on converged = 12,12,24:g8:hex27: a
+    # linear-compression's model-error data were made on converged = 15,15,30:g16:hex27: a
     # correction on it (any spelling) is refused by the one check up front (before: only after
     # the correction's runs had been made)
     def no_runs(self):
@@ -21,7 +21,7 @@ def test_a_dishonest_high_fidelity_mesh_is_refused_before_any_high_fidelity_run(
     spec = RunSpec(
         "linear-compression",
         "lm",
-        treatment=Treatment("one-point", hifi_mesh="12,12,24:hex27:g8:quarter"),
+        treatment=Treatment("one-point", hifi_mesh="15,15,30:hex27:g16:quarter"),
     )
     with pytest.raises(HonestyError, match="hifi model uses discretisation"):
         prepare(spec)

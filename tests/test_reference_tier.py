@@ -23,15 +23,15 @@ CASE = "linear-compression"
 
 
 def test_converged_is_the_model_error_mesh_and_a_preset_with_tokens():
-    assert data.MODEL_ERROR_MESH == data.tier_settings("model-error").mesh == "12,12,24:g8:hex27"
+    assert data.MODEL_ERROR_MESH == data.tier_settings("model-error").mesh == "15,15,30:g16:hex27"
     spec = parse_mesh_spec("converged")
     assert (spec.shape, spec.grading, spec.element, spec.symmetry) == (
-        (12, 12, 24),
-        8.0,
+        (15, 15, 30),
+        16.0,
         "hex27",
         "eighth",
     )
-    assert discretisation_key("converged:quarter") == "12,12,24:g8:hex27"
+    assert discretisation_key("converged:quarter") == "15,15,30:g16:hex27"
     with pytest.raises(ValueError, match="element given twice"):
         parse_mesh_spec("converged:hex8")
 
@@ -164,6 +164,18 @@ def test_the_code_hash_follows_the_response_sources_only(tmp_path):
         (tmp_path / rel).write_text("changed\n")
         assert response_cache.sources_hash(tmp_path) != before
         before = response_cache.sources_hash(tmp_path)
+    # docstrings, comments and layout compute nothing: editing them keeps the hash
+    code = 'def f(x):\n    return 2 * x\n'
+    (tmp_path / "fe/newton.py").write_text(code)
+    before = response_cache.sources_hash(tmp_path)
+    (tmp_path / "fe/newton.py").write_text(
+        '"""Newton."""\n\n\ndef f(x):  # doubles\n    """Twice x, mm."""\n    return 2*x\n'
+    )
+    assert response_cache.sources_hash(tmp_path) == before
+    (tmp_path / "fe/newton.py").write_text('def f(x):\n    return 3 * x\n')
+    assert response_cache.sources_hash(tmp_path) != before
+    (tmp_path / "fe/newton.py").write_text('def f(x):\n    x = "2"\n    return 2 * x\n')
+    assert response_cache.sources_hash(tmp_path) != before  # a string that is not a docstring
     assert response_cache.code_hash() == response_cache.sources_hash(
         Path(response_cache.__file__).resolve().parents[1]
     )
@@ -173,10 +185,10 @@ def test_a_shipped_set_made_with_other_settings_is_served_with_a_warning(monkeyp
     """A shipped model-error set made on another mesh than the tier's (e.g. one not yet remade)
     is not silently taken for the tier's: the warning names the file, both meshes and the fix."""
     monkeypatch.setattr(data, "MODEL_ERROR_MESH", "6,6,12:g4")
-    made = r"mesh '12,12,24:g8:hex27' \(asked '6,6,12:g4'\).*--force"
+    made = r"mesh '15,15,30:g16:hex27' \(asked '6,6,12:g4'\).*--force"
     with pytest.warns(UserWarning, match=made):
         ds = data.get_data(CASE, data.tier_settings("model-error"))
-    assert ds.settings.mesh == "12,12,24:g8:hex27"
+    assert ds.settings.mesh == "15,15,30:g16:hex27"
 
 
 def test_a_plain_mesh_is_solved_once_without_jacobian_and_again_when_asked_with_one(

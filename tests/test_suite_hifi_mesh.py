@@ -63,7 +63,7 @@ def _refused(tmp_path, capsys, text: str) -> str:
     [
         ("9,9,x", ["[suite] hifi_mesh: mesh '9,9,x' is unknown; allowed: coarse"]),
         # the model-error data's discretisation in any spelling: the honesty rule's one check
-        ("converged:quarter", ["hifi_mesh = 'converged:quarter'", "12,12,24:g8:hex27",
+        ("converged:quarter", ["hifi_mesh = 'converged:quarter'", "15,15,30:g16:hex27",
                                "made the model-error data"]),
         ("6,6,12:g8:hex27", ["hifi_mesh = '6,6,12:g8:hex27' (6,6,12 elements) is not finer "
                              "than the inverse mesh '6,6,12:g8:hex27'", "allowed: a mesh"]),
@@ -143,21 +143,21 @@ def test_the_note_quotes_no_study_rows_of_another_high_fidelity_mesh(tmp_path):
     [
         "converged",
         "converged:eighth",
-        "12,12,24:g8:hex27:eighth",
-        "12,12,24:g8:gz8:hex27",  # gz equal to g: the same mesh
-        " 12, 12,24:gz8.0:g8:hex27:quarter ",
+        "15,15,30:g16:hex27:eighth",
+        "15,15,30:g16:gz16:hex27",  # gz equal to g: the same mesh
+        " 15, 15,30:gz16.0:g16:hex27:quarter ",
     ],
 )
 def test_no_spelling_of_the_data_mesh_passes_as_hifi_mesh(value):
     """The honesty rule compares discretisations, not strings: every spelling of the model-error
-    data mesh 12,12,24:g8:hex27 is refused (a [[part]] too), and a grading that differs is not."""
+    data mesh 15,15,30:g16:hex27 is refused (a [[part]] too), and a grading that differs is not."""
     with pytest.raises(ValueError, match="which made the model-error data") as info:
         parse_suite({"suite": BASE | {"treatments": ["iterated"], "hifi_mesh": value}})
-    assert "hifi model uses discretisation 12,12,24:g8:hex27," in str(info.value)
+    assert "hifi model uses discretisation 15,15,30:g16:hex27," in str(info.value)
     with pytest.raises(ValueError, match=r"\[\[part\]\] 2: hifi_mesh = .*made the model-error"):
         parse_suite(
             {"suite": BASE | {"treatments": ["iterated"]}, "part": [{}, {"hifi_mesh": value}]}
         )
-    other = "12,12,24:g8:gz4:hex27"
+    other = "15,15,30:g16:gz8:hex27"
     suite = parse_suite({"suite": BASE | {"treatments": ["iterated"], "hifi_mesh": other}})
     assert [r.treatment.hifi_mesh for r in suite.runs()] == [other]

@@ -23,6 +23,7 @@ import math
 from pathlib import Path
 
 from bench.paths import not_writable, output_file  # noqa: F401 (the options' checks)
+from problems.fe.presets import SPEC_PRESETS
 
 ArgumentTypeError = argparse.ArgumentTypeError
 
@@ -221,8 +222,8 @@ def add_tier_arguments(parser) -> None:
         choices=["consistent", "model-error"],
         default=None,
         help="fit the tier's shipped data set for the inverse mesh: consistent (made with the "
-        "inverse mesh itself) or model-error (made on the converged 12,12,24:g8:hex27); in place "
-        "of --data",
+        "inverse mesh itself) or model-error (made on the converged "
+        f"{SPEC_PRESETS['converged']}); in place of --data",
     )
     parser.add_argument(
         "--correction",

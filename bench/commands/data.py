@@ -9,11 +9,13 @@ cache (``$FEMUBENCH_CACHE_DIR``). DIC-route images go next to the data file, in
 
 from __future__ import annotations
 
+from problems.fe.presets import SPEC_PRESETS
+
 NAME = "data"
 HELP = (
     "Compute a pseudo-experimental data set of a case: the reference response, rounded (and "
-    "noised), in the model-error tier (the converged mesh 12,12,24:g8:hex27) or the consistent "
-    "tier (the inverse model's mesh)."
+    "noised), in the model-error tier (the converged mesh "
+    f"{SPEC_PRESETS['converged']}) or the consistent tier (the inverse model's mesh)."
 )
 
 
@@ -32,8 +34,8 @@ def add_arguments(p) -> None:
         "--mesh",
         default=None,
         type=mesh_spec,
-        help="data mesh (default: 12,12,24:g8:hex27, the preset converged, for the model-error "
-        "tier; for the consistent tier the inverse model's mesh, default coarse)",
+        help=f"data mesh (default: {SPEC_PRESETS['converged']}, the preset converged, for the "
+        "model-error tier; for the consistent tier the inverse model's mesh, default coarse)",
     )
     p.add_argument(
         "--resolution-um",

@@ -290,7 +290,8 @@ def _grading(token: str, spec, prefix: str = "g") -> float:
 
 def parse_mesh_spec(spec: str | tuple[int, int, int] | MeshSpec) -> MeshSpec:
     """Parse ``MESH[:TOKEN...]``: MESH a preset (``coarse``, ``paper``, ``fine``, ``xfine``; or
-    ``converged`` = ``12,12,24:g8:hex27``, whose tokens may not be given again), ``NX,NY,NZ`` or
+    ``converged``, a full spec in :data:`problems.fe.presets.SPEC_PRESETS`, whose tokens may not
+    be given again), ``NX,NY,NZ`` or
     a tuple; then, in any order and each at most once, a symmetry ``eighth`` or
     ``quarter`` (default ``eighth`` where it is exact, NZ even), a grading ``gR`` (R >= 1 the
     largest / smallest element length along every direction, :func:`graded_box_mesh`; default

@@ -1,8 +1,8 @@
 """A small on-disk cache of expensive FE runs at one point, so that one solve of the model-error
 tier's reference mesh serves both the data generator (:func:`problems.inverse.data.make_data`)
 and the convergence study (:func:`bench.studies.convergence.solve_mesh`): on the converged
-reference (``12,12,24:g8:hex27``, ~300 CPU s per case with its Jacobian) solving it twice would
-double the tier's cost.
+reference (``15,15,30:g16:hex27``, 440-720 CPU s per case without its Jacobian) solving it twice
+would double the tier's cost.
 
 An entry is one JSON file in ``<data cache dir>/responses/`` (default
 ``~/.cache/femubench/data/responses``, see :func:`problems.inverse.user_cache.cache_dir`), keyed
@@ -23,6 +23,7 @@ holds.
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
 import json
@@ -58,15 +59,36 @@ CODE_SOURCES = (
 NOT_RESPONSE_CODE = ("fe/presets.py",)
 
 
+def code_text(source: str) -> bytes:
+    """What of a Python source computes: its syntax tree without docstrings (comments,
+    layout and docstrings change no response, so editing them keeps every entry valid); the
+    bytes themselves for a file that does not parse."""
+    try:
+        tree = ast.parse(source)
+    except SyntaxError:
+        return source.encode()
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (
+            isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+            and body
+            and isinstance(body[0], ast.Expr)
+            and isinstance(body[0].value, ast.Constant)
+            and isinstance(body[0].value.value, str)
+        ):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree).encode()
+
+
 def sources_hash(root: Path, patterns=CODE_SOURCES, excluded=NOT_RESPONSE_CODE) -> str:
     """SHA-256 (16 hex digits) of the files under ``root`` matched by ``patterns`` and not by
-    ``excluded``: their relative paths and bytes, in sorted order."""
+    ``excluded``: their relative paths and :func:`code_text`, in sorted order."""
     h = hashlib.sha256()
     skip = {p for pattern in excluded for p in root.glob(pattern)}
     files = {p for pattern in patterns for p in root.glob(pattern) if p.is_file()} - skip
     for path in sorted(files):
         h.update(path.relative_to(root).as_posix().encode() + b"\0")
-        h.update(path.read_bytes() + b"\0")
+        h.update(code_text(path.read_text(encoding="utf-8", errors="surrogateescape")) + b"\0")
     return h.hexdigest()[:16]
 
 
