@@ -143,6 +143,30 @@ def test_records_made_on_other_data_are_set_aside_and_rerun(tmp_path, monkeypatc
     assert current_data_hash(cfg) is None
 
 
+def test_a_record_of_a_re_pointed_tier_is_stale_before_its_data_set_exists(tmp_path, monkeypatch):
+    """A non-default data set is made when its first run runs, so its hash is unknown before:
+    the data mesh in the record's provenance decides (a tier re-pointed to another mesh, any
+    spelling of the same mesh passing)."""
+    from bench.experiment.runner import current_data_mesh, stale_records
+    from problems.inverse import data as D
+
+    monkeypatch.setenv(D.DATA_DIR_ENV, str(tmp_path / "empty"))
+    cfg, _ = _fe_record(None)
+    assert current_data_hash(cfg) is None and current_data_mesh(cfg) == "6,6,12"
+
+    def record(data_mesh):
+        rec = _fe_record("f" * 64)[1]
+        rec["result"]["provenance"]["data_mesh"] = data_mesh
+        return {config_hash(cfg): rec}
+
+    assert stale_records([cfg], record("coarse:eighth")) == []  # the same mesh spelt otherwise
+    ((_, why),) = stale_records([cfg], record("12,12,24:g8:hex27"))
+    assert why == "made on data of mesh 12,12,24:g8:hex27, today's data mesh is 6,6,12"
+    legacy = record("12,12,24:g8:hex27")
+    del legacy[config_hash(cfg)]["result"]["provenance"]["data_mesh"]
+    assert stale_records([cfg], legacy) == []  # nothing to compare: accepted
+
+
 # --- planned vs present, crashes --------------------------------------------------------------
 
 

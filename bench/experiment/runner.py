@@ -459,10 +459,24 @@ def current_data_hash(config: RunSpec) -> str | None:
         return None
 
 
+def current_data_mesh(config: RunSpec) -> str | None:
+    """The discretisation key of the mesh that makes the data set ``config`` would use today
+    (None for a data file, an analytic case or a user problem)."""
+    if config.data.file or config.problem or is_analytic(config.case):
+        return None
+    from problems.fe.mesh import discretisation_key
+
+    return discretisation_key(config.data.data_settings(config.mesh).mesh)
+
+
 def stale_records(runs: list[RunSpec], done: dict[str, dict]) -> list[tuple[dict, str]]:
     """``(record, reason)`` of every record in ``done`` (by config hash) of one of ``runs`` that
-    was made on other data than the run would use today (its ``data_hash`` differs from
-    :func:`current_data_hash`; a record without ``data_hash`` is accepted)."""
+    was made on other data than the run would use today: its ``data_hash`` differs from
+    :func:`current_data_hash`, or, while today's data set is not on disk yet (a non-default
+    set, made when its first run runs), the data mesh in its provenance differs from
+    :func:`current_data_mesh` (a re-pointed tier). A record without ``data_hash`` is accepted."""
+    from problems.fe.mesh import discretisation_key
+
     today: dict = {}
     out = []
     for cfg in runs:
@@ -471,11 +485,19 @@ def stale_records(runs: list[RunSpec], done: dict[str, dict]) -> list[tuple[dict
             continue
         key = data_key(cfg)
         if key not in today:
-            today[key] = current_data_hash(cfg)
-        if today[key] is not None and today[key] != rec["data_hash"]:
+            today[key] = (current_data_hash(cfg), current_data_mesh(cfg))
+        data_hash, data_mesh = today[key]
+        if data_hash is not None and data_hash != rec["data_hash"]:
             out.append(
-                (rec, f"made on data {rec['data_hash'][:12]}, today's data is {today[key][:12]}")
+                (rec, f"made on data {rec['data_hash'][:12]}, today's data is {data_hash[:12]}")
             )
+            continue
+        made_on = ((rec.get("result") or {}).get("provenance") or {}).get("data_mesh")
+        if data_hash is None and data_mesh and made_on:
+            if discretisation_key(made_on) != data_mesh:
+                out.append(
+                    (rec, f"made on data of mesh {made_on}, today's data mesh is {data_mesh}")
+                )
     return out
 
 
