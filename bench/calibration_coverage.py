@@ -29,6 +29,14 @@ well above when a bias dominates); and each experiment's largest |error| / sd. A
 the test does not determine to 2 %, not a biased calibration. Not stated for a study whose
 noise is scaled (``noise_scale`` != 1).
 
+Meshes are stored and keyed as discretisations: a preset of
+:data:`problems.fe.presets.SPEC_PRESETS` (``converged``, a role whose mesh can be re-pointed) given
+in any mesh option is spelled out when the settings are made (:func:`spell_out`), and a stored
+settings block that names one, from a study made before, is read as what it meant then
+(:data:`LEGACY_SPEC_PRESETS`, :func:`settings_from_dict`). A rerun into an ``out`` whose study has
+another data, inverse or check mesh is refused (:func:`check_same_meshes`): its records are not
+overwritten by another mesh's.
+
 Resumable: each experiment's record is written atomically to ``<out>/experiments/eNNN.json``
 keyed by what makes it (settings, index); a rerun reads the records whose key matches and runs
 the others (the calibration inside resumes per variant too). The bulky files (virtual
@@ -64,6 +72,52 @@ TARGET_SHARE = 0.9
 #: revision of the scores of a study with a discretisation band, in its records' keys (2: the
 #: ranking's band); records scored by another are rescored from the calibrations, no new runs
 SCORING = 2
+#: the mesh options of a study (:class:`CoverageSettings` fields)
+MESH_FIELDS = ("data_mesh", "inverse_mesh", "check_mesh")
+#: what a :data:`problems.fe.presets.SPEC_PRESETS` name meant in the settings of the studies that
+#: stored it by name, before names were spelled out: ``converged`` was ``12,12,24:g8:hex27`` until
+#: it was re-pointed to ``15,15,30:g16:hex27`` at stop 38 (2026-11-27; no coverage study was made
+#: between the re-pointing and the spelling out). A stored settings block naming it is read as
+#: this mesh (:func:`settings_from_dict`), and the keys spell this mesh by that name, so that the
+#: records of those studies (e.g. results/calibration/coverage/linear-compression-hex27) still
+#: match: ``--data-mesh 12,12,24:g8:hex27`` resumes or rescores them, today's ``converged`` is
+#: another discretisation (new keys; refused into their ``out``, :func:`check_same_meshes`).
+#: The :data:`~problems.fe.presets.MESH_PRESETS` names (``coarse``, ``paper``, ...) and ``auto``
+#: (the check mesh :data:`problems.inverse.build.DEFAULT_HIFI` names for the inverse mesh) are
+#: stored and keyed as typed: they name fixed sizes and a fixed table, not a role whose mesh is
+#: chosen anew, and spelling them out would change the keys of every study made with them (the
+#: shipped linear-compression ones: data ``fine``, inverse ``coarse``, check ``paper``; the hex27
+#: ones: check ``auto``) and rerun them. Re-pointing one of them needs an entry here.
+LEGACY_SPEC_PRESETS: dict[str, str] = {"converged": "12,12,24:g8:hex27"}
+
+
+def spell_out(spec: str) -> str:
+    """``spec`` with a :data:`~problems.fe.presets.SPEC_PRESETS` name as its size replaced by the
+    spec it names today (``converged:quarter`` -> ``15,15,30:g16:hex27:quarter``); any other
+    spec unchanged (a MESH_PRESETS name, ``NX,NY,NZ[:TOKEN...]``, ``auto``, ``""``)."""
+    from problems.fe.presets import SPEC_PRESETS
+
+    base, sep, rest = spec.partition(":")
+    return SPEC_PRESETS[base.strip()] + sep + rest if base.strip() in SPEC_PRESETS else spec
+
+
+def read_stored_mesh(spec: str) -> str:
+    """A mesh setting as stored by a study: a :data:`LEGACY_SPEC_PRESETS` name (stored before
+    names were spelled out) as the spec it meant then (``converged`` -> ``12,12,24:g8:hex27``);
+    any other unchanged."""
+    base, sep, rest = spec.partition(":")
+    legacy = LEGACY_SPEC_PRESETS.get(base.strip())
+    return legacy + sep + rest if legacy else spec
+
+
+def _key_spelling(spec: str) -> str:
+    """How a (spelled-out) mesh setting enters the keys: a :data:`LEGACY_SPEC_PRESETS` mesh by
+    its old name (the keys of the studies made with it, :func:`read_stored_mesh` reversed),
+    any other as it is."""
+    for name, legacy in LEGACY_SPEC_PRESETS.items():
+        if spec == legacy or spec.startswith(legacy + ":"):
+            return name + spec[len(legacy) :]
+    return spec
 
 
 @dataclass(frozen=True)
@@ -73,7 +127,8 @@ class CoverageSettings:
     variant      : the Drucker-Prager variant that makes the data (a case name)
     n            : number of virtual experiments
     data_mesh    : mesh of the model that makes the data (finer than ``inverse_mesh``)
-    inverse_mesh : mesh of the calibration's inverse model
+    inverse_mesh : mesh of the calibration's inverse model (both, and ``check_mesh``, with a
+                   ``converged``-like preset spelled out, :func:`spell_out`)
     models       : variants calibrated and ranked (default: the three surfaces in the
                    variant's hardening test)
     budget       : ``lm`` evaluations per variant and experiment
@@ -163,6 +218,8 @@ class CoverageSettings:
         if not (math.isfinite(self.noise_scale) and self.noise_scale >= 0):
             raise ValueError(f"--noise-scale {self.noise_scale!r}: a number >= 0 (1: as drawn)")
         object.__setattr__(self, "noise_scale", float(self.noise_scale) + 0.0)  # -0 is 0
+        for name in MESH_FIELDS:  # checked as typed above, stored as the discretisation
+            object.__setattr__(self, name, spell_out(getattr(self, name)))
 
     def margin_mm(self, specimen_mm) -> float:
         """The plate margin, mm, of a calibration of a specimen ``specimen_mm`` = (width,
@@ -197,10 +254,14 @@ class CoverageSettings:
         d["strains"] = list(self.strains)
         return d
 
+    def _key_dict(self) -> dict:
+        """:meth:`to_dict` with the meshes as they enter the keys (:func:`_key_spelling`)."""
+        return self.to_dict() | {name: _key_spelling(getattr(self, name)) for name in MESH_FIELDS}
+
     def data_key(self, i: int) -> str:
         """Hash of what makes experiment ``i``'s data (studies differing in the calibration
         alone share them)."""
-        d = self.to_dict()
+        d = self._key_dict()
         body = {k: d[k] for k in ("variant", "data_mesh", "seed", "specimens", "strains")}
         body |= {"spacing_mm": d["spacing_mm"], "index": i}
         if self.noise_scale != 1.0:  # the keys of studies before the option
@@ -210,7 +271,7 @@ class CoverageSettings:
     def calibration_key(self, i: int) -> str:
         """Hash of what makes experiment ``i`` and its calibration (``n`` excluded: a study
         extended to more experiments keeps the ones done): names its calibration folder."""
-        body = {k: v for k, v in self.to_dict().items() if k != "n"} | {"index": i}
+        body = {k: v for k, v in self._key_dict().items() if k != "n"} | {"index": i}
         if self.correction == "none":  # no band without a correction: studies before it resume
             body.pop("error_band")
         if not self.plate_margin_mm:  # margin 0: the keys of studies before the option
@@ -233,6 +294,70 @@ class CoverageSettings:
             sort_keys=True,
         )
         return hashlib.sha256(band.encode()).hexdigest()[:16]
+
+
+def settings_from_dict(d: dict) -> CoverageSettings:
+    """A study's settings as stored (``summary.json``'s ``settings``), a legacy preset name read
+    as what it meant then (:func:`read_stored_mesh`): the keys of its records, not today's
+    meaning of the name."""
+    d = dict(d)
+    for name in MESH_FIELDS:
+        if name in d:
+            d[name] = read_stored_mesh(d[name])
+    d["specimens"] = tuple(tuple(s) for s in d.get("specimens", SPECIMENS))
+    for name in ("models", "strains"):
+        if name in d:
+            d[name] = tuple(d[name])
+    return CoverageSettings(**d)
+
+
+def _fine_mesh(settings: dict) -> str:
+    """The check mesh a stored (legacy-read) settings block names ('' for none)."""
+    from problems.inverse.build import hifi_mesh_for
+
+    if settings.get("check_mesh", "") != "auto":
+        return settings.get("check_mesh", "")
+    return hifi_mesh_for(settings["inverse_mesh"])
+
+
+def check_same_meshes(s: CoverageSettings, out) -> None:
+    """ValueError (one line naming the option) when ``out`` holds a study (its ``summary.json``)
+    whose data, inverse or check mesh is another discretisation than ``s``'s (a legacy preset
+    name read as what it meant then): a rerun would overwrite that study's records with another
+    mesh's, e.g. one made on ``converged`` before stop 38 (``12,12,24:g8:hex27``) rerun with
+    today's ``converged``."""
+    from problems.fe.mesh import discretisation_key
+
+    try:
+        stored = json.loads((Path(out) / "summary.json").read_text())["settings"]
+        was = {name: read_stored_mesh(stored[name]) for name in MESH_FIELDS}
+        was["check_mesh"] = _fine_mesh(was)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return  # no study there (or not one of these): nothing to overwrite
+    now = {name: getattr(s, name) for name in MESH_FIELDS}
+    now["check_mesh"] = s.calibration_settings().fine_mesh
+    for name in MESH_FIELDS:
+        a, b = was[name], now[name]
+        if (discretisation_key(a) if a else "") != (discretisation_key(b) if b else ""):
+            option = "--" + name.replace("_", "-")
+            raise ValueError(
+                f"{option} {_named(getattr(s, name), b)}: --out {out} holds a study made with "
+                f"{_named(stored[name], a)}, another discretisation; allowed: {option} "
+                f"{a or 'none'} (resumes it) or another --out"
+            )
+
+
+def _named(value: str, mesh: str) -> str:
+    """A mesh setting ``value`` in words, with the ``mesh`` it stands for when not the same
+    (``auto``, a legacy preset name) and the preset that names it today."""
+    from problems.fe.presets import SPEC_PRESETS
+
+    if value == "auto":
+        return f"auto = {mesh}"
+    if value != mesh:
+        return f"{value} (= {mesh} until stop 38)"
+    today = [name for name, spec in SPEC_PRESETS.items() if spec == value]
+    return (value or "none") + (f" ({today[0]} today)" if today else "")
 
 
 def draw_test(s: CoverageSettings, i: int):
@@ -574,13 +699,17 @@ def per_specimen(records: list[dict]) -> list[dict]:
     ]
 
 
+def _mesh_text(spec: str) -> str:
+    """A stored mesh setting in Markdown, a legacy preset name with the mesh it meant then."""
+    meant = read_stored_mesh(spec)
+    return f"`{spec}`" + (f" (= `{meant}` until stop 38)" if meant != spec else "")
+
+
 def _check_mesh(s: dict) -> str:
     """The study's check mesh as named, ``auto`` with the mesh it stands for."""
     if s["check_mesh"] != "auto":
-        return s["check_mesh"]
-    from problems.inverse.build import hifi_mesh_for
-
-    return f"auto = {hifi_mesh_for(s['inverse_mesh'])}"
+        return _mesh_text(s["check_mesh"])
+    return f"`auto = {_fine_mesh(s | {'inverse_mesh': read_stored_mesh(s['inverse_mesh'])})}`"
 
 
 def _margin_text(margin) -> str:
@@ -670,9 +799,9 @@ def render_summary(summary: dict) -> str:
     lines = [
         f"# Calibration coverage: {s['variant']}, {n} virtual experiments",
         "",
-        f"Data made on mesh `{s['data_mesh']}`, calibrated on the inverse mesh "
-        f"`{s['inverse_mesh']}` (correction {s['correction']}"
-        + (f", check mesh `{_check_mesh(s)}`" if s["check_mesh"] else "")
+        f"Data made on mesh {_mesh_text(s['data_mesh'])}, calibrated on the inverse mesh "
+        f"{_mesh_text(s['inverse_mesh'])} (correction {s['correction']}"
+        + (f", check mesh {_check_mesh(s)}" if s["check_mesh"] else "")
         + f"; {_margin_text(s.get('plate_margin_mm', 0.0))}), `lm` with {s['budget']} "
         "evaluations per variant from the test's start; models "
         f"{', '.join(s['models'])}. Specimens (width x depth x height, mm) drawn from "
@@ -762,6 +891,7 @@ def run_coverage(s: CoverageSettings, out, *, work=None, progress=print, indices
     from bench.calibration import done_before
 
     out = Path(out)
+    check_same_meshes(s, out)
     work = Path(work) if work else out / "work"
     indices = range(s.n) if indices is None else indices
     summary = None

@@ -3,6 +3,7 @@ and the honesty rule on its meshes."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -195,19 +196,23 @@ def test_count_at_least_is_the_poisson_binomial_tail():
 
 
 def test_shipped_studies_keep_their_record_keys():
-    """The options added since (plate margin, noise scale) leave the keys of the shipped studies
-    made without them: their records resume, not rerun."""
+    """The options added since (plate margin, noise scale) and the spelling out of mesh presets
+    leave the keys of the shipped studies made without them (read from their stored settings, a
+    ``converged`` there as 12,12,24:g8:hex27): their records resume, not rerun."""
     root = Path(__file__).resolve().parents[1] / "results" / "calibration" / "coverage"
     checked = 0
-    for name in ("hyperbolic-compression-hex27", "hyperbolic-compression-hex27-margin"):
+    for name in (
+        "hyperbolic-compression-hex27",
+        "hyperbolic-compression-hex27-margin",
+        "linear-compression",
+    ):
         st = json.loads((root / name / "summary.json").read_text())["settings"]
-        st = {k: tuple(map(tuple, v)) if k == "specimens" else tuple(v)
-              if isinstance(v, list) else v for k, v in st.items()}  # fmt: skip
-        s = CoverageSettings(**st)
+        s = cov.settings_from_dict(st)
         rec = json.loads((root / name / "experiments" / "e000.json").read_text())
-        assert s.key(0) == rec["key"] and s.calibration_key(0) == rec["calibration_key"]
+        assert s.key(0) == rec["key"]
+        assert s.calibration_key(0) == rec.get("calibration_key", rec["key"])  # none: the same
         checked += 1
-    assert checked == 2
+    assert checked == 3
 
 
 def test_noise_free_twin_is_the_data_without_its_noise(tmp_path, monkeypatch):
@@ -269,3 +274,55 @@ def test_noise_free_twin_of_the_images_route_has_no_camera_noise(tmp_path, monke
         grey[scale] = read_image(tmp_path / f"s{scale:g}" / "images" / "image_02.png")
     assert np.ptp(grey[0.0]) == 0  # 0.5 of 255, rounded: one grey level everywhere
     assert 1.6 < np.std(grey[1.0]) < 2.4  # the camera's 2 grey levels
+
+
+def test_presets_are_stored_and_keyed_as_discretisations(tmp_path):
+    """``converged`` in a mesh option is stored and hashed as its spec today; plain meshes keep
+    the keys they had (pinned from the code before the change); a stored block saying
+    ``converged`` (made before stop 38) reads as 12,12,24:g8:hex27, with its records' keys, and is
+    not resumed by a study on today's ``converged``."""
+    from problems.fe.presets import SPEC_PRESETS
+
+    new = CoverageSettings("hyperbolic-compression", 10, "converged", "6,6,12:g8:hex27",
+                           correction="one-point", check_mesh="auto")  # fmt: skip
+    assert new.data_mesh == SPEC_PRESETS["converged"] == "15,15,30:g16:hex27"
+    assert new.to_dict()["data_mesh"] == "15,15,30:g16:hex27"
+    spelled = dataclasses.replace(new, data_mesh="15,15,30:g16:hex27")
+    assert new.key(0) == spelled.key(0) and new.data_key(0) == spelled.data_key(0)
+    assert cov.spell_out("converged:quarter") == "15,15,30:g16:hex27:quarter"
+    assert draw_test(new, 0).data_mesh == "15,15,30:g16:hex27"
+    # plain meshes: the keys of before (the shipped linear-compression study's e000 key)
+    plain = CoverageSettings("linear-compression", 10, "fine", "coarse", check_mesh="paper")
+    assert (plain.data_key(0), plain.key(0)) == ("58d338c6c79c5688", "4ae61433429369fd")
+    hex27 = CoverageSettings("hyperbolic-compression", 10, "paper", "6,6,12:g8:hex27",
+                             correction="one-point", check_mesh="auto")  # fmt: skip
+    assert (hex27.data_key(3), hex27.calibration_key(3), hex27.key(3)) == (
+        "e19e1cdfb1c0f21b", "d341f07f12e4dc0f", "33e8c471b066acfc")  # fmt: skip
+    # a legacy block: converged as it was, the keys of its records; today's converged differs
+    old = cov.settings_from_dict(new.to_dict() | {"data_mesh": "converged"})
+    assert old.data_mesh == "12,12,24:g8:hex27"
+    assert (old.data_key(0), old.calibration_key(0), old.key(0)) == (
+        "c9ba18ba0573f2bd", "a91ba9f5859f5370", "a6b528696fedd87b")  # fmt: skip
+    assert new.data_key(0) != old.data_key(0) and new.key(0) != old.key(0)
+    assert "`converged` (= `12,12,24:g8:hex27` until stop 38)" in cov.render_summary(
+        cov.summarise(old, []) | {"settings": old.to_dict() | {"data_mesh": "converged"}}
+    )
+    # ... and its out is not resumed with today's converged: refused before any run, untouched
+    out = tmp_path / "legacy"
+    out.mkdir()
+    stored = json.dumps({"settings": old.to_dict() | {"data_mesh": "converged"}})
+    (out / "summary.json").write_text(stored)
+    with pytest.raises(ValueError) as err:
+        run_coverage(new, out, progress=pytest.fail)
+    assert str(err.value) == (
+        f"--data-mesh 15,15,30:g16:hex27 (converged today): --out {out} holds a study made with "
+        "converged (= 12,12,24:g8:hex27 until stop 38), another discretisation; allowed: "
+        "--data-mesh 12,12,24:g8:hex27 (resumes it) or another --out")  # fmt: skip
+    assert (out / "summary.json").read_text() == stored and sorted(out.iterdir()) == [
+        out / "summary.json"]  # fmt: skip
+    argv = ["--variant", "hyperbolic-compression", "--inverse-mesh", "6,6,12:g8:hex27",
+            "--correction", "one-point", "--check-mesh", "auto", "--out", str(out)]  # fmt: skip
+    assert main(["calibrate-coverage", "--data-mesh", "converged", *argv]) == 2
+    assert (out / "summary.json").read_text() == stored
+    cov.check_same_meshes(old, out)  # the legacy mesh spelled out resumes it
+    cov.check_same_meshes(dataclasses.replace(old, data_mesh="converged"), tmp_path / "none")

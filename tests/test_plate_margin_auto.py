@@ -30,10 +30,11 @@ def test_auto_is_a_tenth_of_the_smallest_dimension():
 
 def test_coverage_keys_margin_zero_as_before_and_other_margins_apart():
     base = CoverageSettings(
-        "hyperbolic-compression", 10, "converged", "6,6,12:g8:hex27",
+        "hyperbolic-compression", 10, "12,12,24:g8:hex27", "6,6,12:g8:hex27",
         correction="one-point", check_mesh="auto",
     )  # fmt: skip
-    # the key of the shipped hyperbolic-compression study's experiment 0 (before the option)
+    # the key of the shipped hyperbolic-compression study's experiment 0 (before the option; its
+    # data mesh is converged's until stop 38)
     assert base.calibration_key(0) == "a91ba9f5859f5370"
     auto = dataclasses.replace(base, plate_margin_mm="auto")
     ten = dataclasses.replace(base, plate_margin_mm=10)
