@@ -42,11 +42,15 @@ def add_arguments(p) -> None:
         plate_margin_or_auto,
         positive_int,
     )
+    from problems.fe.presets import SPEC_PRESETS
 
     p.add_argument("--variant", default="linear-compression", help="the variant making the data")
     p.add_argument("--n", type=positive_int, default=10, help="virtual experiments (default 10)")
     p.add_argument(
-        "--data-mesh", default="paper", help="mesh that makes the data (default paper; finer)"
+        "--data-mesh",
+        default="paper",
+        help="mesh that makes the data (default paper; finer). In every mesh option a preset "
+        f"such as converged is stored as its spec (today {SPEC_PRESETS['converged']})",
     )
     p.add_argument("--inverse-mesh", default="coarse", help="inverse mesh (default coarse)")
     p.add_argument(
