@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from problems.fe.presets import spell_out
 from problems.inverse import layout
 from problems.inverse.data import Dataset
 from problems.io.atomic import atomic_write_text
@@ -185,10 +186,10 @@ def variant_key(data: Dataset, case, settings: CalibrationSettings) -> str:
         "lower": case.lower.tolist(),
         "upper": case.upper.tolist(),
         "start": case.start.tolist(),
-        "mesh": settings.mesh,
+        "mesh": spell_out(settings.mesh),  # a re-pointed preset is another model
         "budget": settings.budget,
         "seed": settings.seed,
-        **({"correction": settings.fine_mesh} if settings.correction != "none" else {}),
+        **({"correction": spell_out(settings.fine_mesh)} if settings.correction != "none" else {}),
         **(
             {"treatment": settings.correction}
             if settings.correction in ("one-point", "first-order")

@@ -31,11 +31,12 @@ noise is scaled (``noise_scale`` != 1).
 
 Meshes are stored and keyed as discretisations: a preset of
 :data:`problems.fe.presets.SPEC_PRESETS` (``converged``, a role whose mesh can be re-pointed) given
-in any mesh option is spelled out when the settings are made (:func:`spell_out`), and a stored
-settings block that names one, from a study made before, is read as what it meant then
-(:data:`LEGACY_SPEC_PRESETS`, :func:`settings_from_dict`). A rerun into an ``out`` whose study has
-another data, inverse or check mesh is refused (:func:`check_same_meshes`): its records are not
-overwritten by another mesh's.
+in any mesh option is spelled out when the settings are made
+(:func:`problems.fe.presets.spell_out`), and a stored settings block that names one, from a
+study made before, is read as what it meant then (:data:`LEGACY_SPEC_PRESETS`,
+:func:`settings_from_dict`). A rerun into an ``out`` whose study has another data, inverse or
+check mesh is refused (:func:`check_same_meshes`): its records are not overwritten by another
+mesh's.
 
 Resumable: each experiment's record is written atomically to ``<out>/experiments/eNNN.json``
 keyed by what makes it (settings, index); a rerun reads the records whose key matches and runs
@@ -56,6 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
+from problems.fe.presets import spell_out
 from problems.io.atomic import atomic_write_text
 
 FORMAT = "femubench-calibration-coverage/1"
@@ -91,16 +93,6 @@ MESH_FIELDS = ("data_mesh", "inverse_mesh", "check_mesh")
 LEGACY_SPEC_PRESETS: dict[str, str] = {"converged": "12,12,24:g8:hex27"}
 
 
-def spell_out(spec: str) -> str:
-    """``spec`` with a :data:`~problems.fe.presets.SPEC_PRESETS` name as its size replaced by the
-    spec it names today (``converged:quarter`` -> ``15,15,30:g16:hex27:quarter``); any other
-    spec unchanged (a MESH_PRESETS name, ``NX,NY,NZ[:TOKEN...]``, ``auto``, ``""``)."""
-    from problems.fe.presets import SPEC_PRESETS
-
-    base, sep, rest = spec.partition(":")
-    return SPEC_PRESETS[base.strip()] + sep + rest if base.strip() in SPEC_PRESETS else spec
-
-
 def read_stored_mesh(spec: str) -> str:
     """A mesh setting as stored by a study: a :data:`LEGACY_SPEC_PRESETS` name (stored before
     names were spelled out) as the spec it meant then (``converged`` -> ``12,12,24:g8:hex27``);
@@ -128,7 +120,7 @@ class CoverageSettings:
     n            : number of virtual experiments
     data_mesh    : mesh of the model that makes the data (finer than ``inverse_mesh``)
     inverse_mesh : mesh of the calibration's inverse model (both, and ``check_mesh``, with a
-                   ``converged``-like preset spelled out, :func:`spell_out`)
+                   ``converged``-like preset spelled out, :func:`problems.fe.presets.spell_out`)
     models       : variants calibrated and ranked (default: the three surfaces in the
                    variant's hardening test)
     budget       : ``lm`` evaluations per variant and experiment

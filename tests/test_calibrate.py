@@ -196,6 +196,23 @@ def test_shipped_calibration_matches_the_example():
     assert report["ranking"][0]["variant"].startswith("linear-")
 
 
+def test_a_variant_key_names_the_discretisation_a_preset_stands_for_today():
+    """``converged`` is re-pointable: a variant calibrated with it is keyed by the mesh it names
+    today, so a re-pointed preset is never served another mesh's result."""
+    from problems.inverse.lab import curve_summary, lab_case
+
+    exp = load_experiment(EXAMPLE / "experiment.toml")
+    data = import_experiment(exp)
+    case = lab_case("linear-compression", data, curve_summary(data))
+
+    def key(mesh):
+        return cal.variant_key(data, case, CalibrationSettings(mesh, exp.budget))
+
+    assert key("converged") == key("15,15,30:g16:hex27") != key("12,12,24:g8:hex27")
+    assert key("converged:quarter") == key("15,15,30:g16:hex27:quarter")
+    assert key(exp.mesh) != key("converged")
+
+
 def test_data_mesh_is_never_a_calibration_mesh(tmp_path, capsys):
     """A virtual experiment records its data mesh; --mesh or --check-mesh (auto too) on it is
     refused in one line with exit code 2, before any model run."""

@@ -13,6 +13,7 @@ import pytest
 import bench.calibration_coverage as cov
 from bench.calibration_coverage import CoverageSettings, draw_test, run_coverage
 from bench.cli import main
+from problems.fe.presets import spell_out
 
 TINY = [
     "--n", "2", "--data-mesh", "4,4,8", "--inverse-mesh", "3,3,6",
@@ -289,7 +290,7 @@ def test_presets_are_stored_and_keyed_as_discretisations(tmp_path):
     assert new.to_dict()["data_mesh"] == "15,15,30:g16:hex27"
     spelled = dataclasses.replace(new, data_mesh="15,15,30:g16:hex27")
     assert new.key(0) == spelled.key(0) and new.data_key(0) == spelled.data_key(0)
-    assert cov.spell_out("converged:quarter") == "15,15,30:g16:hex27:quarter"
+    assert spell_out("converged:quarter") == "15,15,30:g16:hex27:quarter"
     assert draw_test(new, 0).data_mesh == "15,15,30:g16:hex27"
     # plain meshes: the keys of before (the shipped linear-compression study's e000 key)
     plain = CoverageSettings("linear-compression", 10, "fine", "coarse", check_mesh="paper")

@@ -27,3 +27,12 @@ MESH_PRESETS: dict[str, tuple[int, int, int]] = {
 #: the nine cases: docs/fe_model.md, "The converged reference"). Until stop 38 it was
 #: ``12,12,24:g8:hex27`` (0.25-0.42 sigma, +0.042 to +0.095 %: short of the criterion).
 SPEC_PRESETS: dict[str, str] = {"converged": "15,15,30:g16:hex27"}
+
+
+def spell_out(spec: str) -> str:
+    """``spec`` with a :data:`SPEC_PRESETS` name as its size replaced by the spec it names today
+    (``converged:quarter`` -> ``15,15,30:g16:hex27:quarter``); any other spec unchanged (a
+    :data:`MESH_PRESETS` name, ``NX,NY,NZ[:TOKEN...]``, ``auto``, ``""``). For keys and stored
+    settings, whose meaning must not change when a preset is re-pointed."""
+    base, sep, rest = spec.partition(":")
+    return SPEC_PRESETS[base.strip()] + sep + rest if base.strip() in SPEC_PRESETS else spec
