@@ -39,16 +39,18 @@ def test_converged_is_the_model_error_mesh_and_a_preset_with_tokens():
 @pytest.mark.parametrize(
     "role, kwargs",
     [
-        ("forward", {"mesh": "12,12,24:hex27:g8:quarter"}),
+        ("forward", {"mesh": "15,15,30:hex27:g16:quarter"}),
         ("hifi", {"mesh": "coarse", "hifi_mesh": "converged:eighth"}),  # corrections and BAE
-        ("hifi", {"mesh": "coarse", "hifi_mesh": "12,12,24:g8.0:hex27"}),
+        ("hifi", {"mesh": "coarse", "hifi_mesh": "15,15,30:g16.0:hex27"}),
     ],
 )
 def test_the_honesty_rule_refuses_every_spelling_of_the_converged_reference(role, kwargs):
     ds = SimpleNamespace(case=CASE, settings=data.tier_settings("model-error"))
-    with pytest.raises(HonestyError, match=f"the {role} model uses discretisation 12,12,24:g8"):
+    with pytest.raises(HonestyError, match=f"the {role} model uses discretisation 15,15,30:g16"):
         check_discretisations(get_case(CASE), ds, **kwargs)
-    check_discretisations(get_case(CASE), ds, mesh="12,12,24:g4:hex27", hifi_mesh="paper")
+    # the previous reference and another grading of today's are other discretisations
+    check_discretisations(get_case(CASE), ds, mesh="15,15,30:g8:hex27", hifi_mesh="paper")
+    check_discretisations(get_case(CASE), ds, mesh="coarse", hifi_mesh="12,12,24:g8:hex27")
 
 
 def test_the_honesty_rule_refuses_a_surrogate_trained_on_the_converged_reference(monkeypatch):
