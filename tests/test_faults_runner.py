@@ -167,6 +167,27 @@ def test_a_record_of_a_re_pointed_tier_is_stale_before_its_data_set_exists(tmp_p
     assert stale_records([cfg], legacy) == []  # nothing to compare: accepted
 
 
+def test_the_report_says_whether_the_runs_of_set_aside_records_were_made_again(tmp_path):
+    """A record set aside as made on other data is either rerun or missing: the completeness
+    note counts which (it used to say "run again" whatever happened)."""
+    from types import SimpleNamespace
+
+    from bench.report.completeness import section_completeness
+
+    suite = _suite(tmp_path)
+    out = tmp_path / "res"
+    assert cli(["run", str(suite), "--out", str(out), "--quiet", "--workers", "1"]) == 0
+    first = sorted(store.scan_records(out)[0], key=lambda r: r["config_hash"])[0]
+    store.set_aside(store.record_path(out, first["config_hash"]), store.STALE)
+    note = "".join(section_completeness(SimpleNamespace(source=out)))
+    assert "| tiny | 3 | 2 | 0 | 1 |" in note
+    assert "1 record(s) made on other data than today's were set aside in `runs/stale/`; " in note
+    assert "0 of their runs have a record made again" in note
+    assert cli(["run", str(suite), "--out", str(out), "--quiet", "--workers", "1"]) == 0
+    note = "".join(section_completeness(SimpleNamespace(source=out)))
+    assert "| tiny | 3 | 3 | 0 | 0 |" in note and "1 of their runs have a record made again" in note
+
+
 # --- planned vs present, crashes --------------------------------------------------------------
 
 

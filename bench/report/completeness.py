@@ -80,9 +80,11 @@ def section_completeness(rep) -> list[str]:
                 "runs them again)\n"
             )
     if stale:
+        present = {r.get("config_hash") for r in records}
+        rerun = sum(p.name.split(".")[0] in present for p in stale)
         notes.append(
             f"- {len(stale)} record(s) made on other data than today's were set aside in "
-            "`runs/stale/` by `femubench run` (their runs were run again)\n"
+            f"`runs/stale/`; {rerun} of their runs have a record made again\n"
         )
     done = all("error" not in p and not completeness(p, records)["missing"] for _, p in plans)
     intro = (
