@@ -62,7 +62,9 @@ NOT_RESPONSE_CODE = ("fe/presets.py",)
 def code_text(source: str) -> bytes:
     """What of a Python source computes: its syntax tree without docstrings (comments,
     layout and docstrings change no response, so editing them keeps every entry valid); the
-    bytes themselves for a file that does not parse."""
+    bytes themselves for a file that does not parse. The dump follows the interpreter's AST, so
+    another Python minor version hashes differently and solves again (never serves a wrong
+    entry)."""
     try:
         tree = ast.parse(source)
     except SyntaxError:
