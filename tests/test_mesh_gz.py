@@ -66,7 +66,7 @@ def test_keys_round_trip_and_equal_ratios_are_one_discretisation():
     assert (g.grading, g.grading_z, g.key) == (1.0, 8.0, "6,6,12:gz8")
     keys = {discretisation_key(f"6,6,12:g8{t}:hex27") for t in ("", ":gz4", ":gz2", ":gz1")}
     assert len(keys) == 4
-    assert discretisation_key("converged:gz4") == "12,12,24:g8:gz4:hex27"
+    assert discretisation_key("converged:gz4") == "15,15,30:g16:gz4:hex27"
     # MeshSpec built directly is normalised the same way; replace() keeps the z ratio
     assert MeshSpec((6, 6, 12), "eighth", 8.0, "hex8", 8.0) == MeshSpec((6, 6, 12), "eighth", 8.0)
     assert MeshSpec((6, 6, 12), "eighth", 8.0, "hex8", 8.0).grading_z is None
