@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 install: $(STAMP)
 
-## make run: the default suite on the coarse mesh, then its report, under results/
+## make run: the default suite (coarse mesh; 6,6,12:g8:hex27 on model-error data), then its report, under results/
 run: $(STAMP)
 	$(BIN)/femubench run suites/default.toml --out results/default
 	$(BIN)/femubench report results/default --format md,csv,tex
