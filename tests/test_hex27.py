@@ -199,6 +199,64 @@ def test_front_face_interpolation_is_biquadratic():
     assert np.allclose(W.sum(axis=1), 1.0)
 
 
+def _face_field(mesh, snapshots=2):
+    """A response stand-in whose front-face displacements are biquadratic in (y, z) per element
+    (exactly representable on 27-node elements, not on a bilinear interpolant of their nodes)."""
+    from types import SimpleNamespace
+
+    y, z = mesh.nodes[:, 1], mesh.nodes[:, 2]
+    u = np.zeros((snapshots, mesh.n_nodes, 3))
+    for k in range(snapshots):
+        u[k, :, 1] = (k + 1) * (1e-3 * y + 2e-10 * y * y * z * z - 4e-7 * y * z)
+        u[k, :, 2] = -(k + 1) * (2e-3 * z + 1e-10 * y * y * z * z + 3e-7 * y * y)
+    return SimpleNamespace(mesh=mesh, displacements=u)
+
+
+def test_dic_route_deforms_the_images_by_the_element_field():
+    """The DIC route's field is the elements' own interpolation, the one the FE route samples:
+    biquadratic on a graded 27-node mesh (exact for a biquadratic field, at the grid points equal
+    to the FE route's operator), bilinear on 8-node meshes as before (scipy's grid interpolant)."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from problems.dic.route import front_face_fields
+    from problems.fe.mesh import parse_mesh_spec
+
+    mesh = quadratic_mesh(parse_mesh_spec("3,3,6:g8").build())
+    resp = _face_field(mesh)
+    rng = np.random.default_rng(4)
+    y, z = rng.uniform(0, 75, (40, 25)), rng.uniform(0, 150, (40, 25))
+    y[0, :2], z[0, :2] = (0.0, 75.0), (150.0, 0.0)  # the face's edges
+    for k, field in enumerate(front_face_fields(resp)):
+        uy, uz = field(y, z)
+        assert uy.shape == y.shape
+        exact_y = (k + 1) * (1e-3 * y + 2e-10 * y * y * z * z - 4e-7 * y * z)
+        exact_z = -(k + 1) * (2e-3 * z + 1e-10 * y * y * z * z + 3e-7 * y * y)
+        assert np.abs(uy - exact_y).max() < 1e-14 and np.abs(uz - exact_z).max() < 1e-14  # mm
+        pts = measurement_grid()
+        W = front_face_operator(mesh, pts)
+        u = resp.displacements[k]
+        got = field(pts[:, 0], pts[:, 1])
+        assert np.abs(got[0] - W @ u[:, 1]).max() < 1e-15 * np.abs(u).max()
+        assert np.abs(got[1] - W @ u[:, 2]).max() < 1e-15 * np.abs(u).max()
+    # a bilinear interpolant through the 27-node grid (what the route did before) is not that field
+    g = mesh.grid_index()[-1]
+    ys, zs = mesh.nodes[g[:, 0], 1], mesh.nodes[g[0, :], 2]
+    bilinear = RegularGridInterpolator((ys, zs), resp.displacements[0][g, 1])
+    old = bilinear(np.column_stack([y.ravel(), z.ravel()])).reshape(y.shape)
+    assert np.abs(old - front_face_fields(resp)[0](y, z)[0]).max() > 3e-4  # mm (0.69 um here)
+
+    hex8 = parse_mesh_spec("4,4,8:g8").build()
+    resp8 = _face_field(hex8)
+    g = hex8.grid_index()[-1]
+    ys, zs = hex8.nodes[g[:, 0], 1], hex8.nodes[g[0, :], 2]
+    for k, field in enumerate(front_face_fields(resp8)):
+        for c, got in zip((1, 2), field(y, z)):
+            want = RegularGridInterpolator((ys, zs), resp8.displacements[k][g, c])(
+                np.column_stack([y.ravel(), z.ravel()])
+            )
+            np.testing.assert_allclose(got.ravel(), want, rtol=0, atol=1e-15)
+
+
 def test_vtu_writes_triquadratic_cells(tmp_path):
     import meshio
 

@@ -1,7 +1,8 @@
 """The DIC route of the pseudo-experimental data: FE response -> speckle images -> IC-GN DIC.
 
 The FE front-face field of each snapshot is handed to :func:`problems.dic.measure_front_face`
-as a bilinear interpolant of the front-face nodal displacements; the measured displacements and
+as the elements' own interpolant of the front-face nodal displacements (bilinear on 8-node,
+biquadratic on 27-node meshes); the measured displacements and
 their DIC standard deviations replace the FE values. Points whose correlation failed get zero
 value and infinite standard deviation: they carry no weight in the objective. The covariance is
 taken diagonal: on the 5 mm grid the 21 px subsets do not overlap, so points are independent, and
@@ -17,23 +18,27 @@ from __future__ import annotations
 from dataclasses import asdict
 
 import numpy as np
-from scipy.interpolate import RegularGridInterpolator
+
+from problems.fe.front_face import front_face_stencil
 
 
 def front_face_fields(response) -> list:
-    """One callable ``field(y_mm, z_mm) -> (u_y, u_z)`` per snapshot (quarter coordinates, mm)."""
+    """One callable ``field(y_mm, z_mm) -> (u_y, u_z)`` per snapshot (quarter coordinates, mm): the
+    elements' own interpolation of the front-face nodal displacements, bilinear on 8-node and
+    biquadratic on 27-node meshes (:func:`problems.fe.front_face.front_face_stencil`, the same
+    field the FE route samples at the grid points). Points must lie on the face (the image
+    renderer clamps them onto it)."""
     mesh = response.mesh
-    g = mesh.grid_index()[-1]  # (ny+1, nz+1) front-face nodes
-    ys, zs = mesh.nodes[g[:, 0], 1], mesh.nodes[g[0, :], 2]
     fields = []
     for u in response.displacements:
-        uy = RegularGridInterpolator((ys, zs), u[g, 1], bounds_error=False, fill_value=None)
-        uz = RegularGridInterpolator((ys, zs), u[g, 2], bounds_error=False, fill_value=None)
 
-        def field(y, z, uy=uy, uz=uz):
-            pts = np.column_stack([np.ravel(y), np.ravel(z)])
+        def field(y, z, u=u):
             shape = np.shape(y)
-            return uy(pts).reshape(shape), uz(pts).reshape(shape)
+            cols, w = front_face_stencil(mesh, np.column_stack([np.ravel(y), np.ravel(z)]))
+            return (
+                np.einsum("ij,ij->i", w, u[cols, 1]).reshape(shape),
+                np.einsum("ij,ij->i", w, u[cols, 2]).reshape(shape),
+            )
 
         fields.append(field)
     return fields

@@ -29,12 +29,14 @@ def measurement_grid(
     return np.column_stack([Y.ravel(), Z.ravel()])
 
 
-def front_face_operator(mesh: Mesh, points_mm) -> sp.csr_matrix:
-    """Sparse (m, n_nodes) interpolation from node values to front-face points (y, z) mm: the
-    elements' own shape functions on the face, bilinear (8-node) or biquadratic (27-node).
+def front_face_stencil(mesh: Mesh, points_mm) -> tuple[np.ndarray, np.ndarray]:
+    """Node indices and weights (m, k) of the elements' own shape functions on the front face at
+    points (y, z) mm: k = 4, bilinear (8-node), or k = 9, biquadratic (27-node); a nodal field
+    ``u`` (n_nodes,) is ``(w * u[cols]).sum(axis=1)`` there.
 
     Uses the structured grid of the front face x = max x (node coordinates of the undeformed mesh;
     the elements' faces are flat with straight edges, so the face map is affine per direction).
+    Points must lie on the face (within 1e-9 mm).
     """
     pts = np.atleast_2d(np.asarray(points_mm, float))
     g = mesh.grid_index()[-1]  # (gy+1, gz+1) node indices on x = 75 mm
@@ -59,5 +61,13 @@ def front_face_operator(mesh: Mesh, points_mm) -> sp.csr_matrix:
         a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
         cols = g[2 * j[:, None] + a.ravel(), 2 * k[:, None] + b.ravel()]
         w = ls[:, a.ravel()] * lt[:, b.ravel()]
+    return cols, w
+
+
+def front_face_operator(mesh: Mesh, points_mm) -> sp.csr_matrix:
+    """Sparse (m, n_nodes) interpolation from node values to front-face points (y, z) mm: the
+    elements' own shape functions on the face (:func:`front_face_stencil`)."""
+    cols, w = front_face_stencil(mesh, points_mm)
+    pts = np.atleast_2d(np.asarray(points_mm, float))
     rows = np.repeat(np.arange(len(pts)), w.shape[1])
     return sp.csr_matrix((w.ravel(), (rows, cols.ravel())), shape=(len(pts), mesh.n_nodes))
