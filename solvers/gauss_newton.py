@@ -14,7 +14,10 @@ exact one, or one parallel batch of finite differences):
 With exact Jacobians the trial points of the line search are run with their Jacobians (the
 accepted point's is then at hand: one run per iteration when the full step is taken).
 
-Stops: relative cost decrease < ftol or relative step < xtol, projected gradient < gtol, no
+Stops: relative cost decrease < ftol, predicted by the linear model before the line search
+(``|r|^2 - |r + J p|^2 <= ftol |r|^2``, MINPACK's test: at the optimum the trial points' costs
+differ from the start's by rounding only, and the line search would spend evaluations comparing
+them) or achieved by the accepted step; relative step < xtol, projected gradient < gtol, no
 acceptable step after ``max_backtracks`` halvings, ``max_iterations``. At every stop but the
 last the first-order test of :mod:`solvers.optimality` gives the status: ``"converged"`` when it
 passes at the returned point (the line search failing *at* the optimum, where no decrease is
@@ -81,6 +84,9 @@ def run_gauss_newton(r: Run) -> Outcome:
         p = np.zeros_like(z)
         if free.any():
             p[free] = np.linalg.lstsq(J[:, free], -res, rcond=None)[0]
+        predicted = f - float(np.sum((res + J @ p) ** 2))  # the linear model's decrease
+        if predicted <= o["ftol"] * f:  # no step can decrease the cost measurably (MINPACK's test)
+            return verdict("predicted relative cost decrease below ftol", z, res, J, it)
         alpha, accepted = 1.0, None
         for _ in range(int(o["max_backtracks"]) + 1):
             zt = np.clip(z + alpha * p, lo, hi)

@@ -19,6 +19,7 @@ import numpy as np
 
 from problems.inverse.evaluator import BudgetExhausted
 from solvers.base import Outcome, Run, lhs, register
+from solvers.optimality import data_cost
 from solvers.options import count, flag, fraction
 from solvers.pyswarms_ import PSO_OPTIONS
 from solvers.scipy_ import LM_OPTIONS
@@ -78,6 +79,13 @@ def run_multistart(r: Run) -> Outcome:
         statuses.append(out.status)
     best = min(range(len(summary)), key=lambda j: summary[j]["cost"]) if summary else None
     status = "converged" if best is not None and statuses[best] == "converged" else "stalled"
+    if status != "converged" and best is not None:
+        # a converged start whose cost ties the best one's (the same optimum reached twice; the
+        # costs differ by rounding) is the converged answer: its optimality test held there
+        tie = float(o["ftol"]) * summary[best]["cost"] + 1e-15 * data_cost(obj)
+        tied = [j for j in range(len(summary)) if summary[j]["cost"] <= summary[best]["cost"] + tie]
+        if any(statuses[j] == "converged" for j in tied):
+            status = "converged"
     if obj.remaining < 1 and status != "converged":
         status = "budget"
     return Outcome(
