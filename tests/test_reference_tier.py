@@ -167,14 +167,14 @@ def test_the_code_hash_follows_the_response_sources_only(tmp_path):
         assert response_cache.sources_hash(tmp_path) != before
         before = response_cache.sources_hash(tmp_path)
     # docstrings, comments and layout compute nothing: editing them keeps the hash
-    code = 'def f(x):\n    return 2 * x\n'
+    code = "def f(x):\n    return 2 * x\n"
     (tmp_path / "fe/newton.py").write_text(code)
     before = response_cache.sources_hash(tmp_path)
     (tmp_path / "fe/newton.py").write_text(
         '"""Newton."""\n\n\ndef f(x):  # doubles\n    """Twice x, mm."""\n    return 2*x\n'
     )
     assert response_cache.sources_hash(tmp_path) == before
-    (tmp_path / "fe/newton.py").write_text('def f(x):\n    return 3 * x\n')
+    (tmp_path / "fe/newton.py").write_text("def f(x):\n    return 3 * x\n")
     assert response_cache.sources_hash(tmp_path) != before
     (tmp_path / "fe/newton.py").write_text('def f(x):\n    x = "2"\n    return 2 * x\n')
     assert response_cache.sources_hash(tmp_path) != before  # a string that is not a docstring
