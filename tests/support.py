@@ -39,8 +39,8 @@ def assert_shipped_calibration_is_of(out, data, case, settings) -> bool:
     made it did (then rerunning the command resumes: True); otherwise (another CPU or BLAS
     changes the last digits of the import, the hash with them: False) its ``case`` variant's
     stored chi2 is the objective at its identified parameters on today's import within 1e-9
-    relative (measured 3e-15 and 6e-15 between the machine that made them and a Zen 3 one) — the same
-    calibration, up to this machine's last digits."""
+    relative (measured 3e-15 and 6e-15 between the machine that made them and a Zen 3 one): the
+    same calibration, up to this machine's last digits."""
     import json
 
     import numpy as np
